@@ -1,0 +1,180 @@
+//! An in-process broadcast bus between threads.
+
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use crossbeam_channel::{Receiver, Sender, TrySendError, bounded};
+
+use super::{CanBus, passes};
+use crate::clock::{Clock, MonotonicClock};
+use crate::error::BusError;
+use crate::frame::{CanFrame, Stamped};
+
+struct Member {
+    id: u64,
+    tx: Sender<Stamped>,
+}
+
+struct Shared {
+    members: Mutex<Vec<Member>>,
+    next_id: AtomicU64,
+    /// Frames an endpoint could not take because its queue was full (like a socket overrun).
+    overruns: AtomicU64,
+    clock: Arc<dyn Clock>,
+    depth: usize,
+}
+
+/// A broadcast bus: every endpoint receives what every other endpoint sends. Each endpoint has a
+/// bounded receive queue (like a socket's receive buffer); a frame that finds it full is dropped
+/// for that endpoint and counted in [`InProcBus::overruns`], so a slow reader never stalls a sender.
+#[derive(Clone)]
+pub struct InProcBus {
+    shared: Arc<Shared>,
+}
+
+impl InProcBus {
+    /// A bus stamped by the process's monotonic clock, 4096 frames of queue per endpoint.
+    pub fn new() -> Self {
+        Self::with_clock(Arc::new(MonotonicClock::new()), 4096)
+    }
+
+    /// A bus whose receive timestamps come from `clock` (a `ManualClock` in tests).
+    pub fn with_clock(clock: Arc<dyn Clock>, depth: usize) -> Self {
+        Self {
+            shared: Arc::new(Shared {
+                members: Mutex::new(Vec::new()),
+                next_id: AtomicU64::new(0),
+                overruns: AtomicU64::new(0),
+                clock,
+                depth,
+            }),
+        }
+    }
+
+    /// A new endpoint on the bus.
+    pub fn endpoint(&self) -> InProcEndpoint {
+        let (tx, rx) = bounded(self.shared.depth);
+        let id = self.shared.next_id.fetch_add(1, Ordering::Relaxed);
+        if let Ok(mut m) = self.shared.members.lock() {
+            m.push(Member { id, tx });
+        }
+        InProcEndpoint {
+            bus: self.clone(),
+            id,
+            rx,
+            filters: Vec::new(),
+        }
+    }
+
+    pub fn overruns(&self) -> u64 {
+        self.shared.overruns.load(Ordering::Relaxed)
+    }
+}
+
+impl Default for InProcBus {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// One endpoint of an [`InProcBus`].
+pub struct InProcEndpoint {
+    bus: InProcBus,
+    id: u64,
+    rx: Receiver<Stamped>,
+    filters: Vec<(u32, u32)>,
+}
+
+impl Drop for InProcEndpoint {
+    fn drop(&mut self) {
+        if let Ok(mut m) = self.bus.shared.members.lock() {
+            m.retain(|x| x.id != self.id);
+        }
+    }
+}
+
+impl CanBus for InProcEndpoint {
+    fn send(&mut self, frame: &CanFrame) -> Result<(), BusError> {
+        let s = &self.bus.shared;
+        let st = Stamped {
+            t_us: s.clock.now_us(),
+            frame: *frame,
+        };
+        let members = s.members.lock().map_err(|_| BusError::Closed)?;
+        for m in members.iter().filter(|m| m.id != self.id) {
+            if let Err(TrySendError::Full(_)) = m.tx.try_send(st) {
+                s.overruns.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+        Ok(())
+    }
+
+    fn recv(&mut self, timeout: Duration) -> Result<Option<Stamped>, BusError> {
+        let deadline = std::time::Instant::now() + timeout;
+        loop {
+            match self.rx.recv_deadline(deadline) {
+                Ok(st) if passes(&self.filters, &st.frame) => return Ok(Some(st)),
+                Ok(_) => continue,
+                Err(_) => return Ok(None),
+            }
+        }
+    }
+
+    fn set_filters(&mut self, filters: &[(u32, u32)]) -> Result<(), BusError> {
+        self.filters = filters.to_vec();
+        Ok(())
+    }
+
+    fn try_clone(&self) -> Result<Box<dyn CanBus>, BusError> {
+        Ok(Box::new(self.bus.endpoint()))
+    }
+
+    fn name(&self) -> &str {
+        "inproc"
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::clock::ManualClock;
+    use crate::frame::make_id;
+
+    fn f(id: u32) -> CanFrame {
+        CanFrame::classic(make_id(id, false).unwrap(), &[1, 2]).unwrap()
+    }
+
+    #[test]
+    fn broadcast_to_others_not_self_with_clock_stamps() {
+        let clock = ManualClock::new(100);
+        let bus = InProcBus::with_clock(Arc::new(clock.clone()), 8);
+        let mut a = bus.endpoint();
+        let mut b = bus.endpoint();
+        let mut c = bus.endpoint();
+        c.set_filters(&[(0x200, 0x7F8)]).unwrap();
+        a.send(&f(0x123)).unwrap();
+        clock.advance_us(50);
+        a.send(&f(0x201)).unwrap();
+        let z = Duration::from_millis(10);
+        assert_eq!(b.recv(z).unwrap().unwrap().t_us, 100);
+        assert_eq!(b.recv(z).unwrap().unwrap().t_us, 150);
+        assert_eq!(c.recv(z).unwrap().unwrap().frame.raw_id(), 0x201);
+        assert!(a.recv(z).unwrap().is_none());
+        assert!(c.recv(z).unwrap().is_none());
+    }
+
+    #[test]
+    fn full_queue_drops_and_counts_without_blocking() {
+        let bus = InProcBus::with_clock(Arc::new(ManualClock::new(0)), 2);
+        let mut a = bus.endpoint();
+        let _b = bus.endpoint();
+        for _ in 0..5 {
+            a.send(&f(1)).unwrap();
+        }
+        assert_eq!(bus.overruns(), 3);
+        drop(_b);
+        a.send(&f(1)).unwrap();
+        assert_eq!(bus.overruns(), 3);
+    }
+}

@@ -1,0 +1,62 @@
+//! The bus abstraction: send and receive timestamped frames.
+//!
+//! Two implementations with the same semantics: [`SocketCanBus`] on a Linux CAN interface (real
+//! `can0` or virtual `vcan0`) and [`InProcBus`], a broadcast bus between threads of one process for
+//! host tests and the demo. On both, every endpoint sees every frame sent by every *other*
+//! endpoint; an endpoint does not receive its own frames (SocketCAN's default).
+
+mod inproc;
+mod socket;
+
+pub use inproc::{InProcBus, InProcEndpoint};
+pub use socket::{SocketCanBus, interface_mtu};
+
+use std::time::Duration;
+
+use crate::error::BusError;
+use crate::frame::{CanFrame, Stamped};
+
+/// One handle on a CAN bus. A thread owns its handle; [`CanBus::try_clone`] gives another thread
+/// its own (a second socket on SocketCAN).
+pub trait CanBus: Send {
+    /// Queues a frame for transmission. Never blocks for long: a full queue is an error.
+    fn send(&mut self, frame: &CanFrame) -> Result<(), BusError>;
+
+    /// The next received frame, or `None` after `timeout` without one.
+    fn recv(&mut self, timeout: Duration) -> Result<Option<Stamped>, BusError>;
+
+    /// Passes only frames whose `id & mask == filter_id & mask` (all frames when empty).
+    fn set_filters(&mut self, filters: &[(u32, u32)]) -> Result<(), BusError>;
+
+    /// Another handle on the same bus.
+    fn try_clone(&self) -> Result<Box<dyn CanBus>, BusError>;
+
+    /// A name for logs ("vcan0", "inproc").
+    fn name(&self) -> &str;
+}
+
+impl CanBus for Box<dyn CanBus> {
+    fn send(&mut self, frame: &CanFrame) -> Result<(), BusError> {
+        (**self).send(frame)
+    }
+    fn recv(&mut self, timeout: Duration) -> Result<Option<Stamped>, BusError> {
+        (**self).recv(timeout)
+    }
+    fn set_filters(&mut self, filters: &[(u32, u32)]) -> Result<(), BusError> {
+        (**self).set_filters(filters)
+    }
+    fn try_clone(&self) -> Result<Box<dyn CanBus>, BusError> {
+        (**self).try_clone()
+    }
+    fn name(&self) -> &str {
+        (**self).name()
+    }
+}
+
+/// True when a frame passes a filter list (empty list: everything passes).
+pub fn passes(filters: &[(u32, u32)], frame: &CanFrame) -> bool {
+    filters.is_empty()
+        || filters
+            .iter()
+            .any(|(id, mask)| frame.raw_id() & mask == id & mask)
+}

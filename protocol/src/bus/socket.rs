@@ -1,0 +1,165 @@
+//! SocketCAN through the `socketcan` crate: one `CanFdSocket` per handle, kernel receive
+//! timestamps, kernel-side filters.
+
+use std::io::ErrorKind;
+use std::time::{Duration, UNIX_EPOCH};
+
+use socketcan::id::FdFlags;
+use socketcan::{
+    CanAnyFrame, CanFdFrame, CanFdSocket, CanFilter, EmbeddedFrame, Socket, SocketOptions,
+};
+
+use super::CanBus;
+use crate::error::BusError;
+use crate::frame::{CanFrame, Stamped};
+
+/// A handle on a Linux CAN interface (`can0`, `vcan0`, ...).
+///
+/// The socket is an FD socket, so it receives classic and FD frames alike. On an interface with
+/// MTU 16 (classic only) sending an FD frame fails with [`BusError::FdNotSupported`]; note that a
+/// classic `CanSocket` elsewhere on the host never sees FD frames.
+pub struct SocketCanBus {
+    iface: String,
+    sock: CanFdSocket,
+    read_timeout: Option<Duration>,
+}
+
+/// The interface's MTU from sysfs: 16 for classic CAN, 72 for CAN FD.
+pub fn interface_mtu(iface: &str) -> Option<u32> {
+    std::fs::read_to_string(format!("/sys/class/net/{iface}/mtu"))
+        .ok()
+        .and_then(|s| s.trim().parse().ok())
+}
+
+impl SocketCanBus {
+    pub fn open(iface: &str) -> Result<Self, BusError> {
+        let open_err = |source| BusError::Open {
+            iface: iface.to_string(),
+            source,
+        };
+        let sock = CanFdSocket::open(iface).map_err(open_err)?;
+        sock.set_recv_timestamp(true).map_err(open_err)?;
+        // A full transmit queue (no ACK, bus off) must not stall a control loop.
+        sock.set_write_timeout(Duration::from_millis(5))
+            .map_err(open_err)?;
+        Ok(Self {
+            iface: iface.to_string(),
+            sock,
+            read_timeout: None,
+        })
+    }
+
+    pub fn iface(&self) -> &str {
+        &self.iface
+    }
+
+    fn io_err(&self, e: std::io::Error) -> BusError {
+        let iface = self.iface.clone();
+        match e.raw_os_error() {
+            Some(libc_enetdown) if [100, 19, 6].contains(&libc_enetdown) => {
+                // ENETDOWN, ENODEV, ENXIO: the interface is down or gone.
+                BusError::Down { iface, source: e }
+            }
+            Some(105) => BusError::TxQueueFull { iface }, // ENOBUFS
+            _ if e.kind() == ErrorKind::WouldBlock || e.kind() == ErrorKind::TimedOut => {
+                BusError::TxQueueFull { iface }
+            }
+            _ => BusError::Io { iface, source: e },
+        }
+    }
+}
+
+fn to_socketcan(f: &CanFrame) -> Option<CanAnyFrame> {
+    if f.is_fd() {
+        let flags = if f.is_brs() {
+            FdFlags::BRS
+        } else {
+            FdFlags::empty()
+        };
+        CanFdFrame::with_flags(f.id(), f.data(), flags).map(CanAnyFrame::Fd)
+    } else if f.is_remote() {
+        socketcan::CanRemoteFrame::new_remote(f.id(), f.len()).map(CanAnyFrame::Remote)
+    } else {
+        socketcan::CanDataFrame::new(f.id(), f.data()).map(CanAnyFrame::Normal)
+    }
+}
+
+fn from_socketcan(f: &CanAnyFrame) -> Option<CanFrame> {
+    match f {
+        CanAnyFrame::Normal(d) => CanFrame::classic(d.id(), d.data()),
+        CanAnyFrame::Remote(r) => CanFrame::remote(r.id(), r.dlc()),
+        CanAnyFrame::Fd(d) => CanFrame::fd(d.id(), d.data(), d.is_brs()),
+        CanAnyFrame::Error(_) => None,
+    }
+}
+
+impl CanBus for SocketCanBus {
+    fn send(&mut self, frame: &CanFrame) -> Result<(), BusError> {
+        let Some(f) = to_socketcan(frame) else {
+            return Err(BusError::Io {
+                iface: self.iface.clone(),
+                source: std::io::Error::new(ErrorKind::InvalidInput, "frame not representable"),
+            });
+        };
+        match self.sock.write_frame(&f) {
+            Ok(()) => Ok(()),
+            // The kernel answers EINVAL to an FD frame on an MTU-16 interface.
+            Err(e) if frame.is_fd() && e.raw_os_error() == Some(22) => {
+                Err(BusError::FdNotSupported {
+                    iface: self.iface.clone(),
+                })
+            }
+            Err(e) => Err(self.io_err(e)),
+        }
+    }
+
+    fn recv(&mut self, timeout: Duration) -> Result<Option<Stamped>, BusError> {
+        let timeout = timeout.max(Duration::from_micros(1));
+        if self.read_timeout != Some(timeout) {
+            self.sock
+                .set_read_timeout(timeout)
+                .map_err(|e| self.io_err(e))?;
+            self.read_timeout = Some(timeout);
+        }
+        loop {
+            match self.sock.read_frame_with_timestamp() {
+                Ok((f, ts)) => {
+                    let Some(frame) = from_socketcan(&f) else {
+                        continue;
+                    };
+                    let t_us = ts
+                        .duration_since(UNIX_EPOCH)
+                        .map(|d| d.as_micros() as u64)
+                        .unwrap_or(0);
+                    return Ok(Some(Stamped { t_us, frame }));
+                }
+                Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {
+                    return Ok(None);
+                }
+                Err(e) if e.kind() == ErrorKind::Interrupted => return Ok(None),
+                Err(e) => return Err(self.io_err(e)),
+            }
+        }
+    }
+
+    fn set_filters(&mut self, filters: &[(u32, u32)]) -> Result<(), BusError> {
+        let r = if filters.is_empty() {
+            self.sock.set_filter_accept_all()
+        } else {
+            let fs: Vec<CanFilter> = filters
+                .iter()
+                .map(|&(id, mask)| CanFilter::new(id, mask))
+                .collect();
+            self.sock.set_filters(&fs)
+        };
+        r.map_err(|e| self.io_err(e))
+    }
+
+    fn try_clone(&self) -> Result<Box<dyn CanBus>, BusError> {
+        Ok(Box::new(SocketCanBus::open(&self.iface)?))
+    }
+
+    fn name(&self) -> &str {
+        &self.iface
+    }
+}

@@ -1,0 +1,396 @@
+//! The DBC description of the protocol, generated from one table so it cannot drift from the
+//! encoders (a test checks `presrs.dbc` against this generator, and the interop test checks the
+//! encoders against Python `cantools` reading the DBC).
+//!
+//! Per-foot messages get one DBC message per identifier (`FootContact_F0` .. `_F7`). The FD
+//! tactile message is multiplexed by `SegmentIndex`: value 0 is the header, values 1-255 are data
+//! segments (extended multiplexing, `SG_MUL_VAL_`); the classic variant likewise with header
+//! parts 0, 1, 2 and data from 3.
+
+use std::fmt::Write;
+
+use crate::ids::{IdConfig, MAX_FEET, MessageKind};
+use crate::messages::{
+    ANGLE_SCALE_RAD, LENGTH_SCALE_M, OMEGA_SCALE, PERCENT_SCALE, TERRAIN_UNKNOWN, TERRAINS,
+};
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Mux {
+    None,
+    Multiplexor,
+    Value(u32),
+    Range(u32, u32),
+}
+
+#[derive(Clone, Debug)]
+struct Sig {
+    name: String,
+    start: u32,
+    len: u32,
+    signed: bool,
+    factor: f64,
+    min: f64,
+    max: f64,
+    unit: &'static str,
+    mux: Mux,
+    values: Option<&'static str>,
+}
+
+fn sig(name: &str, start: u32, len: u32, signed: bool, factor: f64, unit: &'static str) -> Sig {
+    let (lo, hi) = if signed {
+        (
+            -(1i64 << (len - 1)) as f64,
+            ((1i64 << (len - 1)) - 1) as f64,
+        )
+    } else {
+        (0.0, ((1u64 << len) - 1) as f64)
+    };
+    Sig {
+        name: name.to_string(),
+        start,
+        len,
+        signed,
+        factor,
+        min: round(lo * factor),
+        max: round(hi * factor),
+        unit,
+        mux: Mux::None,
+        values: None,
+    }
+}
+
+fn round(v: f64) -> f64 {
+    (v * 1e6).round() / 1e6
+}
+
+impl Sig {
+    fn mux(mut self, m: Mux) -> Self {
+        self.mux = m;
+        self
+    }
+    fn range(mut self, min: f64, max: f64) -> Self {
+        self.min = min;
+        self.max = max;
+        self
+    }
+    fn values(mut self, v: &'static str) -> Self {
+        self.values = Some(v);
+        self
+    }
+}
+
+fn signals(kind: MessageKind) -> Vec<Sig> {
+    match kind {
+        MessageKind::LegCommand => vec![
+            sig("LegLengthSetpoint", 0, 16, false, LENGTH_SCALE_M, "m"),
+            sig(
+                "TouchdownAngleSetpoint",
+                16,
+                16,
+                true,
+                ANGLE_SCALE_RAD,
+                "rad",
+            ),
+            sig("GaitId", 32, 8, false, 1.0, ""),
+            sig("Phase", 40, 8, false, 1.0, "")
+                .range(0.0, 1.0)
+                .values("Phase"),
+            sig("Sequence", 48, 8, false, 1.0, ""),
+        ],
+        MessageKind::FootContact => vec![
+            sig("Contact", 0, 8, false, 1.0, "")
+                .range(0.0, 1.0)
+                .values("Phase"),
+            sig("Sequence", 8, 8, false, 1.0, ""),
+            sig("TimestampUs", 16, 32, false, 1.0, "us"),
+        ],
+        MessageKind::LegState => vec![
+            sig("LegAngle", 0, 16, true, ANGLE_SCALE_RAD, "rad"),
+            sig("LegLength", 16, 16, false, LENGTH_SCALE_M, "m"),
+            sig("TimestampUs", 32, 32, false, 1.0, "us"),
+        ],
+        MessageKind::TerrainClass => vec![
+            sig("Step", 0, 16, false, 1.0, ""),
+            sig("TerrainId", 16, 8, false, 1.0, "").values("Terrain"),
+            sig("Confidence", 24, 8, false, PERCENT_SCALE, "%").range(0.0, 100.0),
+            sig("DamagePercent", 32, 8, false, PERCENT_SCALE, "%").range(0.0, 100.0),
+            sig("FlagRepaired", 40, 1, false, 1.0, ""),
+            sig("FlagLowConfidence", 41, 1, false, 1.0, ""),
+            sig("FlagNoSample", 42, 1, false, 1.0, ""),
+            sig("FlagMultiFrame", 43, 1, false, 1.0, ""),
+            sig("LatencyUs", 48, 16, false, 1.0, "us"),
+        ],
+        MessageKind::NodeStatus => vec![
+            sig("Heartbeat", 0, 8, false, 1.0, ""),
+            sig("State", 8, 8, false, 1.0, "")
+                .range(0.0, 4.0)
+                .values("NodeState"),
+            sig("ModelId", 16, 16, false, 1.0, ""),
+            sig("CrcFailures", 32, 8, false, 1.0, ""),
+            sig("IncompleteFrames", 40, 8, false, 1.0, ""),
+            sig("BusErrors", 48, 8, false, 1.0, ""),
+            sig("DamagePercent", 56, 8, false, PERCENT_SCALE, "%").range(0.0, 100.0),
+        ],
+        MessageKind::GaitStatus => vec![
+            sig("ActiveGait", 0, 8, false, 1.0, ""),
+            sig("TerrainId", 8, 8, false, 1.0, "").values("Terrain"),
+            sig("Omega", 16, 16, false, OMEGA_SCALE, "rad/s"),
+            sig("BetaDes", 32, 16, true, ANGLE_SCALE_RAD, "rad"),
+            sig("Reason", 48, 8, false, 1.0, "")
+                .range(0.0, 3.0)
+                .values("GaitReason"),
+            sig("Foot", 56, 8, false, 1.0, "").range(0.0, 7.0),
+        ],
+        MessageKind::TactileFrame => {
+            let mut v = vec![
+                sig("FrameSeq", 0, 8, false, 1.0, ""),
+                sig("SegmentIndex", 8, 8, false, 1.0, "").mux(Mux::Multiplexor),
+                sig("Rows", 16, 8, false, 1.0, "").mux(Mux::Value(0)),
+                sig("Cols", 24, 8, false, 1.0, "").mux(Mux::Value(0)),
+                sig("BitsPerPixel", 32, 8, false, 1.0, "").mux(Mux::Value(0)),
+                sig("SegmentCount", 40, 8, false, 1.0, "").mux(Mux::Value(0)),
+                sig("Crc32", 48, 32, false, 1.0, "").mux(Mux::Value(0)),
+                sig("TimestampUs", 80, 32, false, 1.0, "us").mux(Mux::Value(0)),
+            ];
+            for i in 0..62 {
+                v.push(
+                    sig(&format!("Px{i:02}"), 16 + 8 * i, 8, false, 1.0, "")
+                        .mux(Mux::Range(1, 255)),
+                );
+            }
+            v
+        }
+        MessageKind::TactileFrameClassic => {
+            let mut v = vec![
+                sig("FrameSeq", 0, 8, false, 1.0, ""),
+                sig("SegmentIndex", 8, 16, false, 1.0, "").mux(Mux::Multiplexor),
+                sig("Rows", 24, 8, false, 1.0, "").mux(Mux::Value(0)),
+                sig("Cols", 32, 8, false, 1.0, "").mux(Mux::Value(0)),
+                sig("BitsPerPixel", 40, 8, false, 1.0, "").mux(Mux::Value(0)),
+                sig("SegmentCount", 48, 16, false, 1.0, "").mux(Mux::Value(0)),
+                sig("Crc32", 24, 32, false, 1.0, "").mux(Mux::Value(1)),
+                sig("TimestampUs", 24, 32, false, 1.0, "us").mux(Mux::Value(2)),
+            ];
+            for i in 0..5 {
+                v.push(
+                    sig(&format!("Px{i:02}"), 24 + 8 * i, 8, false, 1.0, "")
+                        .mux(Mux::Range(3, 65535)),
+                );
+            }
+            v
+        }
+    }
+}
+
+fn sender(kind: MessageKind) -> &'static str {
+    match kind {
+        MessageKind::LegCommand | MessageKind::GaitStatus => "Controller",
+        MessageKind::FootContact | MessageKind::TactileFrame | MessageKind::TactileFrameClassic => {
+            "Foot"
+        }
+        MessageKind::LegState => "Leg",
+        MessageKind::TerrainClass | MessageKind::NodeStatus => "Node",
+    }
+}
+
+fn receivers(kind: MessageKind) -> &'static str {
+    match kind {
+        MessageKind::LegCommand => "Leg",
+        MessageKind::TactileFrame | MessageKind::TactileFrameClassic => "Node",
+        MessageKind::FootContact => "Node,Controller",
+        MessageKind::LegState | MessageKind::TerrainClass | MessageKind::NodeStatus => "Controller",
+        MessageKind::GaitStatus => "Node",
+    }
+}
+
+fn fmt_num(v: f64) -> String {
+    let s = format!("{v}");
+    if s.contains('e') {
+        format!("{v:.10}")
+    } else {
+        s
+    }
+}
+
+/// The DBC text for an identifier map.
+pub fn generate(ids: &IdConfig) -> String {
+    let mut o = String::new();
+    let _ = writeln!(
+        o,
+        "VERSION \"presrs-protocol {}\"\n",
+        env!("CARGO_PKG_VERSION")
+    );
+    let _ = writeln!(
+        o,
+        "NS_ :\n\tBA_DEF_\n\tBA_\n\tVAL_\n\tVAL_TABLE_\n\tSG_MUL_VAL_\n"
+    );
+    let _ = writeln!(o, "BS_:\n");
+    let _ = writeln!(o, "BU_: Controller Leg Foot Node\n");
+    let mut terrains = String::new();
+    for (id, name) in TERRAINS {
+        let _ = write!(terrains, " {id} \"{name}\"");
+    }
+    let _ = write!(terrains, " {TERRAIN_UNKNOWN} \"unknown\"");
+    let tables: [(&str, String); 4] = [
+        ("Terrain", terrains.clone()),
+        ("Phase", " 0 \"flight\" 1 \"stance\"".to_string()),
+        (
+            "NodeState",
+            " 0 \"starting\" 1 \"running\" 2 \"degraded\" 3 \"no_model\" 4 \"stopping\""
+                .to_string(),
+        ),
+        (
+            "GaitReason",
+            " 0 \"initial\" 1 \"terrain\" 2 \"unknown\" 3 \"node_lost\"".to_string(),
+        ),
+    ];
+    for (name, vals) in &tables {
+        let _ = writeln!(o, "VAL_TABLE_ {name}{vals};");
+    }
+    o.push('\n');
+
+    // (dbc id, name, kind)
+    let mut msgs = Vec::new();
+    for kind in MessageKind::ALL {
+        let n = if kind.per_foot() { MAX_FEET } else { 1 };
+        for f in 0..n {
+            let raw = ids.id(kind, f);
+            let dbc_id = if ids.extended { raw | 0x8000_0000 } else { raw };
+            let name = if kind.per_foot() {
+                format!("{}_F{f}", kind.name())
+            } else {
+                kind.name().to_string()
+            };
+            msgs.push((dbc_id, name, kind));
+        }
+    }
+    let mut vals = String::new();
+    let mut muxvals = String::new();
+    for (dbc_id, name, kind) in &msgs {
+        let _ = writeln!(o, "BO_ {dbc_id} {name}: {} {}", kind.dlc(), sender(*kind));
+        for s in signals(*kind) {
+            let m = match s.mux {
+                Mux::None => String::new(),
+                Mux::Multiplexor => " M".to_string(),
+                Mux::Value(v) => format!(" m{v}"),
+                Mux::Range(a, _) => format!(" m{a}"),
+            };
+            let _ = writeln!(
+                o,
+                " SG_ {}{m} : {}|{}@1{} ({},0) [{}|{}] \"{}\" {}",
+                s.name,
+                s.start,
+                s.len,
+                if s.signed { '-' } else { '+' },
+                fmt_num(s.factor),
+                fmt_num(s.min),
+                fmt_num(s.max),
+                s.unit,
+                receivers(*kind)
+            );
+            if let Some(t) = s.values
+                && let Some((_, v)) = tables.iter().find(|(n, _)| *n == t)
+            {
+                let _ = writeln!(vals, "VAL_ {dbc_id} {}{v};", s.name);
+            }
+            if let Mux::Range(a, b) = s.mux {
+                let _ = writeln!(
+                    muxvals,
+                    "SG_MUL_VAL_ {dbc_id} {} SegmentIndex {a}-{b};",
+                    s.name
+                );
+            }
+        }
+        o.push('\n');
+    }
+    let _ = writeln!(o, "BA_DEF_  \"BusType\" STRING ;");
+    let _ = writeln!(
+        o,
+        "BA_DEF_ BO_  \"VFrameFormat\" ENUM  \"StandardCAN\",\"ExtendedCAN\",\"reserved\",\"J1939PG\",\"reserved\",\"reserved\",\"reserved\",\"reserved\",\"reserved\",\"reserved\",\"reserved\",\"reserved\",\"reserved\",\"reserved\",\"StandardCAN_FD\",\"ExtendedCAN_FD\";"
+    );
+    let _ = writeln!(o, "BA_DEF_ BO_  \"CANFD_BRS\" ENUM  \"0\",\"1\";");
+    let _ = writeln!(o, "BA_DEF_DEF_  \"BusType\" \"CAN FD\";");
+    let _ = writeln!(o, "BA_DEF_DEF_  \"VFrameFormat\" \"StandardCAN\";");
+    let _ = writeln!(o, "BA_DEF_DEF_  \"CANFD_BRS\" \"1\";");
+    let _ = writeln!(o, "BA_ \"BusType\" \"CAN FD\";");
+    for (dbc_id, _, kind) in &msgs {
+        let fmt = match (kind.is_fd(), ids.extended) {
+            (false, false) => 0,
+            (false, true) => 1,
+            (true, false) => 14,
+            (true, true) => 15,
+        };
+        let _ = writeln!(o, "BA_ \"VFrameFormat\" BO_ {dbc_id} {fmt};");
+        if kind.is_fd() {
+            let _ = writeln!(o, "BA_ \"CANFD_BRS\" BO_ {dbc_id} 1;");
+        }
+    }
+    o.push('\n');
+    o.push_str(&vals);
+    o.push('\n');
+    o.push_str(&muxvals);
+    o
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shipped_dbc_matches_generator() {
+        let shipped = include_str!("../presrs.dbc");
+        assert!(
+            shipped == generate(&IdConfig::default()),
+            "protocol/presrs.dbc is stale: regenerate it with `cargo run -- dbc --out protocol/presrs.dbc`"
+        );
+    }
+
+    #[test]
+    fn signals_fit_their_messages_without_overlap() {
+        for kind in MessageKind::ALL {
+            let sigs = signals(kind);
+            for s in &sigs {
+                assert!(
+                    s.start + s.len <= 8 * kind.dlc() as u32,
+                    "{} in {}",
+                    s.name,
+                    kind.name()
+                );
+            }
+            for (i, a) in sigs.iter().enumerate() {
+                for b in &sigs[i + 1..] {
+                    let same_mux = match (a.mux, b.mux) {
+                        (Mux::Value(x), Mux::Value(y)) => x == y,
+                        (Mux::Range(..), Mux::Value(_)) | (Mux::Value(_), Mux::Range(..)) => false,
+                        _ => true,
+                    };
+                    let overlap = a.start < b.start + b.len && b.start < a.start + a.len;
+                    assert!(
+                        !(same_mux && overlap),
+                        "{} and {} overlap in {}",
+                        a.name,
+                        b.name,
+                        kind.name()
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn extended_ids_are_flagged() {
+        let ids = IdConfig {
+            extended: true,
+            ..IdConfig::default()
+        };
+        let d = generate(&ids);
+        assert!(d.contains(&format!(
+            "BO_ {} FootContact_F0: 8 Foot",
+            0x100u32 | 0x8000_0000
+        )));
+        assert!(d.contains(&format!(
+            "BA_ \"VFrameFormat\" BO_ {} 15;",
+            0x600u32 | 0x8000_0000
+        )));
+    }
+}

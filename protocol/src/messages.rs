@@ -1,0 +1,617 @@
+//! Typed messages: physical values in, bytes out, and back.
+//!
+//! All multi-byte fields are little-endian. Physical values are kept in SI units (m, rad,
+//! rad/s, percent, µs) in the structs and scaled to integers on the wire; out-of-range values
+//! saturate at the field's limits rather than wrap. `docs/protocol.md` has the bit layouts and
+//! `presrs.dbc` describes the same layouts for third-party tools.
+
+use crate::error::DecodeError;
+use crate::frame::{CanFrame, make_id};
+use crate::ids::{IdConfig, MessageKind};
+
+/// Terrain id meaning "not classified" (no sample, or below the unknown threshold).
+pub const TERRAIN_UNKNOWN: u8 = 0xFF;
+
+/// The terrain ids used on the bus, with their names (the DBC's value table).
+pub const TERRAINS: [(u8, &str); 12] = [
+    (0, "aluminum"),
+    (1, "sand"),
+    (2, "pine_needles"),
+    (3, "gravel"),
+    (4, "sandpaper_220"),
+    (5, "sandpaper_150"),
+    (6, "sandpaper_100"),
+    (7, "sandpaper_60"),
+    (8, "wood"),
+    (9, "carpet"),
+    (10, "clay"),
+    (11, "grass"),
+];
+
+/// The bus name of a terrain id (`"unknown"` for 0xFF, `None` for an id nobody assigned).
+pub fn terrain_name(id: u8) -> Option<&'static str> {
+    if id == TERRAIN_UNKNOWN {
+        return Some("unknown");
+    }
+    TERRAINS.iter().find(|(i, _)| *i == id).map(|(_, n)| *n)
+}
+
+/// The terrain id of a bus name.
+pub fn terrain_id(name: &str) -> Option<u8> {
+    if name == "unknown" {
+        return Some(TERRAIN_UNKNOWN);
+    }
+    TERRAINS.iter().find(|(_, n)| *n == name).map(|(i, _)| *i)
+}
+
+fn sat_u(v: f64, max: f64) -> f64 {
+    if v.is_nan() {
+        0.0
+    } else {
+        v.round().clamp(0.0, max)
+    }
+}
+
+fn sat_i16(v: f64) -> i16 {
+    if v.is_nan() {
+        0
+    } else {
+        v.round().clamp(i16::MIN as f64, i16::MAX as f64) as i16
+    }
+}
+
+fn need(message: &'static str, data: &[u8], n: usize) -> Result<(), DecodeError> {
+    if data.len() < n {
+        Err(DecodeError::TooShort {
+            message,
+            need: n,
+            got: data.len(),
+        })
+    } else {
+        Ok(())
+    }
+}
+
+fn u16_at(d: &[u8], i: usize) -> u16 {
+    u16::from_le_bytes([d[i], d[i + 1]])
+}
+fn i16_at(d: &[u8], i: usize) -> i16 {
+    i16::from_le_bytes([d[i], d[i + 1]])
+}
+fn u32_at(d: &[u8], i: usize) -> u32 {
+    u32::from_le_bytes([d[i], d[i + 1], d[i + 2], d[i + 3]])
+}
+
+/// Scale of leg lengths on the wire: 0.1 mm per bit (0 to 6.5535 m).
+pub const LENGTH_SCALE_M: f64 = 1e-4;
+/// Scale of angles on the wire: 0.1 mrad per bit (±3.2767 rad).
+pub const ANGLE_SCALE_RAD: f64 = 1e-4;
+/// Scale of angular frequencies: 1 mrad/s per bit.
+pub const OMEGA_SCALE: f64 = 1e-3;
+/// Scale of percentages (confidence, damage): 0.5 % per bit (0 to 100 % in 0..200).
+pub const PERCENT_SCALE: f64 = 0.5;
+
+/// Stance or flight.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Phase {
+    #[default]
+    Flight = 0,
+    Stance = 1,
+}
+
+/// Controller -> leg: set points for the next control period.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct LegCommand {
+    /// Leg length set point zeta (m), eq. (4) in stance.
+    pub leg_length_m: f64,
+    /// Touchdown angle set point beta_TD (rad), eq. (5) in flight.
+    pub touchdown_angle_rad: f64,
+    /// Gait in force (1..=3 for G1..G3; 0 none).
+    pub gait: u8,
+    pub phase: Phase,
+    /// Wrapping counter, one per command.
+    pub seq: u8,
+}
+
+/// Foot -> all: the micro-switch in the foot (debounced by the receiver, not the sender).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct FootContact {
+    /// Switch closed: the foot is on the ground.
+    pub stance: bool,
+    /// Wrapping counter, one per message.
+    pub seq: u8,
+    /// Sender clock, µs, wrapping (low 32 bits; 71.6 min period).
+    pub timestamp_us: u32,
+}
+
+/// Leg -> all: measured leg angle and length.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct LegState {
+    /// Leg angle beta from the vertical (rad), positive with the foot ahead of the hip.
+    pub leg_angle_rad: f64,
+    pub leg_length_m: f64,
+    pub timestamp_us: u32,
+}
+
+/// Bits of [`TerrainClass::flags`].
+pub mod flags {
+    /// Sensor lines known dead were filled by the repair filter.
+    pub const REPAIRED: u8 = 1 << 0;
+    /// The best class's confidence was below the configured threshold.
+    pub const LOW_CONFIDENCE: u8 = 1 << 1;
+    /// No usable pressure image arrived in the stance window.
+    pub const NO_SAMPLE: u8 = 1 << 2;
+    /// Decided from several frames of the stance (sum of log-posteriors).
+    pub const MULTI_FRAME: u8 = 1 << 3;
+}
+
+/// Node -> all: the terrain under one foot, once per step.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct TerrainClass {
+    /// Step counter of this foot (wrapping).
+    pub step: u16,
+    /// Terrain id ([`TERRAINS`]), [`TERRAIN_UNKNOWN`] when not classified.
+    pub terrain: u8,
+    /// Posterior of the chosen class, 0..=100 %.
+    pub confidence_pct: f64,
+    /// Sensor damage, paper eq. (6), 0..=100 %.
+    pub damage_pct: f64,
+    /// [`flags`] bits.
+    pub flags: u8,
+    /// From the receipt of the sampled frame's last segment to this message, µs (saturates at 65535).
+    pub latency_us: u32,
+}
+
+/// Node state in [`NodeStatus`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum NodeState {
+    #[default]
+    Starting = 0,
+    Running = 1,
+    /// Running, but the bus reported errors or the interface is being reopened.
+    Degraded = 2,
+    /// No usable model loaded.
+    NoModel = 3,
+    Stopping = 4,
+}
+
+impl NodeState {
+    pub fn from_u8(v: u8) -> Option<Self> {
+        Some(match v {
+            0 => Self::Starting,
+            1 => Self::Running,
+            2 => Self::Degraded,
+            3 => Self::NoModel,
+            4 => Self::Stopping,
+            _ => return None,
+        })
+    }
+}
+
+/// Node -> all, 10 Hz: heartbeat and health. Counters are the low 8 bits of running totals, so a
+/// monitor takes differences (mod 256) between messages.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct NodeStatus {
+    pub heartbeat: u8,
+    pub state: NodeState,
+    /// Low 16 bits of the loaded model's content hash.
+    pub model_id: u16,
+    pub crc_failures: u8,
+    pub incomplete_frames: u8,
+    pub bus_errors: u8,
+    /// Largest sensor damage over the feet, 0..=100 %.
+    pub damage_pct: f64,
+}
+
+/// Why the controller runs the gait it runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum GaitReason {
+    /// Configured start gait, no terrain seen yet.
+    #[default]
+    Initial = 0,
+    /// Chosen from the terrain table.
+    Terrain = 1,
+    /// Safe gait: terrain unknown.
+    Unknown = 2,
+    /// Safe gait: node heartbeat lost.
+    NodeLost = 3,
+}
+
+impl GaitReason {
+    pub fn from_u8(v: u8) -> Option<Self> {
+        Some(match v {
+            0 => Self::Initial,
+            1 => Self::Terrain,
+            2 => Self::Unknown,
+            3 => Self::NodeLost,
+            _ => return None,
+        })
+    }
+}
+
+/// Controller -> all: the gait in force (at every switch and at 10 Hz).
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct GaitStatus {
+    /// 1..=3 for G1..G3 (configurable gaits may use more).
+    pub gait: u8,
+    /// The terrain the gait was chosen for.
+    pub terrain: u8,
+    pub omega_rad_s: f64,
+    pub beta_des_rad: f64,
+    pub reason: GaitReason,
+    pub foot: u8,
+}
+
+impl LegCommand {
+    pub fn encode(&self) -> [u8; 8] {
+        let mut d = [0u8; 8];
+        d[0..2].copy_from_slice(
+            &(sat_u(self.leg_length_m / LENGTH_SCALE_M, 65535.0) as u16).to_le_bytes(),
+        );
+        d[2..4].copy_from_slice(&sat_i16(self.touchdown_angle_rad / ANGLE_SCALE_RAD).to_le_bytes());
+        d[4] = self.gait;
+        d[5] = self.phase as u8;
+        d[6] = self.seq;
+        d
+    }
+
+    pub fn decode(d: &[u8]) -> Result<Self, DecodeError> {
+        need("LegCommand", d, 7)?;
+        let phase = match d[5] {
+            0 => Phase::Flight,
+            1 => Phase::Stance,
+            v => {
+                return Err(DecodeError::BadValue {
+                    message: "LegCommand",
+                    field: "Phase",
+                    value: v as u32,
+                });
+            }
+        };
+        Ok(Self {
+            leg_length_m: u16_at(d, 0) as f64 * LENGTH_SCALE_M,
+            touchdown_angle_rad: i16_at(d, 2) as f64 * ANGLE_SCALE_RAD,
+            gait: d[4],
+            phase,
+            seq: d[6],
+        })
+    }
+}
+
+impl FootContact {
+    pub fn encode(&self) -> [u8; 8] {
+        let mut d = [0u8; 8];
+        d[0] = self.stance as u8;
+        d[1] = self.seq;
+        d[2..6].copy_from_slice(&self.timestamp_us.to_le_bytes());
+        d
+    }
+
+    pub fn decode(d: &[u8]) -> Result<Self, DecodeError> {
+        need("FootContact", d, 6)?;
+        if d[0] > 1 {
+            return Err(DecodeError::BadValue {
+                message: "FootContact",
+                field: "Contact",
+                value: d[0] as u32,
+            });
+        }
+        Ok(Self {
+            stance: d[0] == 1,
+            seq: d[1],
+            timestamp_us: u32_at(d, 2),
+        })
+    }
+}
+
+impl LegState {
+    pub fn encode(&self) -> [u8; 8] {
+        let mut d = [0u8; 8];
+        d[0..2].copy_from_slice(&sat_i16(self.leg_angle_rad / ANGLE_SCALE_RAD).to_le_bytes());
+        d[2..4].copy_from_slice(
+            &(sat_u(self.leg_length_m / LENGTH_SCALE_M, 65535.0) as u16).to_le_bytes(),
+        );
+        d[4..8].copy_from_slice(&self.timestamp_us.to_le_bytes());
+        d
+    }
+
+    pub fn decode(d: &[u8]) -> Result<Self, DecodeError> {
+        need("LegState", d, 8)?;
+        Ok(Self {
+            leg_angle_rad: i16_at(d, 0) as f64 * ANGLE_SCALE_RAD,
+            leg_length_m: u16_at(d, 2) as f64 * LENGTH_SCALE_M,
+            timestamp_us: u32_at(d, 4),
+        })
+    }
+}
+
+impl TerrainClass {
+    pub fn encode(&self) -> [u8; 8] {
+        let mut d = [0u8; 8];
+        d[0..2].copy_from_slice(&self.step.to_le_bytes());
+        d[2] = self.terrain;
+        d[3] = sat_u(self.confidence_pct / PERCENT_SCALE, 200.0) as u8;
+        d[4] = sat_u(self.damage_pct / PERCENT_SCALE, 200.0) as u8;
+        d[5] = self.flags;
+        d[6..8].copy_from_slice(&(self.latency_us.min(65535) as u16).to_le_bytes());
+        d
+    }
+
+    pub fn decode(d: &[u8]) -> Result<Self, DecodeError> {
+        need("TerrainClass", d, 8)?;
+        Ok(Self {
+            step: u16_at(d, 0),
+            terrain: d[2],
+            confidence_pct: d[3] as f64 * PERCENT_SCALE,
+            damage_pct: d[4] as f64 * PERCENT_SCALE,
+            flags: d[5],
+            latency_us: u16_at(d, 6) as u32,
+        })
+    }
+}
+
+impl NodeStatus {
+    pub fn encode(&self) -> [u8; 8] {
+        let mut d = [0u8; 8];
+        d[0] = self.heartbeat;
+        d[1] = self.state as u8;
+        d[2..4].copy_from_slice(&self.model_id.to_le_bytes());
+        d[4] = self.crc_failures;
+        d[5] = self.incomplete_frames;
+        d[6] = self.bus_errors;
+        d[7] = sat_u(self.damage_pct / PERCENT_SCALE, 200.0) as u8;
+        d
+    }
+
+    pub fn decode(d: &[u8]) -> Result<Self, DecodeError> {
+        need("NodeStatus", d, 8)?;
+        let state = NodeState::from_u8(d[1]).ok_or(DecodeError::BadValue {
+            message: "NodeStatus",
+            field: "State",
+            value: d[1] as u32,
+        })?;
+        Ok(Self {
+            heartbeat: d[0],
+            state,
+            model_id: u16_at(d, 2),
+            crc_failures: d[4],
+            incomplete_frames: d[5],
+            bus_errors: d[6],
+            damage_pct: d[7] as f64 * PERCENT_SCALE,
+        })
+    }
+}
+
+impl GaitStatus {
+    pub fn encode(&self) -> [u8; 8] {
+        let mut d = [0u8; 8];
+        d[0] = self.gait;
+        d[1] = self.terrain;
+        d[2..4].copy_from_slice(
+            &(sat_u(self.omega_rad_s / OMEGA_SCALE, 65535.0) as u16).to_le_bytes(),
+        );
+        d[4..6].copy_from_slice(&sat_i16(self.beta_des_rad / ANGLE_SCALE_RAD).to_le_bytes());
+        d[6] = self.reason as u8;
+        d[7] = self.foot;
+        d
+    }
+
+    pub fn decode(d: &[u8]) -> Result<Self, DecodeError> {
+        need("GaitStatus", d, 8)?;
+        let reason = GaitReason::from_u8(d[6]).ok_or(DecodeError::BadValue {
+            message: "GaitStatus",
+            field: "Reason",
+            value: d[6] as u32,
+        })?;
+        Ok(Self {
+            gait: d[0],
+            terrain: d[1],
+            omega_rad_s: u16_at(d, 2) as f64 * OMEGA_SCALE,
+            beta_des_rad: i16_at(d, 4) as f64 * ANGLE_SCALE_RAD,
+            reason,
+            foot: d[7],
+        })
+    }
+}
+
+/// Any message of the protocol. Tactile segments are not decoded here: their payload goes to
+/// [`crate::tactile::Reassembler`] straight from the frame, so nothing is copied.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Message {
+    LegCommand(LegCommand),
+    FootContact(FootContact),
+    LegState(LegState),
+    TerrainClass(TerrainClass),
+    NodeStatus(NodeStatus),
+    GaitStatus(GaitStatus),
+    /// A tactile segment (FD or classic variant); read the payload from the frame.
+    TactileSegment(crate::tactile::Variant),
+}
+
+impl Message {
+    pub fn kind(&self) -> MessageKind {
+        match self {
+            Message::LegCommand(_) => MessageKind::LegCommand,
+            Message::FootContact(_) => MessageKind::FootContact,
+            Message::LegState(_) => MessageKind::LegState,
+            Message::TerrainClass(_) => MessageKind::TerrainClass,
+            Message::NodeStatus(_) => MessageKind::NodeStatus,
+            Message::GaitStatus(_) => MessageKind::GaitStatus,
+            Message::TactileSegment(crate::tactile::Variant::Fd) => MessageKind::TactileFrame,
+            Message::TactileSegment(crate::tactile::Variant::Classic) => {
+                MessageKind::TactileFrameClassic
+            }
+        }
+    }
+
+    /// Builds the frame for this message, from `foot` (ignored by single-ID messages).
+    /// Tactile segments are built by [`crate::tactile::Segmenter`]; this returns `None` for them.
+    pub fn to_frame(&self, ids: &IdConfig, foot: u8) -> Option<CanFrame> {
+        let data = match self {
+            Message::LegCommand(m) => m.encode(),
+            Message::FootContact(m) => m.encode(),
+            Message::LegState(m) => m.encode(),
+            Message::TerrainClass(m) => m.encode(),
+            Message::NodeStatus(m) => m.encode(),
+            Message::GaitStatus(m) => m.encode(),
+            Message::TactileSegment(_) => return None,
+        };
+        let id = make_id(ids.id(self.kind(), foot), ids.extended)?;
+        CanFrame::classic(id, &data)
+    }
+}
+
+/// Decodes a received frame. `Ok(None)`: the identifier is not one of ours (not an error: the
+/// bus is shared). `Err`: ours but malformed; the caller counts it and goes on.
+pub fn decode(frame: &CanFrame, ids: &IdConfig) -> Result<Option<(u8, Message)>, DecodeError> {
+    let Some((kind, foot)) = ids.lookup(frame.raw_id(), frame.is_extended()) else {
+        return Ok(None);
+    };
+    if frame.is_remote() {
+        return Err(DecodeError::Remote {
+            message: kind.name(),
+        });
+    }
+    let d = frame.data();
+    let msg = match kind {
+        MessageKind::LegCommand => Message::LegCommand(LegCommand::decode(d)?),
+        MessageKind::FootContact => Message::FootContact(FootContact::decode(d)?),
+        MessageKind::LegState => Message::LegState(LegState::decode(d)?),
+        MessageKind::TerrainClass => Message::TerrainClass(TerrainClass::decode(d)?),
+        MessageKind::NodeStatus => Message::NodeStatus(NodeStatus::decode(d)?),
+        MessageKind::GaitStatus => Message::GaitStatus(GaitStatus::decode(d)?),
+        MessageKind::TactileFrame => Message::TactileSegment(crate::tactile::Variant::Fd),
+        MessageKind::TactileFrameClassic => {
+            Message::TactileSegment(crate::tactile::Variant::Classic)
+        }
+    };
+    Ok(Some((foot, msg)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rt(m: Message, foot: u8) -> Message {
+        let ids = IdConfig::default();
+        let f = m.to_frame(&ids, foot).unwrap();
+        let (gf, got) = decode(&f, &ids).unwrap().unwrap();
+        if m.kind().per_foot() {
+            assert_eq!(gf, foot);
+        }
+        got
+    }
+
+    #[test]
+    fn round_trips_within_resolution() {
+        let lc = LegCommand {
+            leg_length_m: 0.3512,
+            touchdown_angle_rad: -0.4213,
+            gait: 2,
+            phase: Phase::Stance,
+            seq: 200,
+        };
+        let Message::LegCommand(g) = rt(Message::LegCommand(lc), 3) else {
+            panic!()
+        };
+        assert!((g.leg_length_m - lc.leg_length_m).abs() <= 0.5e-4);
+        assert!((g.touchdown_angle_rad - lc.touchdown_angle_rad).abs() <= 0.5e-4);
+        assert_eq!((g.gait, g.phase, g.seq), (2, Phase::Stance, 200));
+
+        let fc = FootContact {
+            stance: true,
+            seq: 9,
+            timestamp_us: 0xDEAD_BEEF,
+        };
+        assert_eq!(rt(Message::FootContact(fc), 7), Message::FootContact(fc));
+
+        let tc = TerrainClass {
+            step: 65000,
+            terrain: 11,
+            confidence_pct: 97.5,
+            damage_pct: 7.0,
+            flags: flags::REPAIRED | flags::LOW_CONFIDENCE,
+            latency_us: 812,
+        };
+        assert_eq!(rt(Message::TerrainClass(tc), 0), Message::TerrainClass(tc));
+
+        let ns = NodeStatus {
+            heartbeat: 255,
+            state: NodeState::Degraded,
+            model_id: 0xBEEF,
+            crc_failures: 1,
+            incomplete_frames: 2,
+            bus_errors: 3,
+            damage_pct: 12.5,
+        };
+        assert_eq!(rt(Message::NodeStatus(ns), 0), Message::NodeStatus(ns));
+
+        let gs = GaitStatus {
+            gait: 3,
+            terrain: 9,
+            omega_rad_s: 7.0,
+            beta_des_rad: 0.57,
+            reason: GaitReason::Terrain,
+            foot: 1,
+        };
+        let Message::GaitStatus(g) = rt(Message::GaitStatus(gs), 0) else {
+            panic!()
+        };
+        assert!((g.omega_rad_s - 7.0).abs() < 1e-9 && (g.beta_des_rad - 0.57).abs() < 1e-9);
+    }
+
+    #[test]
+    fn saturates_instead_of_wrapping() {
+        let tc = TerrainClass {
+            confidence_pct: 180.0,
+            latency_us: 1_000_000,
+            ..Default::default()
+        };
+        let d = TerrainClass::decode(&tc.encode()).unwrap();
+        assert_eq!(d.confidence_pct, 100.0);
+        assert_eq!(d.latency_us, 65535);
+        let lc = LegCommand {
+            leg_length_m: -1.0,
+            touchdown_angle_rad: 10.0,
+            ..Default::default()
+        };
+        let d = LegCommand::decode(&lc.encode()).unwrap();
+        assert_eq!(d.leg_length_m, 0.0);
+        assert!((d.touchdown_angle_rad - 3.2767).abs() < 1e-9);
+    }
+
+    #[test]
+    fn malformed_frames_are_errors_not_panics() {
+        let ids = IdConfig::default();
+        let id = make_id(0x100, false).unwrap();
+        let short = CanFrame::classic(id, &[1, 2]).unwrap();
+        let e = decode(&short, &ids).unwrap_err();
+        assert!(
+            e.to_string().contains("FootContact needs at least 6"),
+            "{e}"
+        );
+        let bad = CanFrame::classic(id, &[7, 0, 0, 0, 0, 0, 0, 0]).unwrap();
+        assert!(matches!(
+            decode(&bad, &ids),
+            Err(DecodeError::BadValue { .. })
+        ));
+        let rem = CanFrame::remote(id, 8).unwrap();
+        assert!(matches!(
+            decode(&rem, &ids),
+            Err(DecodeError::Remote { .. })
+        ));
+        let other = CanFrame::classic(make_id(0x7E5, false).unwrap(), &[]).unwrap();
+        assert_eq!(decode(&other, &ids), Ok(None));
+        let st =
+            CanFrame::classic(make_id(0x280, false).unwrap(), &[0, 9, 0, 0, 0, 0, 0, 0]).unwrap();
+        assert!(decode(&st, &ids).is_err());
+    }
+
+    #[test]
+    fn terrain_names() {
+        assert_eq!(terrain_name(11), Some("grass"));
+        assert_eq!(terrain_id("wood"), Some(8));
+        assert_eq!(terrain_name(0xFF), Some("unknown"));
+        assert_eq!(terrain_name(200), None);
+    }
+}
