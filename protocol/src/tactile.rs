@@ -61,11 +61,14 @@ impl Variant {
             Variant::Classic => 3,
         }
     }
+    /// Most data segments an image can have: bounded by the index field (FD), the receive
+    /// bitmap (classic) and the largest image.
     fn max_data_segments(self) -> usize {
-        match self {
+        let by_field = match self {
             Variant::Fd => 255,
             Variant::Classic => BITMAP_WORDS * 64 - 3,
-        }
+        };
+        by_field.min(MAX_BYTES.div_ceil(self.data_per_segment()))
     }
     /// Data segments needed for `n_bytes` pixel bytes.
     pub fn data_segments(self, n_bytes: usize) -> usize {
