@@ -33,7 +33,7 @@ fn hex_val(c: u8) -> Option<u8> {
 
 fn parse_hex_bytes(s: &str, out: &mut [u8; 64]) -> Option<usize> {
     let b = s.as_bytes();
-    if b.len() % 2 != 0 || b.len() / 2 > 64 {
+    if !b.len().is_multiple_of(2) || b.len() / 2 > 64 {
         return None;
     }
     for (i, pair) in b.chunks_exact(2).enumerate() {
@@ -149,7 +149,7 @@ pub fn write_record(w: &mut impl Write, iface: &str, st: &Stamped) -> std::io::R
     }
     if f.is_remote() {
         write!(w, "R")?;
-        if f.len() > 0 {
+        if !f.is_empty() {
             write!(w, "{}", f.len())?;
         }
     } else {

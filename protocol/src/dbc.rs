@@ -3,7 +3,7 @@
 //! encoders against Python `cantools` reading the DBC).
 //!
 //! Per-foot messages get one DBC message per identifier (`FootContact_F0` .. `_F7`). The FD
-//! tactile message is multiplexed by `SegmentIndex`: value 0 is the header, values 1-255 are data
+//! tactile message is multiplexed by `SegmentIndex`: value 0 is the header, values 1-133 are data
 //! segments (extended multiplexing, `SG_MUL_VAL_`); the classic variant likewise with header
 //! parts 0, 1, 2 and data from 3.
 
@@ -13,6 +13,7 @@ use crate::ids::{IdConfig, MAX_FEET, MessageKind};
 use crate::messages::{
     ANGLE_SCALE_RAD, LENGTH_SCALE_M, OMEGA_SCALE, PERCENT_SCALE, TERRAIN_UNKNOWN, TERRAINS,
 };
+use crate::tactile::Variant;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Mux {
@@ -155,7 +156,7 @@ fn signals(kind: MessageKind) -> Vec<Sig> {
             for i in 0..62 {
                 v.push(
                     sig(&format!("Px{i:02}"), 16 + 8 * i, 8, false, 1.0, "")
-                        .mux(Mux::Range(1, 255)),
+                        .mux(Mux::Range(1, Variant::Fd.max_data_segments() as u32)),
                 );
             }
             v
@@ -173,8 +174,10 @@ fn signals(kind: MessageKind) -> Vec<Sig> {
             ];
             for i in 0..5 {
                 v.push(
-                    sig(&format!("Px{i:02}"), 24 + 8 * i, 8, false, 1.0, "")
-                        .mux(Mux::Range(3, 65535)),
+                    sig(&format!("Px{i:02}"), 24 + 8 * i, 8, false, 1.0, "").mux(Mux::Range(
+                        3,
+                        2 + Variant::Classic.max_data_segments() as u32,
+                    )),
                 );
             }
             v

@@ -195,7 +195,7 @@ impl IdConfig {
         let mut out = Vec::new();
         for &kind in kinds {
             let base = self.base(kind);
-            if kind.per_foot() && base % MAX_FEET as u32 == 0 {
+            if kind.per_foot() && base.is_multiple_of(MAX_FEET as u32) {
                 out.push((base, width & !(MAX_FEET as u32 - 1)));
             } else {
                 for f in 0..Self::span(kind) {

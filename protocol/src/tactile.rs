@@ -63,7 +63,7 @@ impl Variant {
     }
     /// Most data segments an image can have: bounded by the index field (FD), the receive
     /// bitmap (classic) and the largest image.
-    fn max_data_segments(self) -> usize {
+    pub fn max_data_segments(self) -> usize {
         let by_field = match self {
             Variant::Fd => 255,
             Variant::Classic => BITMAP_WORDS * 64 - 3,
@@ -209,6 +209,18 @@ pub enum SegmentError {
     BadId,
 }
 
+/// A borrowed image to send: geometry, depth, sampling time and row-major pixels.
+#[derive(Clone, Copy, Debug)]
+pub struct ImageRef<'a> {
+    pub rows: usize,
+    pub cols: usize,
+    /// 8 or 16.
+    pub bits: u8,
+    /// Sender clock at sampling, µs (wrapping).
+    pub timestamp_us: u32,
+    pub pixels: &'a [u16],
+}
+
 /// Cuts images into segment frames. Holds no buffers: each frame is built on the stack.
 #[derive(Clone, Debug)]
 pub struct Segmenter {
@@ -226,13 +238,16 @@ impl Segmenter {
         &self,
         foot: u8,
         seq: u8,
-        rows: usize,
-        cols: usize,
-        bits: u8,
-        timestamp_us: u32,
-        pixels: &[u16],
+        img: &ImageRef<'_>,
         mut emit: impl FnMut(CanFrame),
     ) -> Result<(), SegmentError> {
+        let ImageRef {
+            rows,
+            cols,
+            bits,
+            timestamp_us,
+            pixels,
+        } = *img;
         let v = self.variant;
         let n_px = rows * cols;
         let bad = SegmentError::BadImage {
@@ -661,7 +676,18 @@ mod tests {
     ) -> Vec<CanFrame> {
         let mut out = Vec::new();
         Segmenter::new(v, IdConfig::default())
-            .frames(foot, seq, rows, cols, bits, 1234, px, |f| out.push(f))
+            .frames(
+                foot,
+                seq,
+                &ImageRef {
+                    rows,
+                    cols,
+                    bits,
+                    timestamp_us: 1234,
+                    pixels: px,
+                },
+                |f| out.push(f),
+            )
             .unwrap();
         out
     }
@@ -782,10 +808,49 @@ mod tests {
     fn segmenter_rejects_bad_images() {
         let s = Segmenter::new(Variant::Fd, IdConfig::default());
         let e = s
-            .frames(0, 0, 65, 65, 8, 0, &vec![0; 65 * 65], |_| {})
+            .frames(
+                0,
+                0,
+                &ImageRef {
+                    rows: 65,
+                    cols: 65,
+                    bits: 8,
+                    timestamp_us: 0,
+                    pixels: &vec![0; 65 * 65],
+                },
+                |_| {},
+            )
             .unwrap_err();
         assert!(e.to_string().contains("at most 4096 pixels"));
-        assert!(s.frames(0, 0, 2, 2, 12, 0, &[0; 4], |_| {}).is_err());
-        assert!(s.frames(0, 0, 2, 2, 8, 0, &[0; 3], |_| {}).is_err());
+        assert!(
+            s.frames(
+                0,
+                0,
+                &ImageRef {
+                    rows: 2,
+                    cols: 2,
+                    bits: 12,
+                    timestamp_us: 0,
+                    pixels: &[0; 4]
+                },
+                |_| {}
+            )
+            .is_err()
+        );
+        assert!(
+            s.frames(
+                0,
+                0,
+                &ImageRef {
+                    rows: 2,
+                    cols: 2,
+                    bits: 8,
+                    timestamp_us: 0,
+                    pixels: &[0; 3]
+                },
+                |_| {}
+            )
+            .is_err()
+        );
     }
 }

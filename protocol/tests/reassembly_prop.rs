@@ -5,11 +5,11 @@
 use std::collections::HashMap;
 
 use presrs_protocol::ids::IdConfig;
-use presrs_protocol::tactile::{Reassembler, Segmenter, Variant};
+use presrs_protocol::tactile::{ImageRef, Reassembler, Segmenter, Variant};
 use proptest::prelude::*;
+use rand::rngs::StdRng;
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
-use rand::rngs::StdRng;
 
 struct Sent {
     foot: u8,
@@ -24,7 +24,10 @@ struct Sent {
 type Seg = (u8, Vec<u8>, Option<usize>);
 
 fn cases() -> u32 {
-    std::env::var("PROPTEST_CASES").ok().and_then(|s| s.parse().ok()).unwrap_or(100_000)
+    std::env::var("PROPTEST_CASES")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(100_000)
 }
 
 fn make_images(rng: &mut StdRng, n: usize) -> Vec<Sent> {
@@ -38,8 +41,17 @@ fn make_images(rng: &mut StdRng, n: usize) -> Vec<Sent> {
             let cols = rng.random_range(1..=14u8);
             let bits = if rng.random_bool(0.5) { 8 } else { 16 };
             let max = if bits == 8 { 255 } else { 65535 };
-            let pixels = (0..rows as usize * cols as usize).map(|_| rng.random_range(0..=max)).collect();
-            Sent { foot, seq, rows, cols, bits, pixels }
+            let pixels = (0..rows as usize * cols as usize)
+                .map(|_| rng.random_range(0..=max))
+                .collect();
+            Sent {
+                foot,
+                seq,
+                rows,
+                cols,
+                bits,
+                pixels,
+            }
         })
         .collect()
 }
@@ -47,15 +59,30 @@ fn make_images(rng: &mut StdRng, n: usize) -> Vec<Sent> {
 fn segments(v: Variant, img: &Sent) -> Vec<Vec<u8>> {
     let mut out = Vec::new();
     Segmenter::new(v, IdConfig::default())
-        .frames(img.foot, img.seq, img.rows as usize, img.cols as usize, img.bits, 77, &img.pixels, |f| {
-            out.push(f.data().to_vec())
-        })
+        .frames(
+            img.foot,
+            img.seq,
+            &ImageRef {
+                rows: img.rows as usize,
+                cols: img.cols as usize,
+                bits: img.bits,
+                timestamp_us: 77,
+                pixels: &img.pixels,
+            },
+            |f| out.push(f.data().to_vec()),
+        )
         .unwrap();
     out
 }
 
 /// Per foot, each image's segments shuffled, lost and duplicated; feet interleaved at random.
-fn stream(rng: &mut StdRng, v: Variant, imgs: &[Sent], loss: f64, dup: f64) -> (Vec<Seg>, Vec<bool>) {
+fn stream(
+    rng: &mut StdRng,
+    v: Variant,
+    imgs: &[Sent],
+    loss: f64,
+    dup: f64,
+) -> (Vec<Seg>, Vec<bool>) {
     let mut per_foot: HashMap<u8, Vec<Seg>> = HashMap::new();
     let mut complete = Vec::new();
     for (i, img) in imgs.iter().enumerate() {
@@ -75,10 +102,13 @@ fn stream(rng: &mut StdRng, v: Variant, imgs: &[Sent], loss: f64, dup: f64) -> (
         }
         complete.push(all_there);
     }
-    let mut queues: Vec<std::collections::VecDeque<Seg>> = per_foot.into_values().map(Into::into).collect();
+    let mut queues: Vec<std::collections::VecDeque<Seg>> =
+        per_foot.into_values().map(Into::into).collect();
     let mut out = Vec::new();
     while queues.iter().any(|q| !q.is_empty()) {
-        let live: Vec<usize> = (0..queues.len()).filter(|&i| !queues[i].is_empty()).collect();
+        let live: Vec<usize> = (0..queues.len())
+            .filter(|&i| !queues[i].is_empty())
+            .collect();
         let k = live[rng.random_range(0..live.len())];
         if let Some(s) = queues[k].pop_front() {
             out.push(s);
@@ -92,9 +122,14 @@ fn check(v: Variant, imgs: &[Sent], segs: &[Seg]) -> Result<Vec<usize>, TestCase
     let mut delivered = Vec::new();
     for (t, (foot, payload, _)) in segs.iter().enumerate() {
         if let Some(img) = r.push(v, *foot, payload, t as u64 * 10) {
-            let i = imgs.iter().position(|s| s.foot == img.foot && s.seq == img.seq);
+            let i = imgs
+                .iter()
+                .position(|s| s.foot == img.foot && s.seq == img.seq);
             let Some(i) = i else {
-                return Err(TestCaseError::fail(format!("delivered an image never sent: foot {} seq {}", img.foot, img.seq)));
+                return Err(TestCaseError::fail(format!(
+                    "delivered an image never sent: foot {} seq {}",
+                    img.foot, img.seq
+                )));
             };
             let s = &imgs[i];
             prop_assert_eq!((img.rows, img.cols, img.bits), (s.rows, s.cols, s.bits));

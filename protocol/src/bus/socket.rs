@@ -13,6 +13,9 @@ use super::CanBus;
 use crate::error::BusError;
 use crate::frame::{CanFrame, Stamped};
 
+/// Receive buffer requested per socket.
+pub const RECV_BUFFER_BYTES: usize = 4 << 20;
+
 /// A handle on a Linux CAN interface (`can0`, `vcan0`, ...).
 ///
 /// The socket is an FD socket, so it receives classic and FD frames alike. On an interface with
@@ -22,6 +25,22 @@ pub struct SocketCanBus {
     iface: String,
     sock: CanFdSocket,
     read_timeout: Option<Duration>,
+}
+
+fn force_recv_buffer(sock: &CanFdSocket, bytes: usize) -> bool {
+    use std::os::fd::AsRawFd;
+    let v = bytes as libc::c_int;
+    // SAFETY: a valid socket fd and a c_int option value of the right size.
+    let r = unsafe {
+        libc::setsockopt(
+            sock.as_raw_fd(),
+            libc::SOL_SOCKET,
+            libc::SO_RCVBUFFORCE,
+            &v as *const libc::c_int as *const libc::c_void,
+            std::mem::size_of::<libc::c_int>() as libc::socklen_t,
+        )
+    };
+    r == 0
 }
 
 /// The interface's MTU from sysfs: 16 for classic CAN, 72 for CAN FD.
@@ -42,6 +61,13 @@ impl SocketCanBus {
         // A full transmit queue (no ACK, bus off) must not stall a control loop.
         sock.set_write_timeout(Duration::from_millis(5))
             .map_err(open_err)?;
+        // One tactile image is a burst of 33 FD (or 391 classic) frames per foot; the default
+        // receive buffer (~200 KiB, a few hundred frames) overflows when a reader is briefly late.
+        // SO_RCVBUFFORCE (needs CAP_NET_ADMIN) passes net.core.rmem_max; otherwise the kernel
+        // caps the plain request at rmem_max.
+        if !force_recv_buffer(&sock, RECV_BUFFER_BYTES) {
+            let _ = sock.as_raw_socket().set_recv_buffer_size(RECV_BUFFER_BYTES);
+        }
         Ok(Self {
             iface: iface.to_string(),
             sock,

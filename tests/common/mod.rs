@@ -1,0 +1,173 @@
+//! Helpers shared by the system tests.
+#![allow(dead_code)]
+
+use std::collections::BTreeMap;
+
+use protocol::messages::*;
+
+/// The DBC signal values of a message, from our own decoder (for comparison with cantools).
+pub fn signals(m: &Message) -> BTreeMap<&'static str, f64> {
+    let mut s = BTreeMap::new();
+    match m {
+        Message::LegCommand(c) => {
+            s.insert("LegLengthSetpoint", c.leg_length_m);
+            s.insert("TouchdownAngleSetpoint", c.touchdown_angle_rad);
+            s.insert("GaitId", c.gait as f64);
+            s.insert("Phase", c.phase as u8 as f64);
+            s.insert("Sequence", c.seq as f64);
+        }
+        Message::FootContact(c) => {
+            s.insert("Contact", c.stance as u8 as f64);
+            s.insert("Sequence", c.seq as f64);
+            s.insert("TimestampUs", c.timestamp_us as f64);
+        }
+        Message::LegState(c) => {
+            s.insert("LegAngle", c.leg_angle_rad);
+            s.insert("LegLength", c.leg_length_m);
+            s.insert("TimestampUs", c.timestamp_us as f64);
+        }
+        Message::TerrainClass(c) => {
+            s.insert("Step", c.step as f64);
+            s.insert("TerrainId", c.terrain as f64);
+            s.insert("Confidence", c.confidence_pct);
+            s.insert("DamagePercent", c.damage_pct);
+            s.insert(
+                "FlagRepaired",
+                (c.flags & flags::REPAIRED != 0) as u8 as f64,
+            );
+            s.insert(
+                "FlagLowConfidence",
+                (c.flags & flags::LOW_CONFIDENCE != 0) as u8 as f64,
+            );
+            s.insert(
+                "FlagNoSample",
+                (c.flags & flags::NO_SAMPLE != 0) as u8 as f64,
+            );
+            s.insert(
+                "FlagMultiFrame",
+                (c.flags & flags::MULTI_FRAME != 0) as u8 as f64,
+            );
+            s.insert("LatencyUs", c.latency_us as f64);
+        }
+        Message::NodeStatus(c) => {
+            s.insert("Heartbeat", c.heartbeat as f64);
+            s.insert("State", c.state as u8 as f64);
+            s.insert("ModelId", c.model_id as f64);
+            s.insert("CrcFailures", c.crc_failures as f64);
+            s.insert("IncompleteFrames", c.incomplete_frames as f64);
+            s.insert("BusErrors", c.bus_errors as f64);
+            s.insert("DamagePercent", c.damage_pct);
+        }
+        Message::GaitStatus(c) => {
+            s.insert("ActiveGait", c.gait as f64);
+            s.insert("TerrainId", c.terrain as f64);
+            s.insert("Omega", c.omega_rad_s);
+            s.insert("BetaDes", c.beta_des_rad);
+            s.insert("Reason", c.reason as u8 as f64);
+            s.insert("Foot", c.foot as f64);
+        }
+        Message::TactileSegment(_) => {}
+    }
+    s
+}
+
+/// One random message of every kind for a foot, already quantised as the wire carries it.
+pub fn random_messages(rng: &mut impl rand::Rng, foot: u8) -> Vec<Message> {
+    let ms = vec![
+        Message::LegCommand(LegCommand {
+            leg_length_m: rng.random_range(0.0..0.6),
+            touchdown_angle_rad: rng.random_range(-1.0..1.0),
+            gait: rng.random_range(0..4),
+            phase: if rng.random_bool(0.5) {
+                Phase::Stance
+            } else {
+                Phase::Flight
+            },
+            seq: rng.random(),
+        }),
+        Message::FootContact(FootContact {
+            stance: rng.random_bool(0.5),
+            seq: rng.random(),
+            timestamp_us: rng.random(),
+        }),
+        Message::LegState(LegState {
+            leg_angle_rad: rng.random_range(-1.0..1.0),
+            leg_length_m: rng.random_range(0.0..0.6),
+            timestamp_us: rng.random(),
+        }),
+        Message::TerrainClass(TerrainClass {
+            step: rng.random(),
+            terrain: rng.random_range(0..12),
+            confidence_pct: rng.random_range(0.0..100.0),
+            damage_pct: rng.random_range(0.0..100.0),
+            flags: rng.random_range(0..16),
+            latency_us: rng.random_range(0..70000),
+        }),
+        Message::NodeStatus(NodeStatus {
+            heartbeat: rng.random(),
+            state: NodeState::from_u8(rng.random_range(0..5)).unwrap_or_default(),
+            model_id: rng.random(),
+            crc_failures: rng.random(),
+            incomplete_frames: rng.random(),
+            bus_errors: rng.random(),
+            damage_pct: rng.random_range(0.0..100.0),
+        }),
+        Message::GaitStatus(GaitStatus {
+            gait: rng.random_range(1..4),
+            terrain: rng.random_range(0..12),
+            omega_rad_s: rng.random_range(0.0..20.0),
+            beta_des_rad: rng.random_range(-1.0..1.0),
+            reason: GaitReason::from_u8(rng.random_range(0..4)).unwrap_or_default(),
+            foot,
+        }),
+    ];
+    // Quantise through the wire so expected values are exactly what the frame carries.
+    let ids = protocol::IdConfig::default();
+    ms.into_iter()
+        .filter_map(|m| m.to_frame(&ids, foot))
+        .filter_map(|f| {
+            protocol::messages::decode(&f, &ids)
+                .ok()
+                .flatten()
+                .map(|(_, m)| m)
+        })
+        .collect()
+}
+
+/// Hex of bytes.
+pub fn hex(b: &[u8]) -> String {
+    b.iter().map(|x| format!("{x:02x}")).collect()
+}
+
+pub fn unhex(s: &str) -> Vec<u8> {
+    (0..s.len() / 2)
+        .filter_map(|i| u8::from_str_radix(&s[2 * i..2 * i + 2], 16).ok())
+        .collect()
+}
+
+/// The repository root (the root package's manifest directory).
+pub fn root() -> std::path::PathBuf {
+    std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// Runs the Python interop client; its failure fails the test (never a skip).
+pub fn python(args: &[&str]) -> String {
+    let script = root().join("tests/interop/cantools_check.py");
+    let out = std::process::Command::new("python3")
+        .arg(&script)
+        .args(args)
+        .output()
+        .unwrap_or_else(|e| {
+            panic!(
+                "cannot run python3 {}: {e}. Install: pip install -r tests/requirements.txt",
+                script.display()
+            )
+        });
+    let stdout = String::from_utf8_lossy(&out.stdout).to_string();
+    assert!(
+        out.status.success(),
+        "python3 cantools_check.py {args:?} failed:\n{stdout}\n{}\n(needs: pip install -r tests/requirements.txt)",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    stdout
+}
