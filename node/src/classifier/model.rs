@@ -1,0 +1,207 @@
+//! The model file: versioned JSON holding everything needed to classify, and the names of the
+//! images it was trained on.
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use super::image::Crop;
+
+/// Format version written by this build; a model with another version is refused.
+pub const MODEL_VERSION: u32 = 1;
+/// Most classes a model may have (bounds the per-decision buffers).
+pub const MAX_CLASSES: usize = 16;
+
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ClassInfo {
+    pub name: String,
+    /// Terrain id sent in `TerrainClass`.
+    pub terrain_id: u8,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Model {
+    pub version: u32,
+    pub classes: Vec<ClassInfo>,
+    /// Size of the images the model takes (before crop).
+    pub input_rows: usize,
+    pub input_cols: usize,
+    pub crop: Crop,
+    /// 1 = full resolution.
+    pub downsample: usize,
+    /// Mean total intensity of the training images when load normalisation is on: each image is
+    /// scaled to this total before its features are taken.
+    pub normalize_load: Option<f64>,
+    /// FFT length N (feature length N/2 + 1).
+    pub n_fft: usize,
+    /// PCA dimensions h.
+    pub h: usize,
+    /// Mean feature vector (length N/2 + 1).
+    pub pca_mean: Vec<f32>,
+    /// U, h x (N/2 + 1), row-major: Q = U (F - mean).
+    pub pca_matrix: Vec<f32>,
+    /// Stored samples P, m x h row-major (training and validation images, projected).
+    pub samples: Vec<f32>,
+    pub sample_classes: Vec<usize>,
+    /// Gaussian kernel width sigma, chosen on the validation split.
+    pub kernel_width: f64,
+    /// Log-density below which a decision is "unknown".
+    pub unknown_threshold: f64,
+    pub train_hashes: Vec<String>,
+    pub val_hashes: Vec<String>,
+}
+
+/// A model file that cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum ModelError {
+    #[error("cannot read model {path}: {source}")]
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
+    #[error("model {path} is not a PreSRS model file (JSON): {msg}")]
+    Parse { path: String, msg: String },
+    #[error(
+        "model {path} has format version {found}; this build reads version {MODEL_VERSION}. Retrain it with `presrs train`"
+    )]
+    Version { path: String, found: u64 },
+    #[error("model {path} is inconsistent: {msg}. Retrain it with `presrs train`")]
+    Invalid { path: String, msg: String },
+}
+
+impl Model {
+    pub fn feature_len(&self) -> usize {
+        self.n_fft / 2 + 1
+    }
+
+    pub fn n_samples(&self) -> usize {
+        self.sample_classes.len()
+    }
+
+    /// Size after crop and downsampling.
+    pub fn work_size(&self) -> Option<(usize, usize)> {
+        let (r, c) = self.crop.output_size(self.input_rows, self.input_cols)?;
+        let k = self.downsample.max(1);
+        Some((r.div_ceil(k), c.div_ceil(k)))
+    }
+
+    /// A short id: the low 16 bits go out in `NodeStatus`.
+    pub fn id(&self) -> u64 {
+        let text = serde_json::to_string(self).unwrap_or_default();
+        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+        for b in text.bytes() {
+            h ^= b as u64;
+            h = h.wrapping_mul(0x0100_0000_01b3);
+        }
+        h
+    }
+
+    /// Checks every dimension, so a hand-edited or truncated file fails here, not mid-flight.
+    pub fn validate(&self) -> Result<(), String> {
+        let n = self.feature_len();
+        if self.classes.is_empty() || self.classes.len() > MAX_CLASSES {
+            return Err(format!(
+                "{} classes (1..={MAX_CLASSES} allowed)",
+                self.classes.len()
+            ));
+        }
+        let (r, c) = self.work_size().ok_or("crop leaves no pixels")?;
+        if super::features::fft_len(r * c) != self.n_fft {
+            return Err(format!("n_fft {} does not fit {r}x{c} images", self.n_fft));
+        }
+        if self.pca_mean.len() != n {
+            return Err(format!(
+                "pca_mean has {} values, expected {n}",
+                self.pca_mean.len()
+            ));
+        }
+        if self.h == 0 || self.pca_matrix.len() != self.h * n {
+            return Err(format!(
+                "pca_matrix has {} values, expected h x n = {} x {n}",
+                self.pca_matrix.len(),
+                self.h
+            ));
+        }
+        if self.samples.len() != self.n_samples() * self.h || self.n_samples() == 0 {
+            return Err(format!(
+                "samples has {} values for {} labels and h = {}",
+                self.samples.len(),
+                self.n_samples(),
+                self.h
+            ));
+        }
+        if let Some(bad) = self
+            .sample_classes
+            .iter()
+            .find(|&&k| k >= self.classes.len())
+        {
+            return Err(format!("sample class {bad} is not a class index"));
+        }
+        if !(self.kernel_width.is_finite() && self.kernel_width > 0.0) {
+            return Err(format!(
+                "kernel_width {} must be positive",
+                self.kernel_width
+            ));
+        }
+        let finite = self
+            .pca_mean
+            .iter()
+            .chain(&self.pca_matrix)
+            .chain(&self.samples)
+            .all(|v| v.is_finite());
+        if !finite {
+            return Err("non-finite numbers in the PCA or samples".into());
+        }
+        Ok(())
+    }
+
+    pub fn load(path: &Path) -> Result<Self, ModelError> {
+        let p = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|source| ModelError::Io {
+            path: p.clone(),
+            source,
+        })?;
+        Self::from_json(&text, &p)
+    }
+
+    pub fn from_json(text: &str, path: &str) -> Result<Self, ModelError> {
+        let v: serde_json::Value = serde_json::from_str(text).map_err(|e| ModelError::Parse {
+            path: path.into(),
+            msg: e.to_string(),
+        })?;
+        let found = v
+            .get("version")
+            .and_then(|x| x.as_u64())
+            .ok_or_else(|| ModelError::Parse {
+                path: path.into(),
+                msg: "no `version` field".into(),
+            })?;
+        if found != MODEL_VERSION as u64 {
+            return Err(ModelError::Version {
+                path: path.into(),
+                found,
+            });
+        }
+        let m: Model = serde_json::from_value(v).map_err(|e| ModelError::Parse {
+            path: path.into(),
+            msg: e.to_string(),
+        })?;
+        m.validate().map_err(|msg| ModelError::Invalid {
+            path: path.into(),
+            msg,
+        })?;
+        Ok(m)
+    }
+
+    pub fn save(&self, path: &Path) -> Result<(), ModelError> {
+        let text = serde_json::to_string(self).map_err(|e| ModelError::Parse {
+            path: path.display().to_string(),
+            msg: e.to_string(),
+        })?;
+        std::fs::write(path, text).map_err(|source| ModelError::Io {
+            path: path.display().to_string(),
+            source,
+        })
+    }
+}

@@ -1,0 +1,325 @@
+//! Training, as in sections 4.2 and 7.2: per class, `per_class` random samples, `train` of them
+//! for the training set T and the rest for the validation set V; PCA on the feature vectors of
+//! T and V; the kernel width chosen by the accuracy on V with T as the stored samples; then all
+//! of T and V are stored as the model's samples P.
+
+use nalgebra::DMatrix;
+use rand::SeedableRng;
+use rand::seq::SliceRandom;
+
+use super::features::{FeatureExtractor, fft_len};
+use super::image::{Crop, PressureImage};
+use super::model::{ClassInfo, MAX_CLASSES, MODEL_VERSION, Model};
+use super::pwe::Classifier;
+
+#[derive(Clone, Debug)]
+pub struct TrainOptions {
+    pub per_class: usize,
+    pub train: usize,
+    pub crop: Crop,
+    pub downsample: usize,
+    pub normalize_load: bool,
+    /// PCA dimensions; `None`: the paper's 52, or as many as the samples support.
+    pub h: Option<usize>,
+    pub seed: u64,
+}
+
+impl Default for TrainOptions {
+    fn default() -> Self {
+        Self {
+            per_class: 20,
+            train: 13,
+            crop: Crop::default(),
+            downsample: 1,
+            normalize_load: false,
+            h: None,
+            seed: 1,
+        }
+    }
+}
+
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+pub enum TrainError {
+    #[error("class `{class}` has {have} images; training needs at least --per-class {need}")]
+    TooFew {
+        class: String,
+        have: usize,
+        need: usize,
+    },
+    #[error(
+        "--train {train} must be at least 1 and below --per-class {per_class} (the rest validate)"
+    )]
+    BadSplit { train: usize, per_class: usize },
+    #[error("{0} classes; a model holds 2 to {MAX_CLASSES}")]
+    Classes(usize),
+    #[error(
+        "images of {a} and {b} differ in size; give a --crop that makes them equal, or use one sensor size"
+    )]
+    Sizes { a: String, b: String },
+    #[error("crop {crop:?} leaves nothing of a {rows}x{cols} image")]
+    Crop {
+        crop: Crop,
+        rows: usize,
+        cols: usize,
+    },
+    #[error("the PCA did not converge (are all images identical?)")]
+    Pca,
+}
+
+/// One labelled image.
+pub struct Labelled<'a> {
+    pub image: &'a PressureImage,
+    pub class: usize,
+}
+
+/// What was used for what, by index into the input.
+#[derive(Clone, Debug, Default)]
+pub struct Split {
+    pub train: Vec<usize>,
+    pub validation: Vec<usize>,
+    pub test: Vec<usize>,
+}
+
+fn preprocess(img: &PressureImage, o: &TrainOptions) -> Option<PressureImage> {
+    let c = img.crop(&o.crop)?;
+    Some(if o.downsample > 1 {
+        c.downsample(o.downsample)
+    } else {
+        c
+    })
+}
+
+pub fn train(
+    data: &[Labelled<'_>],
+    classes: &[ClassInfo],
+    o: &TrainOptions,
+) -> Result<(Model, Split), TrainError> {
+    if classes.len() < 2 || classes.len() > MAX_CLASSES {
+        return Err(TrainError::Classes(classes.len()));
+    }
+    if o.train == 0 || o.train >= o.per_class {
+        return Err(TrainError::BadSplit {
+            train: o.train,
+            per_class: o.per_class,
+        });
+    }
+    let (rows, cols) = (data[0].image.rows, data[0].image.cols);
+    for d in data {
+        if (d.image.rows, d.image.cols) != (rows, cols) {
+            return Err(TrainError::Sizes {
+                a: format!("{rows}x{cols}"),
+                b: format!("{}x{}", d.image.rows, d.image.cols),
+            });
+        }
+    }
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(o.seed);
+    let mut split = Split::default();
+    for (k, c) in classes.iter().enumerate() {
+        let mut idx: Vec<usize> = (0..data.len()).filter(|&i| data[i].class == k).collect();
+        if idx.len() < o.per_class {
+            return Err(TrainError::TooFew {
+                class: c.name.clone(),
+                have: idx.len(),
+                need: o.per_class,
+            });
+        }
+        idx.shuffle(&mut rng);
+        split.train.extend_from_slice(&idx[..o.train]);
+        split
+            .validation
+            .extend_from_slice(&idx[o.train..o.per_class]);
+        split.test.extend_from_slice(&idx[o.per_class..]);
+    }
+    let prep = |i: usize| {
+        preprocess(data[i].image, o).ok_or(TrainError::Crop {
+            crop: o.crop,
+            rows,
+            cols,
+        })
+    };
+    let first = prep(split.train[0])?;
+    let n_px = first.rows * first.cols;
+    let normalize_load = if o.normalize_load {
+        let tot: f64 = split
+            .train
+            .iter()
+            .chain(&split.validation)
+            .map(|&i| prep(i).map(|p| p.total()))
+            .sum::<Result<f64, _>>()?;
+        Some(tot / (split.train.len() + split.validation.len()) as f64)
+    } else {
+        None
+    };
+    let mut fx = FeatureExtractor::new(n_px);
+    let n = fx.feature_len();
+    let tv: Vec<usize> = split
+        .train
+        .iter()
+        .chain(&split.validation)
+        .copied()
+        .collect();
+    let mut x = DMatrix::<f64>::zeros(tv.len(), n);
+    for (row, &i) in tv.iter().enumerate() {
+        let p = prep(i)?;
+        let scale = match normalize_load {
+            Some(t) if p.total() > 0.0 => (t / p.total()) as f32,
+            _ => 1.0,
+        };
+        let f = fx.features(&p.pixels, scale);
+        for (j, v) in f.iter().enumerate() {
+            x[(row, j)] = *v as f64;
+        }
+    }
+    let mean = x.row_mean();
+    for mut r in x.row_iter_mut() {
+        r -= &mean;
+    }
+    let svd = x.clone().svd(false, true);
+    let v_t = svd.v_t.ok_or(TrainError::Pca)?;
+    let tol = svd.singular_values.max() * 1e-9;
+    let rank = svd
+        .singular_values
+        .iter()
+        .filter(|s| **s > tol)
+        .count()
+        .max(1);
+    let h = o.h.unwrap_or(52).min(rank);
+    // Rows of V^T are the principal axes, sorted by singular value.
+    let mut order: Vec<usize> = (0..svd.singular_values.len()).collect();
+    order.sort_by(|&a, &b| svd.singular_values[b].total_cmp(&svd.singular_values[a]));
+    let mut u = vec![0f32; h * n];
+    for (j, &axis) in order.iter().take(h).enumerate() {
+        for k in 0..n {
+            u[j * n + k] = v_t[(axis, k)] as f32;
+        }
+    }
+    // Project T and V.
+    let mut proj = vec![0f32; tv.len() * h];
+    for row in 0..tv.len() {
+        for j in 0..h {
+            let mut s = 0.0f64;
+            for k in 0..n {
+                s += x[(row, k)] * u[j * n + k] as f64;
+            }
+            proj[row * h + j] = s as f32;
+        }
+    }
+    let labels: Vec<usize> = tv.iter().map(|&i| data[i].class).collect();
+    let n_t = split.train.len();
+    let hash = |is: &[usize]| {
+        is.iter()
+            .map(|&i| data[i].image.content_hash())
+            .collect::<Vec<_>>()
+    };
+    let mut model = Model {
+        version: MODEL_VERSION,
+        classes: classes.to_vec(),
+        input_rows: rows,
+        input_cols: cols,
+        crop: o.crop,
+        downsample: o.downsample.max(1),
+        normalize_load,
+        n_fft: fft_len(n_px),
+        h,
+        pca_mean: mean.iter().map(|v| *v as f32).collect(),
+        pca_matrix: u,
+        samples: proj[..n_t * h].to_vec(),
+        sample_classes: labels[..n_t].to_vec(),
+        kernel_width: 1.0,
+        unknown_threshold: f64::NEG_INFINITY,
+        train_hashes: hash(&split.train),
+        val_hashes: hash(&split.validation),
+    };
+    // Kernel width: a log-spaced grid around the typical nearest-neighbour distance in T,
+    // scored by validation accuracy, ties to the wider kernel (smoother densities).
+    let nn = median_nn_distance(&proj[..n_t * h], h);
+    let mut best = (f64::NEG_INFINITY, 0usize, nn);
+    for step in -16..=8 {
+        let sigma = nn * 2f64.powf(step as f64 / 2.0);
+        model.kernel_width = sigma;
+        let mut c = Classifier::new(model.clone());
+        let mut correct = 0;
+        let mut margin = 0.0;
+        for (vi, &i) in split.validation.iter().enumerate() {
+            let p = prep(i)?;
+            let mut d = c.classify_work(&p.pixels);
+            d.class = Some(d.best);
+            correct += (d.best == labels[n_t + vi]) as usize;
+            margin += d.log_posteriors[labels[n_t + vi]].max(-50.0);
+        }
+        let score = correct as f64 + margin * 1e-6;
+        if score >= best.0 {
+            best = (score, correct, sigma);
+        }
+    }
+    model.kernel_width = best.2;
+    model.samples = proj;
+    model.sample_classes = labels;
+    model.unknown_threshold = unknown_threshold(&model);
+    Ok((model, split))
+}
+
+/// Median over stored samples of the distance to the nearest other sample.
+fn median_nn_distance(p: &[f32], h: usize) -> f64 {
+    let m = p.len() / h;
+    let mut d: Vec<f64> = (0..m)
+        .map(|i| {
+            (0..m)
+                .filter(|&j| j != i)
+                .map(|j| {
+                    (0..h)
+                        .map(|k| ((p[i * h + k] - p[j * h + k]) as f64).powi(2))
+                        .sum::<f64>()
+                })
+                .fold(f64::INFINITY, f64::min)
+                .sqrt()
+        })
+        .filter(|v| v.is_finite() && *v > 0.0)
+        .collect();
+    if d.is_empty() {
+        return 1.0;
+    }
+    d.sort_by(f64::total_cmp);
+    d[d.len() / 2]
+}
+
+/// The unknown threshold: the lowest leave-one-out log density of a stored sample under its own
+/// class, less 10 nats (a density 22,000 times lower than the least typical training image).
+fn unknown_threshold(m: &Model) -> f64 {
+    let h = m.h;
+    let s2 = 2.0 * m.kernel_width * m.kernel_width;
+    let mut lowest = f64::INFINITY;
+    for i in 0..m.n_samples() {
+        let k = m.sample_classes[i];
+        let others: Vec<f64> = (0..m.n_samples())
+            .filter(|&j| j != i && m.sample_classes[j] == k)
+            .map(|j| {
+                -(0..h)
+                    .map(|t| ((m.samples[i * h + t] - m.samples[j * h + t]) as f64).powi(2))
+                    .sum::<f64>()
+                    / s2
+            })
+            .collect();
+        if others.is_empty() {
+            continue;
+        }
+        let mx = others.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+        let ld = mx + others.iter().map(|e| (e - mx).exp()).sum::<f64>().ln()
+            - (others.len() as f64).ln()
+            - 0.5 * h as f64 * (std::f64::consts::PI * s2).ln();
+        lowest = lowest.min(ld);
+    }
+    if lowest.is_finite() {
+        lowest - 10.0
+    } else {
+        f64::NEG_INFINITY
+    }
+}
+
+impl Classifier {
+    /// Decision for an already cropped and downsampled image (training's validation pass).
+    pub fn classify_work(&mut self, work: &[u16]) -> super::pwe::Decision {
+        self.work_mut().copy_from_slice(work);
+        self.decide()
+    }
+}
