@@ -1,0 +1,177 @@
+//! Training and classification end to end on synthetic textures (three surfaces that differ in
+//! their spatial statistics, as the paper's terrains do), and the model file's guards.
+
+use presrs_node::classifier::model::{MODEL_VERSION, ModelError};
+use presrs_node::classifier::train::{Labelled, TrainOptions, train};
+use presrs_node::classifier::{ClassInfo, Classifier, Crop, Model, PressureImage, repair};
+use rand::{Rng, SeedableRng};
+
+/// 44x44 image of a texture: `period` sets the contact-patch spacing, `fill` the contact
+/// fraction, with random placement, load and noise.
+fn texture(rng: &mut impl Rng, period: usize, fill: f64) -> PressureImage {
+    let (dy, dx) = (rng.random_range(0..period), rng.random_range(0..period));
+    let load = rng.random_range(0.8..1.2);
+    let px = (0..44 * 44)
+        .map(|i| {
+            let (r, c) = (i / 44 + dy, i % 44 + dx);
+            let on = ((r % period) as f64) < fill * period as f64
+                && ((c % period) as f64) < fill * period as f64;
+            let v: f64 = if on { 150.0 * load } else { 10.0 * load } + rng.random_range(-8.0..8.0);
+            v.clamp(0.0, 255.0) as u16
+        })
+        .collect();
+    PressureImage::new(44, 44, 8, px)
+}
+
+fn dataset(seed: u64, n: usize) -> (Vec<PressureImage>, Vec<usize>) {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    let kinds = [(4, 0.5), (7, 0.5), (11, 0.35)];
+    let mut imgs = Vec::new();
+    let mut labels = Vec::new();
+    for (k, &(p, f)) in kinds.iter().enumerate() {
+        for _ in 0..n {
+            imgs.push(texture(&mut rng, p, f));
+            labels.push(k);
+        }
+    }
+    (imgs, labels)
+}
+
+fn classes() -> Vec<ClassInfo> {
+    ["wood", "carpet", "grass"]
+        .iter()
+        .map(|n| ClassInfo {
+            name: n.to_string(),
+            terrain_id: protocol::messages::terrain_id(n).unwrap(),
+        })
+        .collect()
+}
+
+fn trained() -> (Model, Vec<PressureImage>, Vec<usize>, Vec<usize>) {
+    let (imgs, labels) = dataset(1, 40);
+    let data: Vec<Labelled> = imgs
+        .iter()
+        .zip(&labels)
+        .map(|(image, &class)| Labelled { image, class })
+        .collect();
+    let opts = TrainOptions {
+        crop: "2,2,2,2".parse::<Crop>().unwrap(),
+        ..TrainOptions::default()
+    };
+    let (model, split) = train(&data, &classes(), &opts).unwrap();
+    (model, imgs, labels, split.test)
+}
+
+#[test]
+fn trains_with_the_paper_split_and_classifies_held_out_images() {
+    let (model, imgs, labels, test) = trained();
+    assert_eq!(
+        model.n_samples(),
+        60,
+        "20 per class stored (13 train + 7 validation)"
+    );
+    assert_eq!(model.train_hashes.len(), 39);
+    assert_eq!(model.val_hashes.len(), 21);
+    assert_eq!(model.n_fft, 2048);
+    assert!(model.h <= 52 && model.h >= 50, "h = {}", model.h);
+    let mut c = Classifier::new(model);
+    let mut correct = 0;
+    for &i in &test {
+        let d = c.classify(&imgs[i].pixels, 44, 44, false).unwrap();
+        assert!(d.class.is_some(), "a known texture was called unknown");
+        correct += (d.best == labels[i]) as usize;
+        let p: f64 = (0..d.n_classes).map(|k| d.log_posteriors[k].exp()).sum();
+        assert!((p - 1.0).abs() < 1e-9);
+    }
+    let acc = correct as f64 / test.len() as f64;
+    assert!(acc >= 0.95, "held-out accuracy {acc}");
+}
+
+#[test]
+fn something_unlike_any_terrain_is_unknown() {
+    let (model, ..) = trained();
+    let mut c = Classifier::new(model);
+    let stripes: Vec<u16> = (0..44 * 44)
+        .map(|i| if (i / 44) % 2 == 0 { 255 } else { 0 })
+        .collect();
+    let d = c.classify(&stripes, 44, 44, false).unwrap();
+    assert_eq!(d.class, None);
+    assert_eq!(d.terrain_id, 0xFF);
+    assert!(c.classify(&stripes, 40, 40, false).is_err());
+}
+
+#[test]
+fn repair_recovers_accuracy_on_damaged_images() {
+    let (model, imgs, labels, test) = trained();
+    let mut c = Classifier::new(model);
+    let mut rng = rand::rngs::StdRng::seed_from_u64(9);
+    let pct = 60.0;
+    let (mut raw, mut fixed) = (0, 0);
+    for &i in &test {
+        let mut img = imgs[i].clone();
+        repair::damage(&mut img, pct, &mut rng);
+        raw += (c.classify(&img.pixels, 44, 44, false).unwrap().best == labels[i]) as usize;
+        fixed += (c.classify(&img.pixels, 44, 44, true).unwrap().best == labels[i]) as usize;
+    }
+    eprintln!("damage {pct}: raw {raw} repaired {fixed}");
+    assert!(
+        fixed as f64 >= 0.9 * test.len() as f64 && raw < fixed,
+        "repair did not help: {fixed} vs {raw} of {}",
+        test.len()
+    );
+}
+
+#[test]
+fn model_file_round_trips_and_guards_its_version() {
+    let (model, imgs, ..) = trained();
+    let dir = std::env::temp_dir().join(format!("presrs-model-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("m.json");
+    model.save(&path).unwrap();
+    let back = Model::load(&path).unwrap();
+    let (mut a, mut b) = (Classifier::new(model.clone()), Classifier::new(back));
+    let da = a.classify(&imgs[0].pixels, 44, 44, false).unwrap();
+    let db = b.classify(&imgs[0].pixels, 44, 44, false).unwrap();
+    assert_eq!(da, db);
+
+    let mut v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    v["version"] = (MODEL_VERSION + 1).into();
+    let e = Model::from_json(&v.to_string(), "old.json").unwrap_err();
+    assert!(matches!(e, ModelError::Version { .. }));
+    assert!(
+        e.to_string().contains("old.json") && e.to_string().contains("presrs train"),
+        "{e}"
+    );
+
+    v["version"] = MODEL_VERSION.into();
+    v["h"] = 3.into();
+    let e = Model::from_json(&v.to_string(), "m.json").unwrap_err();
+    assert!(matches!(e, ModelError::Invalid { .. }), "{e}");
+    assert!(matches!(
+        Model::from_json("{not json", "x").unwrap_err(),
+        ModelError::Parse { .. }
+    ));
+    assert!(matches!(
+        Model::load(&dir.join("missing.json")).unwrap_err(),
+        ModelError::Io { .. }
+    ));
+}
+
+#[test]
+fn training_rejects_bad_requests() {
+    let (imgs, labels) = dataset(2, 10);
+    let data: Vec<Labelled> = imgs
+        .iter()
+        .zip(&labels)
+        .map(|(image, &class)| Labelled { image, class })
+        .collect();
+    let e = train(&data, &classes(), &TrainOptions::default()).unwrap_err();
+    assert!(e.to_string().contains("has 10 images"), "{e}");
+    let o = TrainOptions {
+        per_class: 10,
+        train: 10,
+        ..TrainOptions::default()
+    };
+    assert!(train(&data, &classes(), &o).is_err());
+}
