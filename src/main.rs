@@ -6,6 +6,8 @@ use std::process::ExitCode;
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 
+mod cli;
+
 #[derive(Parser)]
 #[command(
     name = "presrs",
@@ -36,16 +38,71 @@ enum Cmd {
     Sim,
     /// Simulator, node and controller in one process on the in-process bus (not implemented yet: issue 6).
     Demo,
-    /// Train a terrain classifier (not implemented yet: issue 3).
-    Train,
-    /// Evaluate a classifier (not implemented yet: issue 3).
-    Eval,
-    /// Classify images with a model (not implemented yet: issue 3).
-    Classify,
-    /// Print an image's feature vector (not implemented yet: issue 3).
-    Features,
-    /// Apply the repair filter to an image (not implemented yet: issue 3).
-    Repair,
+    /// Train a terrain classifier on DIR/<class>/<images> (the paper's 13/7 split per class).
+    Train {
+        #[arg(long)]
+        data: PathBuf,
+        #[arg(long)]
+        out: PathBuf,
+        #[arg(long, default_value_t = 20)]
+        per_class: usize,
+        #[arg(long, default_value_t = 13)]
+        train: usize,
+        /// Rows/columns removed: top,bottom,left,right (the paper: 2,2,2,2 static; 0,3,6,0 foot).
+        #[arg(long, default_value = "0,0,0,0")]
+        crop: node::classifier::Crop,
+        #[arg(long, default_value_t = 1)]
+        downsample: usize,
+        #[arg(long)]
+        normalize_load: bool,
+        /// PCA dimensions (default: 52, or as many as the samples support).
+        #[arg(long)]
+        dims: Option<usize>,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Skip unreadable files (counted) instead of stopping.
+        #[arg(long)]
+        skip_bad: bool,
+    },
+    /// Evaluate a model on a dataset: confusion matrix (detected vs actual, %) and accuracy.
+    Eval {
+        #[arg(long)]
+        model: PathBuf,
+        #[arg(long)]
+        data: PathBuf,
+        /// Simulated sensor damage, percent (paper eq. 6).
+        #[arg(long)]
+        damage: Option<f64>,
+        /// Apply the paper's repair filter before classifying.
+        #[arg(long)]
+        repair: bool,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        #[arg(long)]
+        json: bool,
+        #[arg(long)]
+        skip_bad: bool,
+    },
+    /// Classify image files: one line per image (file, terrain, confidence).
+    Classify {
+        #[arg(long)]
+        model: PathBuf,
+        files: Vec<PathBuf>,
+    },
+    /// Print an image's feature vector (eqs. 1-3).
+    Features {
+        file: PathBuf,
+        #[arg(long, default_value = "0,0,0,0")]
+        crop: node::classifier::Crop,
+        #[arg(long)]
+        json: bool,
+    },
+    /// Apply the paper's repair filter to an image; writes a PGM of the same size and depth.
+    Repair {
+        file: PathBuf,
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Generate a simulated dataset (not implemented yet: issue 4).
     Dataset,
     /// Reproduce the paper's tables and figures (not implemented yet: issue 7).
@@ -88,11 +145,41 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Cmd::Controller => not_yet("controller", 6),
         Cmd::Sim => not_yet("sim", 4),
         Cmd::Demo => not_yet("demo", 6),
-        Cmd::Train => not_yet("train", 3),
-        Cmd::Eval => not_yet("eval", 3),
-        Cmd::Classify => not_yet("classify", 3),
-        Cmd::Features => not_yet("features", 3),
-        Cmd::Repair => not_yet("repair", 3),
+        Cmd::Train {
+            data,
+            out,
+            per_class,
+            train,
+            crop,
+            downsample,
+            normalize_load,
+            dims,
+            seed,
+            skip_bad,
+        } => {
+            let opts = node::classifier::train::TrainOptions {
+                per_class,
+                train,
+                crop,
+                downsample,
+                normalize_load,
+                h: dims,
+                seed,
+            };
+            cli::train(&data, &out, &opts, skip_bad)
+        }
+        Cmd::Eval {
+            model,
+            data,
+            damage,
+            repair,
+            seed,
+            json,
+            skip_bad,
+        } => cli::eval(&model, &data, damage, repair, seed, json, skip_bad),
+        Cmd::Classify { model, files } => cli::classify(&model, &files),
+        Cmd::Features { file, crop, json } => cli::features(&file, &crop, json),
+        Cmd::Repair { file, out } => cli::repair(&file, &out),
         Cmd::Dataset => not_yet("dataset", 4),
         Cmd::Experiment => not_yet("experiment", 7),
     }

@@ -63,10 +63,7 @@ pub fn repair_lines(
     let mut ok = true;
     // Rows, top to bottom.
     if let Some(first_live) = dead_rows.iter().position(|d| !d) {
-        for r in 0..rows {
-            if !dead_rows[r] {
-                continue;
-            }
+        for r in (0..rows).filter(|&r| dead_rows[r]) {
             let src = if r < first_live { first_live } else { r - 1 };
             for c in 0..cols {
                 let (d, s) = (r * cols + c, src * cols + c);
@@ -80,10 +77,7 @@ pub fn repair_lines(
     }
     // Columns, left to right.
     if let Some(first_live) = dead_cols.iter().position(|d| !d) {
-        for c in 0..cols {
-            if !dead_cols[c] {
-                continue;
-            }
+        for c in (0..cols).filter(|&c| dead_cols[c]) {
             let src = if c < first_live { first_live } else { c - 1 };
             for r in 0..rows {
                 let (d, s) = (r * cols + c, r * cols + src);
@@ -186,7 +180,7 @@ mod tests {
         let mut rng = rand::rngs::StdRng::seed_from_u64(1);
         let mut img = PressureImage::new(41, 38, 8, vec![9; 41 * 38]);
         let d = damage(&mut img, 50.0, &mut rng);
-        assert!(d >= 50.0 && d < 56.0, "{d}");
+        assert!((50.0..56.0).contains(&d), "{d}");
         let (dr, dc) = zero_lines(&img);
         let got = damage_percent(
             dr.iter().filter(|x| **x).count(),

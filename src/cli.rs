@@ -1,0 +1,243 @@
+//! The classifier commands: argument handling and printing around `node::classifier`.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use node::classifier::dataset::{load_dataset, read_image, read_images, write_pgm};
+use node::classifier::train::{Labelled, TrainOptions, train as train_model};
+use node::classifier::{ClassInfo, Classifier, Crop, Model, repair as repair_mod};
+use rand::SeedableRng;
+
+pub fn train(data: &Path, out: &Path, opts: &TrainOptions, skip_bad: bool) -> Result<ExitCode> {
+    let ds = load_dataset(data, skip_bad)?;
+    if !ds.bad.is_empty() {
+        eprintln!(
+            "skipped {} bad files (--skip-bad); first: {}",
+            ds.bad.len(),
+            ds.bad[0]
+        );
+    }
+    let classes: Vec<ClassInfo> = ds
+        .classes
+        .iter()
+        .enumerate()
+        .map(|(i, n)| ClassInfo {
+            name: n.clone(),
+            terrain_id: protocol::messages::terrain_id(n).unwrap_or(100 + i as u8),
+        })
+        .collect();
+    let labelled: Vec<Labelled> = ds
+        .samples
+        .iter()
+        .map(|s| Labelled {
+            image: &s.image,
+            class: s.class,
+        })
+        .collect();
+    if labelled.is_empty() {
+        bail!("{}: no images found", data.display());
+    }
+    let t0 = Instant::now();
+    let (model, split) = train_model(&labelled, &classes, opts)?;
+    let took = t0.elapsed();
+    model.save(out)?;
+    println!(
+        "trained on {} + {} images ({} classes), h = {}, kernel width {:.4}, {:.1} ms; {} images left for testing; wrote {}",
+        split.train.len(),
+        split.validation.len(),
+        classes.len(),
+        model.h,
+        model.kernel_width,
+        took.as_secs_f64() * 1e3,
+        split.test.len(),
+        out.display()
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+fn percentile(v: &mut [f64], q: f64) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    v[((v.len() - 1) as f64 * q).round() as usize]
+}
+
+pub fn eval(
+    model_path: &Path,
+    data: &Path,
+    damage: Option<f64>,
+    repair: bool,
+    seed: u64,
+    json: bool,
+    skip_bad: bool,
+) -> Result<ExitCode> {
+    let model = Model::load(model_path)?;
+    let ds = load_dataset(data, skip_bad)?;
+    let names: Vec<String> = model.classes.iter().map(|c| c.name.clone()).collect();
+    let used: std::collections::HashSet<String> = model
+        .train_hashes
+        .iter()
+        .chain(&model.val_hashes)
+        .cloned()
+        .collect();
+    let k = names.len();
+    let mut confusion = vec![vec![0usize; k]; k]; // [actual][detected]
+    let mut unknown = vec![0usize; k];
+    let mut skipped = 0;
+    let mut times = Vec::new();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let mut c = Classifier::new(model);
+    for s in &ds.samples {
+        let Some(actual) = names.iter().position(|n| *n == ds.classes[s.class]) else {
+            bail!(
+                "class `{}` of {} is not in the model (it knows {names:?})",
+                ds.classes[s.class],
+                data.display()
+            );
+        };
+        if used.contains(&s.image.content_hash()) {
+            skipped += 1;
+            continue;
+        }
+        let mut img = s.image.clone();
+        if let Some(p) = damage {
+            repair_mod::damage(&mut img, p, &mut rng);
+        }
+        let t0 = Instant::now();
+        let d = c
+            .classify(&img.pixels, img.rows, img.cols, repair)
+            .with_context(|| s.path.display().to_string())?;
+        times.push(t0.elapsed().as_secs_f64() * 1e6);
+        match d.class {
+            Some(det) => confusion[actual][det] += 1,
+            None => unknown[actual] += 1,
+        }
+    }
+    let n_tested: usize = times.len();
+    let correct: usize = (0..k).map(|i| confusion[i][i]).sum();
+    let acc = if n_tested > 0 {
+        correct as f64 / n_tested as f64
+    } else {
+        0.0
+    };
+    let per_class: Vec<f64> = (0..k)
+        .map(|i| {
+            let n: usize = confusion[i].iter().sum::<usize>() + unknown[i];
+            if n > 0 {
+                confusion[i][i] as f64 / n as f64
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let med = percentile(&mut times.clone(), 0.5);
+    let p99 = percentile(&mut times, 0.99);
+    if json {
+        let per: serde_json::Map<String, serde_json::Value> = names
+            .iter()
+            .zip(&per_class)
+            .map(|(n, a)| (n.clone(), (*a).into()))
+            .collect();
+        let v = serde_json::json!({
+            "overall_accuracy": acc, "per_class": per, "classes": names, "confusion": confusion,
+            "unknown": unknown, "n_tested": n_tested, "n_skipped": skipped,
+            "damage_pct": damage, "repair": repair,
+            "classify_us_median": med, "classify_us_p99": p99,
+        });
+        println!("{v}");
+    } else {
+        println!(
+            "left out {skipped} images the model was trained or validated on; tested {n_tested}"
+        );
+        print!("{:>16}", "detected \\ actual");
+        for n in &names {
+            print!(" {n:>12}");
+        }
+        println!();
+        for det in 0..k {
+            print!("{:>16}", names[det]);
+            for act in 0..k {
+                let n: usize = confusion[act].iter().sum::<usize>() + unknown[act];
+                let p = if n > 0 {
+                    100.0 * confusion[act][det] as f64 / n as f64
+                } else {
+                    0.0
+                };
+                print!(" {p:>11.1}%");
+            }
+            println!();
+        }
+        if unknown.iter().any(|u| *u > 0) {
+            print!("{:>16}", "unknown");
+            for act in 0..k {
+                let n: usize = confusion[act].iter().sum::<usize>() + unknown[act];
+                print!(
+                    " {:>11.1}%",
+                    if n > 0 {
+                        100.0 * unknown[act] as f64 / n as f64
+                    } else {
+                        0.0
+                    }
+                );
+            }
+            println!();
+        }
+        println!(
+            "overall accuracy {:.1}% ({correct}/{n_tested}); classify median {med:.1} us, p99 {p99:.1} us",
+            acc * 100.0
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+pub fn classify(model_path: &Path, files: &[PathBuf]) -> Result<ExitCode> {
+    let model = Model::load(model_path)?;
+    let names: Vec<String> = model.classes.iter().map(|c| c.name.clone()).collect();
+    let mut c = Classifier::new(model);
+    for f in files {
+        for (i, img) in read_images(f)?.iter().enumerate() {
+            let d = c
+                .classify(&img.pixels, img.rows, img.cols, false)
+                .with_context(|| f.display().to_string())?;
+            let name = d.class.map(|k| names[k].as_str()).unwrap_or("unknown");
+            let frame = if i > 0 {
+                format!("#{i}")
+            } else {
+                String::new()
+            };
+            println!("{}{frame}\t{name}\t{:.3}", f.display(), d.confidence);
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+pub fn features(file: &Path, crop: &Crop, json: bool) -> Result<ExitCode> {
+    let img = read_image(file)?;
+    let img = img
+        .crop(crop)
+        .with_context(|| format!("crop {crop:?} leaves nothing of {}", file.display()))?;
+    let mut fx = node::classifier::features::FeatureExtractor::new(img.rows * img.cols);
+    let f = fx.features(&img.pixels, 1.0);
+    if json {
+        println!("{}", serde_json::json!({ "features": f }));
+    } else {
+        for v in f {
+            println!("{v}");
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+pub fn repair(file: &Path, out: &Path) -> Result<ExitCode> {
+    let mut img = read_image(file)?;
+    let (r, c) = repair_mod::repair(&mut img);
+    write_pgm(&img, out).with_context(|| format!("writing {}", out.display()))?;
+    println!(
+        "filled {r} dead rows and {c} dead columns; wrote {}",
+        out.display()
+    );
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,0 +1,158 @@
+//! The classifier commands end to end through the `presrs` binary, on a synthetic PGM dataset
+//! and the real TekScan export.
+
+use std::path::Path;
+use std::process::Command;
+
+use rand::{Rng, SeedableRng};
+
+fn presrs(args: &[&str]) -> (bool, String, String) {
+    let o = Command::new(env!("CARGO_BIN_EXE_presrs"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        o.status.success(),
+        String::from_utf8_lossy(&o.stdout).into(),
+        String::from_utf8_lossy(&o.stderr).into(),
+    )
+}
+
+fn write_dataset(dir: &Path) {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(4);
+    for (name, period, fill) in [
+        ("wood", 4usize, 0.5f64),
+        ("carpet", 7, 0.5),
+        ("grass", 11, 0.35),
+    ] {
+        let d = dir.join(name);
+        std::fs::create_dir_all(&d).unwrap();
+        for i in 0..30 {
+            let (dy, dx) = (rng.random_range(0..period), rng.random_range(0..period));
+            let mut b = b"P2\n44 44\n255\n".to_vec();
+            for p in 0..44 * 44 {
+                let (r, c) = (p / 44 + dy, p % 44 + dx);
+                let on = ((r % period) as f64) < fill * period as f64
+                    && ((c % period) as f64) < fill * period as f64;
+                let v: f64 = if on { 150.0 } else { 10.0 } + rng.random_range(-8.0..8.0);
+                b.extend_from_slice(format!("{} ", v.clamp(0.0, 255.0) as u16).as_bytes());
+            }
+            std::fs::write(d.join(format!("{i:03}.pgm")), b).unwrap();
+        }
+    }
+}
+
+#[test]
+fn train_eval_classify_features_repair() {
+    let dir = std::env::temp_dir().join(format!("presrs-cli-{}", std::process::id()));
+    let data = dir.join("data");
+    write_dataset(&data);
+    let model = dir.join("model.json");
+    let (ok, out, err) = presrs(&[
+        "train",
+        "--data",
+        data.to_str().unwrap(),
+        "--out",
+        model.to_str().unwrap(),
+        "--crop",
+        "2,2,2,2",
+    ]);
+    assert!(ok, "{out}{err}");
+    assert!(out.contains("39 + 21 images"), "{out}");
+
+    let (ok, out, err) = presrs(&[
+        "eval",
+        "--model",
+        model.to_str().unwrap(),
+        "--data",
+        data.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    assert_eq!(v["n_skipped"], 60);
+    assert_eq!(v["n_tested"], 30);
+    assert!(v["overall_accuracy"].as_f64().unwrap() >= 0.95, "{v}");
+    for key in [
+        "per_class",
+        "confusion",
+        "classify_us_median",
+        "classify_us_p99",
+    ] {
+        assert!(!v[key].is_null(), "{key} missing");
+    }
+    let (ok, out, _) = presrs(&[
+        "eval",
+        "--model",
+        model.to_str().unwrap(),
+        "--data",
+        data.to_str().unwrap(),
+    ]);
+    assert!(
+        ok && out.contains("detected \\ actual") && out.contains("overall accuracy"),
+        "{out}"
+    );
+
+    let img = data.join("grass/029.pgm");
+    let (ok, out, _) = presrs(&[
+        "classify",
+        "--model",
+        model.to_str().unwrap(),
+        img.to_str().unwrap(),
+    ]);
+    assert!(ok && out.contains("\tgrass\t"), "{out}");
+
+    let (ok, out, _) = presrs(&[
+        "features",
+        img.to_str().unwrap(),
+        "--crop",
+        "2,2,2,2",
+        "--json",
+    ]);
+    assert!(ok);
+    let f: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    assert_eq!(f["features"].as_array().unwrap().len(), 1025);
+
+    let asf = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/tekscan/FrasP01L.asf");
+    let (ok, out, err) = presrs(&["features", asf.to_str().unwrap(), "--json"]);
+    assert!(ok, "{err}");
+    let f: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    assert_eq!(f["features"].as_array().unwrap().len(), 1025); // 60x21 = 1260 -> N = 2048
+
+    let fixed = dir.join("fixed.pgm");
+    let broken = dir.join("broken.pgm");
+    let mut b = b"P2\n3 3\n255\n1 2 3\n0 0 0\n7 8 9\n".to_vec();
+    std::fs::write(&broken, &b).unwrap();
+    let (ok, out, _) = presrs(&[
+        "repair",
+        broken.to_str().unwrap(),
+        "--out",
+        fixed.to_str().unwrap(),
+    ]);
+    assert!(ok && out.contains("filled 1 dead rows"), "{out}");
+    let back = node::classifier::dataset::read_image(&fixed).unwrap();
+    assert_eq!(back.pixels, vec![1, 2, 3, 1, 2, 3, 7, 8, 9]);
+
+    // Bad input: named file and line, non-zero exit, no panic.
+    b = b"P2\n3 3\n255\n1 2 3\n0 x 0\n7 8 9\n".to_vec();
+    std::fs::write(&broken, &b).unwrap();
+    let (ok, _, err) = presrs(&[
+        "classify",
+        "--model",
+        model.to_str().unwrap(),
+        broken.to_str().unwrap(),
+    ]);
+    assert!(
+        !ok && err.contains("broken.pgm:5") && !err.contains("panicked"),
+        "{err}"
+    );
+    let (ok, _, err) = presrs(&[
+        "classify",
+        "--model",
+        broken.to_str().unwrap(),
+        img.to_str().unwrap(),
+    ]);
+    assert!(!ok && err.contains("not a PreSRS model"), "{err}");
+    let (ok, _, err) = presrs(&["sim"]);
+    assert!(!ok && err.contains("not implemented yet"), "{err}");
+}
