@@ -8,7 +8,7 @@ mod common;
 use common::*;
 use protocol::ids::IdConfig;
 use protocol::messages::decode;
-use protocol::tactile::{ImageRef, Reassembler, Segmenter, Variant};
+use protocol::tactile::{Reassembler, Variant};
 use protocol::{CanFrame, Stamped};
 use rand::{Rng, SeedableRng};
 
@@ -32,21 +32,7 @@ fn cantools_decodes_every_signal_we_encode() {
         }
         // Tactile: header and data signals of a real image.
         let px: Vec<u16> = (0..44 * 44).map(|_| rng.random_range(0..256)).collect();
-        let mut frames = Vec::new();
-        Segmenter::new(Variant::Fd, ids.clone())
-            .frames(
-                foot,
-                3,
-                &ImageRef {
-                    rows: 44,
-                    cols: 44,
-                    bits: 8,
-                    timestamp_us: 99,
-                    pixels: &px,
-                },
-                |f| frames.push(f),
-            )
-            .unwrap();
+        let frames = frames_44x44(&ids, Variant::Fd, foot, 3, 99, &px);
         let crc = protocol::tactile::pixel_crc(&px, 8);
         vectors.push(serde_json::json!({"id": frames[0].raw_id(), "data": hex(frames[0].data()), "expected": {
             "FrameSeq": 3, "SegmentIndex": 0, "Rows": 44, "Cols": 44, "BitsPerPixel": 8, "SegmentCount": 32,
@@ -160,29 +146,12 @@ fn python_can_reads_our_candump_log() {
             n += 1;
         }
         let px: Vec<u16> = (0..44 * 44).map(|_| rng.random_range(0..256)).collect();
-        Segmenter::new(Variant::Fd, ids.clone())
-            .frames(
-                foot,
-                1,
-                &ImageRef {
-                    rows: 44,
-                    cols: 44,
-                    bits: 8,
-                    timestamp_us: 5,
-                    pixels: &px,
-                },
-                |f| {
-                    t += 20;
-                    protocol::candump::write_record(
-                        &mut log,
-                        "vcan0",
-                        &Stamped { t_us: t, frame: f },
-                    )
-                    .unwrap();
-                    n += 1;
-                },
-            )
-            .unwrap();
+        for f in frames_44x44(&ids, Variant::Fd, foot, 1, 5, &px) {
+            t += 20;
+            protocol::candump::write_record(&mut log, "vcan0", &Stamped { t_us: t, frame: f })
+                .unwrap();
+            n += 1;
+        }
     }
     let path = tmp("ours.log");
     std::fs::write(&path, &log).unwrap();

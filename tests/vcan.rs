@@ -69,24 +69,11 @@ fn every_message_round_trips_through_the_kernel() {
     // Tactile segments: both variants through the kernel.
     for v in [Variant::Fd, Variant::Classic] {
         let px: Vec<u16> = (0..44 * 44).map(|_| rng.random_range(0..256)).collect();
-        let mut n = 0;
-        Segmenter::new(v, ids.clone())
-            .frames(
-                4,
-                9,
-                &ImageRef {
-                    rows: 44,
-                    cols: 44,
-                    bits: 8,
-                    timestamp_us: 1,
-                    pixels: &px,
-                },
-                |f| {
-                    tx.send(&f).unwrap();
-                    n += 1;
-                },
-            )
-            .unwrap();
+        let frames = frames_44x44(&ids, v, 4, 9, 1, &px);
+        for f in &frames {
+            tx.send(f).unwrap();
+        }
+        let n = frames.len();
         let mut r = Reassembler::default();
         let mut img = None;
         for _ in 0..n {
@@ -210,23 +197,10 @@ fn candump_records_our_traffic_and_both_readers_decode_it() {
             sent.push(f);
         }
         let px: Vec<u16> = (0..44 * 44).map(|_| rng.random_range(0..256)).collect();
-        Segmenter::new(Variant::Fd, ids.clone())
-            .frames(
-                foot,
-                0,
-                &ImageRef {
-                    rows: 44,
-                    cols: 44,
-                    bits: 8,
-                    timestamp_us: 0,
-                    pixels: &px,
-                },
-                |f| {
-                    tx.send(&f).unwrap();
-                    sent.push(f);
-                },
-            )
-            .unwrap();
+        for f in frames_44x44(&ids, Variant::Fd, foot, 0, 0, &px) {
+            tx.send(&f).unwrap();
+            sent.push(f);
+        }
     }
     std::thread::sleep(Duration::from_millis(700));
     let _ = candump.kill();

@@ -134,6 +134,29 @@ pub fn random_messages(rng: &mut impl rand::Rng, foot: u8) -> Vec<Message> {
         .collect()
 }
 
+/// The frames of one 44x44 8-bit image, as the foot sends them.
+pub fn frames_44x44(
+    ids: &protocol::IdConfig,
+    v: protocol::tactile::Variant,
+    foot: u8,
+    seq: u8,
+    ts: u32,
+    px: &[u16],
+) -> Vec<protocol::CanFrame> {
+    let img = protocol::tactile::ImageRef {
+        rows: 44,
+        cols: 44,
+        bits: 8,
+        timestamp_us: ts,
+        pixels: px,
+    };
+    let mut out = Vec::new();
+    protocol::tactile::Segmenter::new(v, ids.clone())
+        .frames(foot, seq, &img, |f| out.push(f))
+        .unwrap_or_else(|e| panic!("{e}"));
+    out
+}
+
 /// Hex of bytes.
 pub fn hex(b: &[u8]) -> String {
     b.iter().map(|x| format!("{x:02x}")).collect()

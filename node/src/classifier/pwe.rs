@@ -130,22 +130,14 @@ impl Classifier {
     /// The paper's per-image repair filter on the working image; returns lines filled.
     pub fn repair_work(&mut self) -> usize {
         let (rows, cols) = (self.work_rows, self.work_cols);
-        self.dead_rows.fill(true);
-        self.dead_cols.fill(true);
-        for r in 0..rows {
-            for c in 0..cols {
-                if self.work[r * cols + c] != 0 {
-                    self.dead_rows[r] = false;
-                    self.dead_cols[c] = false;
-                }
-            }
-        }
-        let n = self
-            .dead_rows
-            .iter()
-            .chain(&self.dead_cols)
-            .filter(|d| **d)
-            .count();
+        let n = repair::find_zero_lines(
+            &self.work,
+            rows,
+            cols,
+            None,
+            &mut self.dead_rows,
+            &mut self.dead_cols,
+        );
         if n > 0 {
             repair::repair_lines(
                 &mut self.work,
@@ -236,6 +228,12 @@ impl Classifier {
             log_posteriors,
             n_classes,
         }
+    }
+
+    /// Decision for an already cropped and downsampled image (training's validation pass).
+    pub fn classify_work(&mut self, work: &[u16]) -> Decision {
+        self.work.copy_from_slice(work);
+        self.decide()
     }
 
     /// The whole pipeline for one sensor image.

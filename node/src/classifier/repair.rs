@@ -20,33 +20,56 @@ pub fn damage_percent(dead_rows: usize, dead_cols: usize, rows: usize, cols: usi
     (dr * nc + dc * nr - dr * dc) / (nr * nc) * 100.0
 }
 
-/// Rows and columns that read zero across the whole line (sensels outside the sensor ignored;
-/// a line made only of outside sensels is never dead).
-pub fn zero_lines(img: &PressureImage) -> (Vec<bool>, Vec<bool>) {
-    let mut rows = vec![true; img.rows];
-    let mut cols = vec![true; img.cols];
-    let mut rows_in = vec![false; img.rows];
-    let mut cols_in = vec![false; img.cols];
-    for r in 0..img.rows {
-        for c in 0..img.cols {
-            let i = r * img.cols + c;
-            if img.is_outside(i) {
-                continue;
-            }
-            rows_in[r] = true;
-            cols_in[c] = true;
-            if img.pixels[i] != 0 {
-                rows[r] = false;
-                cols[c] = false;
-            }
+/// Marks the rows and columns that read zero across the whole line (sensels outside the sensor
+/// ignored; a line made only of outside sensels is never dead). Writes into the caller's
+/// buffers, so the classifier's hot path allocates nothing. Returns the number of lines marked.
+pub fn find_zero_lines(
+    pixels: &[u16],
+    rows: usize,
+    cols: usize,
+    outside: Option<&[bool]>,
+    dead_rows: &mut [bool],
+    dead_cols: &mut [bool],
+) -> usize {
+    let inside = |i: usize| !outside.is_some_and(|m| m[i]);
+    // First: a line is a candidate when it has at least one sensel inside the sensor.
+    let candidate = outside.is_none();
+    dead_rows.fill(candidate);
+    dead_cols.fill(candidate);
+    if !candidate {
+        for i in (0..rows * cols).filter(|&i| inside(i)) {
+            dead_rows[i / cols] = true;
+            dead_cols[i % cols] = true;
         }
     }
-    for (d, i) in rows.iter_mut().zip(&rows_in) {
-        *d &= *i;
+    // Then: any load inside the sensor makes its row and column live.
+    for (i, _) in pixels[..rows * cols]
+        .iter()
+        .enumerate()
+        .filter(|&(i, &p)| p != 0 && inside(i))
+    {
+        dead_rows[i / cols] = false;
+        dead_cols[i % cols] = false;
     }
-    for (d, i) in cols.iter_mut().zip(&cols_in) {
-        *d &= *i;
-    }
+    dead_rows
+        .iter()
+        .chain(dead_cols.iter())
+        .filter(|d| **d)
+        .count()
+}
+
+/// [`find_zero_lines`] into fresh vectors: (dead rows, dead columns).
+pub fn zero_lines(img: &PressureImage) -> (Vec<bool>, Vec<bool>) {
+    let mut rows = vec![false; img.rows];
+    let mut cols = vec![false; img.cols];
+    find_zero_lines(
+        &img.pixels,
+        img.rows,
+        img.cols,
+        img.outside.as_deref(),
+        &mut rows,
+        &mut cols,
+    );
     (rows, cols)
 }
 

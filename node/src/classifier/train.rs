@@ -233,26 +233,29 @@ pub fn train(
     // Kernel width: a log-spaced grid around the typical nearest-neighbour distance in T,
     // scored by validation accuracy, ties to the wider kernel (smoother densities).
     let nn = median_nn_distance(&proj[..n_t * h], h);
-    let mut best = (f64::NEG_INFINITY, 0usize, nn);
+    let validation: Vec<PressureImage> = split
+        .validation
+        .iter()
+        .map(|&i| prep(i))
+        .collect::<Result<_, _>>()?;
+    let mut best = (f64::NEG_INFINITY, nn);
     for step in -16..=8 {
         let sigma = nn * 2f64.powf(step as f64 / 2.0);
         model.kernel_width = sigma;
         let mut c = Classifier::new(model.clone());
         let mut correct = 0;
         let mut margin = 0.0;
-        for (vi, &i) in split.validation.iter().enumerate() {
-            let p = prep(i)?;
-            let mut d = c.classify_work(&p.pixels);
-            d.class = Some(d.best);
-            correct += (d.best == labels[n_t + vi]) as usize;
-            margin += d.log_posteriors[labels[n_t + vi]].max(-50.0);
+        for (p, &label) in validation.iter().zip(&labels[n_t..]) {
+            let d = c.classify_work(&p.pixels);
+            correct += (d.best == label) as usize;
+            margin += d.log_posteriors[label].max(-50.0);
         }
         let score = correct as f64 + margin * 1e-6;
         if score >= best.0 {
-            best = (score, correct, sigma);
+            best = (score, sigma);
         }
     }
-    model.kernel_width = best.2;
+    model.kernel_width = best.1;
     model.samples = proj;
     model.sample_classes = labels;
     model.unknown_threshold = unknown_threshold(&model);
@@ -313,13 +316,5 @@ fn unknown_threshold(m: &Model) -> f64 {
         lowest - 10.0
     } else {
         f64::NEG_INFINITY
-    }
-}
-
-impl Classifier {
-    /// Decision for an already cropped and downsampled image (training's validation pass).
-    pub fn classify_work(&mut self, work: &[u16]) -> super::pwe::Decision {
-        self.work_mut().copy_from_slice(work);
-        self.decide()
     }
 }

@@ -82,11 +82,11 @@ impl SocketCanBus {
     fn io_err(&self, e: std::io::Error) -> BusError {
         let iface = self.iface.clone();
         match e.raw_os_error() {
-            Some(libc_enetdown) if [100, 19, 6].contains(&libc_enetdown) => {
-                // ENETDOWN, ENODEV, ENXIO: the interface is down or gone.
+            // The interface is down or gone.
+            Some(libc::ENETDOWN | libc::ENODEV | libc::ENXIO) => {
                 BusError::Down { iface, source: e }
             }
-            Some(105) => BusError::TxQueueFull { iface }, // ENOBUFS
+            Some(libc::ENOBUFS) => BusError::TxQueueFull { iface },
             _ if e.kind() == ErrorKind::WouldBlock || e.kind() == ErrorKind::TimedOut => {
                 BusError::TxQueueFull { iface }
             }
@@ -130,7 +130,7 @@ impl CanBus for SocketCanBus {
         match self.sock.write_frame(&f) {
             Ok(()) => Ok(()),
             // The kernel answers EINVAL to an FD frame on an MTU-16 interface.
-            Err(e) if frame.is_fd() && e.raw_os_error() == Some(22) => {
+            Err(e) if frame.is_fd() && e.raw_os_error() == Some(libc::EINVAL) => {
                 Err(BusError::FdNotSupported {
                     iface: self.iface.clone(),
                 })
