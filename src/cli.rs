@@ -241,3 +241,79 @@ pub fn repair(file: &Path, out: &Path) -> Result<ExitCode> {
     );
     Ok(ExitCode::SUCCESS)
 }
+
+/// The simulated datasets.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum DatasetKind {
+    Static,
+    Sandpaper,
+    Dynamic,
+}
+
+pub fn dataset(
+    kind: DatasetKind,
+    out: &Path,
+    n: Option<usize>,
+    gait: &str,
+    damage: f64,
+    seed: u64,
+) -> Result<ExitCode> {
+    use sim::dataset::{Kind, Options, generate};
+    let gait = controller::Gait::by_name(gait)
+        .with_context(|| format!("--gait {gait}: expected G1, G2 or G3"))?;
+    anyhow::ensure!(
+        (0.0..=100.0).contains(&damage),
+        "--damage {damage}: expected a percentage in 0..=100"
+    );
+    let kind = match kind {
+        DatasetKind::Static => Kind::Static,
+        DatasetKind::Sandpaper => Kind::Sandpaper,
+        DatasetKind::Dynamic => Kind::Dynamic,
+    };
+    let samples = generate(&Options {
+        kind,
+        n,
+        gait,
+        damage_pct: damage,
+        seed,
+    });
+    let mut counts = std::collections::BTreeMap::new();
+    for s in &samples {
+        let dir = out.join(s.terrain.name());
+        std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+        let k = counts.entry(s.terrain.name()).or_insert(0usize);
+        let img = node::classifier::PressureImage::new(s.rows, s.cols, 8, s.pixels.clone());
+        let path = dir.join(format!("{:04}.pgm", *k));
+        node::classifier::dataset::write_pgm(&img, &path)
+            .with_context(|| format!("writing {}", path.display()))?;
+        *k += 1;
+    }
+    for t in kind.terrains() {
+        let of: Vec<&sim::dataset::Sample> = samples.iter().filter(|s| s.terrain == *t).collect();
+        if of.is_empty() {
+            continue;
+        }
+        let mean = |f: &dyn Fn(&sim::dataset::Sample) -> f64| {
+            of.iter().map(|s| f(s)).sum::<f64>() / of.len() as f64
+        };
+        if kind == Kind::Dynamic {
+            println!(
+                "{}: {} images; load at the sample {:.1} N, stance {:.0} ms, speed {:.2} m/s (means)",
+                t.name(),
+                of.len(),
+                mean(&|s| s.load_n),
+                mean(&|s| s.stance_s * 1e3),
+                mean(&|s| s.speed_m_s)
+            );
+        } else {
+            println!(
+                "{}: {} images, load {:.1} N",
+                t.name(),
+                of.len(),
+                mean(&|s| s.load_n)
+            );
+        }
+    }
+    println!("wrote {} images to {}", samples.len(), out.display());
+    Ok(ExitCode::SUCCESS)
+}

@@ -103,8 +103,25 @@ enum Cmd {
         #[arg(long)]
         out: PathBuf,
     },
-    /// Generate a simulated dataset (not implemented yet: issue 4).
-    Dataset,
+    /// Generate a simulated dataset: DIR/<terrain>/<n>.pgm, as `train` and `eval` read it.
+    Dataset {
+        /// static (section 4), sandpaper (section 5) or dynamic (section 7, on the hopper).
+        #[arg(value_enum)]
+        kind: cli::DatasetKind,
+        #[arg(long)]
+        out: PathBuf,
+        /// Images per terrain (default: the paper's counts; Table 4 for dynamic).
+        #[arg(long)]
+        n: Option<usize>,
+        /// Hopper gait for the dynamic set: G1, G2 or G3.
+        #[arg(long, default_value = "G2")]
+        gait: String,
+        /// Sensor damage, percent of sensels on dead rows and columns (eq. 6).
+        #[arg(long, default_value_t = 0.0)]
+        damage: f64,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+    },
     /// Reproduce the paper's tables and figures (not implemented yet: issue 7).
     Experiment,
 }
@@ -180,7 +197,14 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Cmd::Classify { model, files } => cli::classify(&model, &files),
         Cmd::Features { file, crop, json } => cli::features(&file, &crop, json),
         Cmd::Repair { file, out } => cli::repair(&file, &out),
-        Cmd::Dataset => not_yet("dataset", 4),
+        Cmd::Dataset {
+            kind,
+            out,
+            n,
+            gait,
+            damage,
+            seed,
+        } => cli::dataset(kind, &out, n, &gait, damage, seed),
         Cmd::Experiment => not_yet("experiment", 7),
     }
 }

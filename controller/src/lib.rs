@@ -1,1 +1,9 @@
+//! # presrs-controller: the hopper's control laws and per-terrain gait switching
+//!
+//! - [`laws`]: eq. (4), the AER stance leg length, and eq. (5), the flight touchdown angle;
+//! - [`gait`]: gaits `G_i(omega, phi, c, beta_des)`, the paper's G1..G3 as defaults.
 
+pub mod gait;
+pub mod laws;
+
+pub use gait::Gait;

@@ -1,1 +1,8 @@
-
+//! # presrs-sim: the simulated hopper and foot
+pub mod dataset;
+pub mod faults;
+pub mod field;
+pub mod fixed_gait;
+pub mod hopper;
+pub mod skin;
+pub mod terrain;

@@ -10,7 +10,6 @@ use rand::seq::SliceRandom;
 use super::features::{FeatureExtractor, fft_len};
 use super::image::{Crop, PressureImage};
 use super::model::{ClassInfo, MAX_CLASSES, MODEL_VERSION, Model};
-use super::pwe::Classifier;
 
 #[derive(Clone, Debug)]
 pub struct TrainOptions {
@@ -183,29 +182,70 @@ pub fn train(
         .filter(|s| **s > tol)
         .count()
         .max(1);
-    let h = o.h.unwrap_or(52).min(rank);
+    // PCA axes up to the paper's 52 (or --dims), as far as the rank allows.
+    let h_max = o.h.unwrap_or(52).min(rank).max(1);
     // Rows of V^T are the principal axes, sorted by singular value.
     let mut order: Vec<usize> = (0..svd.singular_values.len()).collect();
     order.sort_by(|&a, &b| svd.singular_values[b].total_cmp(&svd.singular_values[a]));
-    let mut u = vec![0f32; h * n];
-    for (j, &axis) in order.iter().take(h).enumerate() {
+    let mut u = vec![0f32; h_max * n];
+    for (j, &axis) in order.iter().take(h_max).enumerate() {
         for k in 0..n {
             u[j * n + k] = v_t[(axis, k)] as f32;
         }
     }
-    // Project T and V.
-    let mut proj = vec![0f32; tv.len() * h];
+    // Project T and V on all h_max axes once; a smaller h uses the leading coordinates.
+    let mut proj = vec![0f32; tv.len() * h_max];
     for row in 0..tv.len() {
-        for j in 0..h {
-            let mut s = 0.0f64;
+        for j in 0..h_max {
+            let mut acc = 0.0f64;
             for k in 0..n {
-                s += x[(row, k)] * u[j * n + k] as f64;
+                acc += x[(row, k)] * u[j * n + k] as f64;
             }
-            proj[row * h + j] = s as f32;
+            proj[row * h_max + j] = acc as f32;
         }
     }
     let labels: Vec<usize> = tv.iter().map(|&i| data[i].class).collect();
     let n_t = split.train.len();
+    // Model selection on V (section 4.2: training determines h and the kernel): every candidate
+    // h (or only --dims), and for each a log-spaced grid of kernel widths around the typical
+    // nearest-neighbour distance in T. Score: validation accuracy, then the summed validation
+    // log-posterior of the true class; ties go to the wider kernel.
+    let candidates: Vec<usize> = match o.h {
+        Some(_) => vec![h_max],
+        None => {
+            let mut c: Vec<usize> = [1, 2, 3, 4, 6, 8, 12, 16, 24, 32, 52]
+                .into_iter()
+                .filter(|&h| h < h_max)
+                .collect();
+            c.push(h_max);
+            c
+        }
+    };
+    let n_classes = classes.len();
+    let mut best = (f64::NEG_INFINITY, h_max, 1.0f64);
+    for &h in &candidates {
+        let t_proj: Vec<f32> = (0..n_t)
+            .flat_map(|r| proj[r * h_max..r * h_max + h].iter().copied())
+            .collect();
+        let nn = median_nn_distance(&t_proj, h);
+        for step in -16..=8 {
+            let sigma = nn * 2f64.powf(step as f64 / 2.0);
+            let mut correct = 0;
+            let mut margin = 0.0;
+            for v in n_t..tv.len() {
+                let q = &proj[v * h_max..v * h_max + h];
+                let (best_k, lp) =
+                    parzen(&t_proj, &labels[..n_t], q, h, sigma, n_classes, labels[v]);
+                correct += (best_k == labels[v]) as usize;
+                margin += lp.max(-50.0);
+            }
+            let score = correct as f64 + margin * 1e-6;
+            if score >= best.0 {
+                best = (score, h, sigma);
+            }
+        }
+    }
+    let (_, h, sigma) = best;
     let hash = |is: &[usize]| {
         is.iter()
             .map(|&i| data[i].image.content_hash())
@@ -222,44 +262,58 @@ pub fn train(
         n_fft: fft_len(n_px),
         h,
         pca_mean: mean.iter().map(|v| *v as f32).collect(),
-        pca_matrix: u,
-        samples: proj[..n_t * h].to_vec(),
-        sample_classes: labels[..n_t].to_vec(),
-        kernel_width: 1.0,
+        pca_matrix: u[..h * n].to_vec(),
+        // The stored samples are T and V (the paper's P has p + q columns).
+        samples: (0..tv.len())
+            .flat_map(|r| proj[r * h_max..r * h_max + h].iter().copied())
+            .collect(),
+        sample_classes: labels,
+        kernel_width: sigma,
         unknown_threshold: f64::NEG_INFINITY,
         train_hashes: hash(&split.train),
         val_hashes: hash(&split.validation),
     };
-    // Kernel width: a log-spaced grid around the typical nearest-neighbour distance in T,
-    // scored by validation accuracy, ties to the wider kernel (smoother densities).
-    let nn = median_nn_distance(&proj[..n_t * h], h);
-    let validation: Vec<PressureImage> = split
-        .validation
-        .iter()
-        .map(|&i| prep(i))
-        .collect::<Result<_, _>>()?;
-    let mut best = (f64::NEG_INFINITY, nn);
-    for step in -16..=8 {
-        let sigma = nn * 2f64.powf(step as f64 / 2.0);
-        model.kernel_width = sigma;
-        let mut c = Classifier::new(model.clone());
-        let mut correct = 0;
-        let mut margin = 0.0;
-        for (p, &label) in validation.iter().zip(&labels[n_t..]) {
-            let d = c.classify_work(&p.pixels);
-            correct += (d.best == label) as usize;
-            margin += d.log_posteriors[label].max(-50.0);
-        }
-        let score = correct as f64 + margin * 1e-6;
-        if score >= best.0 {
-            best = (score, sigma);
-        }
-    }
-    model.kernel_width = best.1;
-    model.samples = proj;
-    model.sample_classes = labels;
     model.unknown_threshold = unknown_threshold(&model);
     Ok((model, split))
+}
+
+/// The Parzen decision for one projected vector `q` against stored samples `t` (equal class
+/// priors, as in [`super::Classifier`]): the best class and the log-posterior of class `truth`.
+fn parzen(
+    t: &[f32],
+    labels: &[usize],
+    q: &[f32],
+    h: usize,
+    sigma: f64,
+    n_classes: usize,
+    truth: usize,
+) -> (usize, f64) {
+    let inv = 1.0 / (2.0 * sigma * sigma);
+    let mut e = vec![f64::NEG_INFINITY; labels.len()];
+    let mut mx = [f64::NEG_INFINITY; MAX_CLASSES];
+    let mut cnt = [0usize; MAX_CLASSES];
+    for (i, &k) in labels.iter().enumerate() {
+        let d2: f64 = (0..h).map(|j| ((t[i * h + j] - q[j]) as f64).powi(2)).sum();
+        e[i] = -d2 * inv;
+        mx[k] = mx[k].max(e[i]);
+        cnt[k] += 1;
+    }
+    let mut sum = [0.0f64; MAX_CLASSES];
+    for (i, &k) in labels.iter().enumerate() {
+        sum[k] += (e[i] - mx[k]).exp();
+    }
+    let mut ld = [f64::NEG_INFINITY; MAX_CLASSES];
+    let mut best = 0;
+    for k in 0..n_classes {
+        if cnt[k] > 0 {
+            ld[k] = mx[k] + sum[k].ln() - (cnt[k] as f64).ln();
+        }
+        if ld[k] > ld[best] {
+            best = k;
+        }
+    }
+    let z: f64 = (0..n_classes).map(|k| (ld[k] - ld[best]).exp()).sum();
+    (best, ld[truth] - ld[best] - z.ln())
 }
 
 /// Median over stored samples of the distance to the nearest other sample.

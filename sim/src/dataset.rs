@@ -1,0 +1,221 @@
+//! The paper's three datasets, generated: static presses (section 4.1), sandpaper presses
+//! (section 5) and dynamic stances on the hopper (section 7.1).
+
+use controller::Gait;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use crate::faults::{FaultParams, Faults};
+use crate::fixed_gait::FixedGait;
+use crate::hopper::{Event, Hopper, HopperParams};
+use crate::skin::{Footprint, Skin, SkinParams};
+use crate::terrain::Terrain;
+
+/// The static load of the test platform, N (section 4.1).
+pub const STATIC_LOAD_N: f64 = 10.0;
+/// When the dynamic image is taken, s after touchdown (section 7.1).
+pub const STANCE_SAMPLE_S: f64 = 0.07;
+/// Sensor frame period, s (100 Hz).
+pub const FRAME_PERIOD_S: f64 = 0.01;
+
+/// Which experiment.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kind {
+    Static,
+    Sandpaper,
+    Dynamic,
+}
+
+impl Kind {
+    pub fn terrains(self) -> &'static [Terrain] {
+        match self {
+            Kind::Static => &Terrain::STATIC,
+            Kind::Sandpaper => &Terrain::SANDPAPER,
+            Kind::Dynamic => &Terrain::DYNAMIC,
+        }
+    }
+
+    /// The paper's sample count for a terrain (Table 4 for the dynamic set).
+    pub fn default_count(self, terrain: Terrain, gait: u8) -> usize {
+        match self {
+            Kind::Static => 100,
+            Kind::Sandpaper => 50,
+            Kind::Dynamic => {
+                let row = match gait {
+                    1 => [72, 43, 119, 69],
+                    3 => [71, 76, 102, 86],
+                    _ => [60, 65, 113, 85],
+                };
+                let i = Terrain::DYNAMIC
+                    .iter()
+                    .position(|t| *t == terrain)
+                    .unwrap_or(0);
+                row[i]
+            }
+        }
+    }
+}
+
+/// One generated image with what produced it.
+#[derive(Clone, Debug)]
+pub struct Sample {
+    pub terrain: Terrain,
+    pub rows: usize,
+    pub cols: usize,
+    pub pixels: Vec<u16>,
+    /// Load on the sensor when the image was taken, N.
+    pub load_n: f64,
+    /// Dynamic set: stance duration (s) and forward speed (m/s) of the step.
+    pub stance_s: f64,
+    pub speed_m_s: f64,
+}
+
+/// Options for [`generate`].
+#[derive(Clone, Debug)]
+pub struct Options {
+    pub kind: Kind,
+    /// Images per terrain; `None`: the paper's counts.
+    pub n: Option<usize>,
+    pub gait: Gait,
+    pub damage_pct: f64,
+    pub seed: u64,
+}
+
+/// Generates a dataset, terrain by terrain.
+pub fn generate(opts: &Options) -> Vec<Sample> {
+    let mut out = Vec::new();
+    for (ti, &terrain) in opts.kind.terrains().iter().enumerate() {
+        // One stream per terrain, so a class's samples do not depend on the others' counts.
+        let mut rng = ChaCha8Rng::seed_from_u64(opts.seed ^ ((ti as u64 + 1) << 32));
+        let n = opts
+            .n
+            .unwrap_or_else(|| opts.kind.default_count(terrain, opts.gait.id));
+        let faults = FaultParams {
+            initial_damage_pct: opts.damage_pct,
+            ..Default::default()
+        };
+        let params = SkinParams::default();
+        let f = Faults::new(faults, params.rows, params.cols, &mut rng);
+        let mut skin = Skin::new(params, f, &mut rng);
+        match opts.kind {
+            Kind::Static | Kind::Sandpaper => {
+                for _ in 0..n {
+                    out.push(press(
+                        &mut skin,
+                        terrain,
+                        STATIC_LOAD_N,
+                        Footprint::DIE,
+                        &mut rng,
+                    ));
+                }
+            }
+            Kind::Dynamic => out.extend(stances(&mut skin, terrain, &opts.gait, n, &mut rng)),
+        }
+    }
+    out
+}
+
+/// One static press of a fresh patch of `terrain`.
+pub fn press(
+    skin: &mut Skin,
+    terrain: Terrain,
+    load_n: f64,
+    fp: Footprint,
+    rng: &mut impl Rng,
+) -> Sample {
+    let (r, c, cell) = skin.grid();
+    let surface = terrain.surface(r, c, cell, rng);
+    let contact = skin.contact(&surface, fp);
+    let (rows, cols) = (skin.params.rows, skin.params.cols);
+    let mut pixels = vec![0; rows * cols];
+    skin.image(&contact, load_n, rng, &mut pixels);
+    Sample {
+        terrain,
+        rows,
+        cols,
+        pixels,
+        load_n,
+        stance_s: 0.0,
+        speed_m_s: 0.0,
+    }
+}
+
+/// `n` hopper stances on `terrain` in `gait`, each on a fresh patch, imaged at the sensor frame
+/// nearest 70 ms after touchdown. The hopper runs 20 settling steps first.
+pub fn stances(
+    skin: &mut Skin,
+    terrain: Terrain,
+    gait: &Gait,
+    n: usize,
+    rng: &mut impl Rng,
+) -> Vec<Sample> {
+    let mut out = Vec::with_capacity(n);
+    let ground = terrain.ground();
+    let mut hopper = Hopper::new(
+        HopperParams::default(),
+        gait.zeta0 + 0.02,
+        2.0 * gait.zeta0 * gait.beta_des.sin() / 0.14,
+    );
+    let mut cmd = FixedGait::new(gait.clone());
+    let phase = rng.random_range(0.0..FRAME_PERIOD_S);
+    let (rows, cols) = (skin.params.rows, skin.params.cols);
+    let mut steps = 0usize;
+    let mut last_td: Option<(f64, f64)> = None;
+    while out.len() < n && steps < 20 + 4 * n {
+        match hopper.advance(1.0, ground, &mut cmd) {
+            Some(Event::Touchdown { t, beta, .. }) => {
+                cmd.on_touchdown(beta);
+                steps += 1;
+                if steps <= 20 {
+                    continue;
+                }
+                let k = ((t + STANCE_SAMPLE_S - phase) / FRAME_PERIOD_S).round();
+                let t_frame = phase + k * FRAME_PERIOD_S;
+                let x0 = hopper.x;
+                match hopper.advance(t_frame - t, ground, &mut cmd) {
+                    None => {
+                        let (r, c, cell) = skin.grid();
+                        let surface = terrain.surface(r, c, cell, rng);
+                        let contact = skin.contact(&surface, Footprint::FOOT);
+                        let mut pixels = vec![0; rows * cols];
+                        let load = hopper.foot_load();
+                        skin.image(&contact, load, rng, &mut pixels);
+                        let speed = last_td.map_or(0.0, |(t0, x)| (x0 - x) / (t - t0));
+                        out.push(Sample {
+                            terrain,
+                            rows,
+                            cols,
+                            pixels,
+                            load_n: load,
+                            stance_s: 0.0,
+                            speed_m_s: speed,
+                        });
+                    }
+                    Some(Event::Liftoff { beta, .. }) => cmd.on_liftoff(beta),
+                    Some(_) => break,
+                }
+                last_td = Some((t, x0));
+            }
+            Some(Event::Liftoff { t, beta }) => {
+                cmd.on_liftoff(beta);
+                if let Some(s) = out.last_mut().filter(|s| s.stance_s == 0.0)
+                    && let Some((t0, _)) = last_td
+                {
+                    s.stance_s = t - t0;
+                }
+            }
+            Some(Event::Fell { .. }) => {
+                // Restart the run; a fall is a hopper problem, not a sensor one.
+                hopper = Hopper::new(
+                    HopperParams::default(),
+                    gait.zeta0 + 0.02,
+                    2.0 * gait.zeta0 * gait.beta_des.sin() / 0.14,
+                );
+                cmd = FixedGait::new(gait.clone());
+                last_td = None;
+            }
+            None => {}
+        }
+    }
+    out
+}

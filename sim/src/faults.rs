@@ -1,0 +1,136 @@
+//! Sensor faults: fatigue damage (whole dead rows and columns, growing with steps), stuck and
+//! noisy sensels, and slow drift.
+
+use rand::Rng;
+use rand::seq::SliceRandom;
+use rand_distr::{Distribution, StandardNormal};
+use serde::{Deserialize, Serialize};
+
+/// How the sensor degrades. All zero: a perfect sensor.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FaultParams {
+    /// Expected new dead lines (rows or columns) per 1000 steps: the fatigue damage rate. The
+    /// paper's foot lost 1 row and 2 columns in 961 steps (section 8): about 3.1.
+    pub dead_lines_per_1000_steps: f64,
+    /// Damage present from the start, percent of sensels (eq. (6)).
+    pub initial_damage_pct: f64,
+    /// Sensels stuck at a random value.
+    pub stuck_pixels: usize,
+    /// Sensels with extra noise (standard deviation `noisy_sd` counts).
+    pub noisy_pixels: usize,
+    pub noisy_sd: f64,
+    /// Gain drift, fraction per hour of sensor time (piezoresistive creep).
+    pub drift_per_hour: f64,
+}
+
+/// The sensor's faults at one moment.
+#[derive(Clone, Debug)]
+pub struct Faults {
+    pub params: FaultParams,
+    pub rows: usize,
+    pub cols: usize,
+    pub dead_rows: Vec<bool>,
+    pub dead_cols: Vec<bool>,
+    pub stuck: Vec<(usize, u16)>,
+    pub noisy: Vec<usize>,
+    /// Multiplicative gain from drift.
+    pub drift_gain: f64,
+}
+
+impl Faults {
+    pub fn new(params: FaultParams, rows: usize, cols: usize, rng: &mut impl Rng) -> Self {
+        let mut f = Self {
+            rows,
+            cols,
+            dead_rows: vec![false; rows],
+            dead_cols: vec![false; cols],
+            stuck: Vec::new(),
+            noisy: Vec::new(),
+            drift_gain: 1.0,
+            params,
+        };
+        let n = rows * cols;
+        for _ in 0..f.params.stuck_pixels {
+            f.stuck
+                .push((rng.random_range(0..n), rng.random_range(0..=255)));
+        }
+        for _ in 0..f.params.noisy_pixels {
+            f.noisy.push(rng.random_range(0..n));
+        }
+        let pct = f.params.initial_damage_pct;
+        f.damage_to(pct, rng);
+        f
+    }
+
+    /// Eq. (6): percent of sensels on a dead row or column.
+    pub fn damage_pct(&self) -> f64 {
+        let dr = self.dead_rows.iter().filter(|&&d| d).count();
+        let dc = self.dead_cols.iter().filter(|&&d| d).count();
+        let dead = dr * self.cols + dc * self.rows - dr * dc;
+        100.0 * dead as f64 / (self.rows * self.cols) as f64
+    }
+
+    /// Kills random live lines until the damage reaches `pct`.
+    pub fn damage_to(&mut self, pct: f64, rng: &mut impl Rng) {
+        let mut live: Vec<(bool, usize)> = (0..self.rows)
+            .filter(|&r| !self.dead_rows[r])
+            .map(|r| (true, r))
+            .chain(
+                (0..self.cols)
+                    .filter(|&c| !self.dead_cols[c])
+                    .map(|c| (false, c)),
+            )
+            .collect();
+        live.shuffle(rng);
+        for (is_row, i) in live {
+            if self.damage_pct() >= pct {
+                break;
+            }
+            self.kill(is_row, i);
+        }
+    }
+
+    fn kill(&mut self, is_row: bool, i: usize) {
+        if is_row {
+            self.dead_rows[i] = true;
+        } else {
+            self.dead_cols[i] = true;
+        }
+    }
+
+    /// One step of wear: a new dead line with probability rate/1000.
+    pub fn on_step(&mut self, rng: &mut impl Rng) {
+        let p = (self.params.dead_lines_per_1000_steps / 1000.0).clamp(0.0, 1.0);
+        if p > 0.0 && rng.random_bool(p) {
+            let is_row = rng.random_bool(0.5);
+            let i = rng.random_range(0..if is_row { self.rows } else { self.cols });
+            self.kill(is_row, i);
+        }
+    }
+
+    /// Advances the drift by `dt_s` seconds of sensor time.
+    pub fn on_time(&mut self, dt_s: f64) {
+        self.drift_gain *= 1.0 + self.params.drift_per_hour * dt_s / 3600.0;
+    }
+
+    /// Applies the faults to an image of counts.
+    pub fn apply(&self, pixels: &mut [u16], max: u16, rng: &mut impl Rng) {
+        for &i in &self.noisy {
+            let n: f64 = StandardNormal.sample(rng);
+            let v = pixels[i] as f64 + n * self.params.noisy_sd;
+            pixels[i] = v.round().clamp(0.0, max as f64) as u16;
+        }
+        for &(i, v) in &self.stuck {
+            pixels[i] = v.min(max);
+        }
+        for (r, _) in self.dead_rows.iter().enumerate().filter(|(_, d)| **d) {
+            pixels[r * self.cols..(r + 1) * self.cols].fill(0);
+        }
+        for (c, _) in self.dead_cols.iter().enumerate().filter(|(_, d)| **d) {
+            for r in 0..self.rows {
+                pixels[r * self.cols + c] = 0;
+            }
+        }
+    }
+}

@@ -1,0 +1,318 @@
+//! A planar spring-loaded inverted pendulum (SLIP) hopper, the model of the FAMU-FSU hopper
+//! (section 6 of the paper).
+//!
+//! A point mass on a massless spring leg. In flight the body is ballistic and the leg is held at
+//! the commanded touchdown angle; touchdown is the exact root of the ballistic foot height (a
+//! quadratic, solved in closed form). In stance the foot stays where it landed (the paper's foot
+//! does not slip), the leg spring and the ground's own stiffness act in series along the leg, and
+//! the spring's rest length follows the commanded leg length (eq. (4) from the controller).
+//! Liftoff is where the leg force returns to zero, located by bisection inside the integration
+//! step rather than by overshooting it.
+//!
+//! Parameters ([`HopperParams::default`]): 2.0 kg body, 0.15 kg foot (it sets the impact spike),
+//! leg stiffness 1.5 kN/m, rest leg length 0.15 m. They give stances of about 140 ms and
+//! speeds of 0.4-1.5 m/s over G1-G3, as the paper reports for the FAMU-FSU hopper.
+
+use serde::{Deserialize, Serialize};
+
+pub const G: f64 = 9.81;
+
+/// Mechanical parameters of the hopper.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct HopperParams {
+    /// Body mass, kg.
+    pub mass_kg: f64,
+    /// Unsprung foot mass, kg: sets the touchdown impact on stiff ground.
+    pub foot_mass_kg: f64,
+    /// Leg spring stiffness, N/m.
+    pub leg_stiffness: f64,
+    /// Leg damping (friction in the leg), N s/m.
+    pub leg_damping: f64,
+    /// Integration step, s (events are located inside it).
+    pub dt: f64,
+}
+
+impl Default for HopperParams {
+    fn default() -> Self {
+        Self {
+            mass_kg: 2.0,
+            foot_mass_kg: 0.15,
+            leg_stiffness: 1500.0,
+            leg_damping: 2.0,
+            dt: 2e-4,
+        }
+    }
+}
+
+/// The ground under the foot: stiffness and damping in series with the leg.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Ground {
+    /// N/m. Wood planks are effectively rigid for a 2 kg hopper; grass, clay and carpet give.
+    pub stiffness: f64,
+    /// N s/m. Clay is lossy; grass is springy.
+    pub damping: f64,
+}
+
+/// Stance or flight, with what the phase needs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Phase {
+    Flight,
+    Stance {
+        /// Foot position on the ground, m.
+        foot_x: f64,
+        /// Time of touchdown, s.
+        t_touchdown: f64,
+    },
+}
+
+/// What happened during a call to [`Hopper::advance`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Event {
+    /// The foot touched the ground at `t` (s) with the leg at `beta` (rad, foot ahead) and the
+    /// body moving at `vx`, `vy` (m/s).
+    Touchdown { t: f64, beta: f64, vx: f64, vy: f64 },
+    /// The foot left the ground at `t` with the leg at `beta` (rad, foot behind: the paper's
+    /// beta_LO).
+    Liftoff { t: f64, beta: f64 },
+    /// The body touched the ground: the hopper fell.
+    Fell { t: f64 },
+}
+
+/// The commands the leg follows.
+pub trait LegCommands {
+    /// Rest length of the leg spring at `t_since_touchdown` (s) in stance, m.
+    fn stance_length(&mut self, t_since_touchdown: f64) -> f64;
+    /// Leg length held in flight, m.
+    fn flight_length(&self) -> f64;
+    /// Touchdown angle held in flight, rad (foot ahead).
+    fn touchdown_angle(&self) -> f64;
+}
+
+/// The hopper's state.
+#[derive(Clone, Debug)]
+pub struct Hopper {
+    pub params: HopperParams,
+    pub t: f64,
+    pub x: f64,
+    pub y: f64,
+    pub vx: f64,
+    pub vy: f64,
+    pub phase: Phase,
+    /// Normal force on the foot at the last step, N (0 in flight).
+    pub foot_force: f64,
+    /// Impact spike of the last touchdown: peak (N) and duration (s).
+    pub impact: (f64, f64),
+    ground: Ground,
+}
+
+impl Hopper {
+    /// A hopper in flight at height `y` (m) moving at `vx` (m/s).
+    pub fn new(params: HopperParams, y: f64, vx: f64) -> Self {
+        Self {
+            params,
+            t: 0.0,
+            x: 0.0,
+            y,
+            vx,
+            vy: 0.0,
+            phase: Phase::Flight,
+            foot_force: 0.0,
+            impact: (0.0, 0.0),
+            ground: Ground {
+                stiffness: 1e6,
+                damping: 0.0,
+            },
+        }
+    }
+
+    pub fn in_stance(&self) -> bool {
+        matches!(self.phase, Phase::Stance { .. })
+    }
+
+    /// Signed leg angle from the vertical, rad, positive with the foot ahead of the hip.
+    pub fn leg_angle(&self, cmd: &dyn LegCommands) -> f64 {
+        match self.phase {
+            Phase::Flight => cmd.touchdown_angle(),
+            Phase::Stance { foot_x, .. } => (foot_x - self.x).atan2(self.y),
+        }
+    }
+
+    /// Current leg length, m.
+    pub fn leg_length(&self, cmd: &dyn LegCommands) -> f64 {
+        match self.phase {
+            Phase::Flight => cmd.flight_length(),
+            Phase::Stance { foot_x, .. } => (self.x - foot_x).hypot(self.y),
+        }
+    }
+
+    /// Series stiffness and damping of leg and ground.
+    fn series(&self) -> (f64, f64) {
+        let (kl, kg) = (self.params.leg_stiffness, self.ground.stiffness);
+        let k = kl * kg / (kl + kg);
+        let share = kl / (kl + kg);
+        (
+            k,
+            self.params.leg_damping + self.ground.damping * share * share,
+        )
+    }
+
+    /// Leg force (N, along the leg, >= 0 while pushing) for a state.
+    fn leg_force(&self, s: &[f64; 4], foot_x: f64, rest: f64) -> f64 {
+        let (k, b) = self.series();
+        let (dx, dy) = (s[0] - foot_x, s[1]);
+        let l = dx.hypot(dy);
+        let ldot = (dx * s[2] + dy * s[3]) / l;
+        k * (rest - l) - b * ldot
+    }
+
+    fn deriv(&self, s: &[f64; 4], foot_x: f64, rest: f64) -> [f64; 4] {
+        let f = self.leg_force(s, foot_x, rest).max(0.0);
+        let (dx, dy) = (s[0] - foot_x, s[1]);
+        let l = dx.hypot(dy);
+        let m = self.params.mass_kg;
+        [s[2], s[3], f * dx / (l * m), f * dy / (l * m) - G]
+    }
+
+    fn rk4(&self, s: [f64; 4], h: f64, foot_x: f64, rest: f64) -> [f64; 4] {
+        let add = |a: &[f64; 4], k: &[f64; 4], f: f64| {
+            [
+                a[0] + f * k[0],
+                a[1] + f * k[1],
+                a[2] + f * k[2],
+                a[3] + f * k[3],
+            ]
+        };
+        let k1 = self.deriv(&s, foot_x, rest);
+        let k2 = self.deriv(&add(&s, &k1, h / 2.0), foot_x, rest);
+        let k3 = self.deriv(&add(&s, &k2, h / 2.0), foot_x, rest);
+        let k4 = self.deriv(&add(&s, &k3, h), foot_x, rest);
+        let mut o = s;
+        for i in 0..4 {
+            o[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+        }
+        o
+    }
+
+    /// Advances by up to `dt_total` seconds on `ground`, stopping early at the first event (which
+    /// it returns); the caller calls again for the rest of the interval.
+    pub fn advance(
+        &mut self,
+        dt_total: f64,
+        ground: Ground,
+        cmd: &mut dyn LegCommands,
+    ) -> Option<Event> {
+        self.ground = ground;
+        let t_end = self.t + dt_total;
+        while self.t < t_end - 1e-12 {
+            let h = (t_end - self.t).min(self.params.dt);
+            match self.phase {
+                Phase::Flight => {
+                    let beta = cmd.touchdown_angle();
+                    let lf = cmd.flight_length();
+                    // Foot height: y - lf cos(beta); ballistic y(t) = y + vy t - g t^2 / 2.
+                    let target = lf * beta.cos();
+                    let (a, b, c) = (-0.5 * G, self.vy, self.y - target);
+                    let disc = b * b - 4.0 * a * c;
+                    let t_hit = if disc >= 0.0 {
+                        // Larger root: the descending crossing.
+                        let r = (-b - disc.sqrt()) / (2.0 * a);
+                        (r >= 0.0).then_some(r)
+                    } else {
+                        None
+                    };
+                    let step = match t_hit {
+                        Some(th) if th <= h => th,
+                        _ => h,
+                    };
+                    self.x += self.vx * step;
+                    self.y += self.vy * step - 0.5 * G * step * step;
+                    self.vy -= G * step;
+                    self.t += step;
+                    self.foot_force = 0.0;
+                    if matches!(t_hit, Some(th) if th <= h) {
+                        let foot_x = self.x + lf * beta.sin();
+                        self.phase = Phase::Stance {
+                            foot_x,
+                            t_touchdown: self.t,
+                        };
+                        // The foot mass stops against the ground spring: a half-sine spike.
+                        let mf = self.params.foot_mass_kg;
+                        let v = (-self.vy).max(0.0);
+                        let kg = ground.stiffness;
+                        self.impact = (
+                            v * (kg * mf).sqrt(),
+                            std::f64::consts::PI * (mf / kg).sqrt(),
+                        );
+                        return Some(Event::Touchdown {
+                            t: self.t,
+                            beta,
+                            vx: self.vx,
+                            vy: self.vy,
+                        });
+                    }
+                    if self.y <= 0.0 {
+                        return Some(Event::Fell { t: self.t });
+                    }
+                }
+                Phase::Stance {
+                    foot_x,
+                    t_touchdown,
+                } => {
+                    let s0 = [self.x, self.y, self.vx, self.vy];
+                    let rest = cmd.stance_length(self.t - t_touchdown);
+                    let s1 = self.rk4(s0, h, foot_x, rest);
+                    let f1 = self.leg_force(&s1, foot_x, rest);
+                    let moving_up = (s1[0] - foot_x) * s1[2] + s1[1] * s1[3] > 0.0;
+                    if f1 <= 0.0 && moving_up && self.t - t_touchdown > 0.01 {
+                        // Bisection on the step fraction for the zero of the leg force.
+                        let (mut lo, mut hi) = (0.0, h);
+                        for _ in 0..40 {
+                            let mid = 0.5 * (lo + hi);
+                            let sm = self.rk4(s0, mid, foot_x, rest);
+                            if self.leg_force(&sm, foot_x, rest) > 0.0 {
+                                lo = mid;
+                            } else {
+                                hi = mid;
+                            }
+                        }
+                        let s = self.rk4(s0, hi, foot_x, rest);
+                        [self.x, self.y, self.vx, self.vy] = s;
+                        self.t += hi;
+                        let beta = (self.x - foot_x).atan2(self.y);
+                        self.phase = Phase::Flight;
+                        self.foot_force = 0.0;
+                        return Some(Event::Liftoff { t: self.t, beta });
+                    }
+                    [self.x, self.y, self.vx, self.vy] = s1;
+                    self.t += h;
+                    let f = f1.max(0.0);
+                    let l = (self.x - foot_x).hypot(self.y);
+                    // Normal force on the foot: the vertical component of the leg force.
+                    self.foot_force = f * self.y / l;
+                    if self.y <= 0.02 {
+                        return Some(Event::Fell { t: self.t });
+                    }
+                }
+            }
+        }
+        None
+    }
+
+    /// Normal force under the foot including the touchdown impact, N.
+    pub fn foot_load(&self) -> f64 {
+        match self.phase {
+            Phase::Flight => 0.0,
+            Phase::Stance { t_touchdown, .. } => {
+                let (peak, dur) = self.impact;
+                let dt = self.t - t_touchdown;
+                let spike = if dt < dur {
+                    peak * (std::f64::consts::PI * dt / dur).sin()
+                } else {
+                    0.0
+                };
+                self.foot_force + spike
+            }
+        }
+    }
+}

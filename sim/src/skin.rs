@@ -1,0 +1,273 @@
+//! PreSRS as the terrain presses it: skin layers, the 44x44 TekScan array and its electronics.
+//!
+//! The skin (section 3 of the paper) is hard silicone over felt over the array. Under load the
+//! surface meets the silicone; height differences finer than about a millimetre are resisted by
+//! the stiff silicone, coarser ones by the soft felt (two scales of a Winkler foundation). The
+//! felt then spreads the contact pressure before it reaches the sensels (a Gaussian blur), each
+//! sensel averages the pressure over its 1.27 mm cell, and the electronics turn 0-138 kPa into
+//! 8-bit counts with sensel-to-sensel gain spread, noise, a noise threshold and saturation.
+
+use rand::Rng;
+use rand_distr::{Distribution, Normal, StandardNormal};
+use serde::{Deserialize, Serialize};
+
+use crate::faults::Faults;
+use crate::field::Field;
+use crate::terrain::Surface;
+
+/// Parameters of the sensor and skin model.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SkinParams {
+    pub rows: usize,
+    pub cols: usize,
+    /// Sensel pitch, mm (TekScan 5051: 1.27).
+    pub pitch_mm: f64,
+    /// Fine-grid cells per sensel along each axis.
+    pub oversample: usize,
+    /// Pressure at full scale, kPa (0-138 kPa to 0-255).
+    pub full_scale_kpa: f64,
+    pub bits: u8,
+    /// Felt compliance as a Winkler stiffness, kPa/mm (3 mm of 99 % void felt).
+    pub felt_kpa_mm: f64,
+    /// Silicone's local stiffness against sub-millimetre asperities, kPa/mm.
+    pub silicone_kpa_mm: f64,
+    /// Lateral spreading of pressure by the felt, mm (Gaussian sigma).
+    pub felt_spread_mm: f64,
+    /// Sensel gain spread after equilibration (fraction, one sigma).
+    pub gain_sd: f64,
+    /// Electronic noise, counts (one sigma).
+    pub noise_counts: f64,
+    /// Readings below this many counts read 0 (the acquisition's noise threshold).
+    pub threshold_counts: f64,
+}
+
+impl Default for SkinParams {
+    fn default() -> Self {
+        Self {
+            rows: 44,
+            cols: 44,
+            pitch_mm: 1.27,
+            oversample: 3,
+            full_scale_kpa: 138.0,
+            bits: 8,
+            felt_kpa_mm: 30.0,
+            silicone_kpa_mm: 1000.0,
+            felt_spread_mm: 0.8,
+            gain_sd: 0.03,
+            noise_counts: 0.4,
+            threshold_counts: 1.0,
+        }
+    }
+}
+
+/// Where the load is applied, in sensel coordinates.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Footprint {
+    /// The static platform's die: a square `margin` sensels inside the array's edge (the paper's
+    /// die is 5.08 mm smaller than the sensor: 2 sensels each side).
+    Die { margin: usize },
+    /// The hopper's elliptical foot base, inscribed in rows `r0..r0+h` and cols `c0..c0+w`
+    /// (the paper: 41 x 38 sensels, 52.1 x 48.3 mm).
+    Ellipse {
+        r0: usize,
+        c0: usize,
+        h: usize,
+        w: usize,
+    },
+}
+
+impl Footprint {
+    /// The hopper foot of section 7.1 on a 44x44 array: the bottom 3 rows and first 6 columns lie
+    /// outside the foot.
+    pub const FOOT: Footprint = Footprint::Ellipse {
+        r0: 0,
+        c0: 6,
+        h: 41,
+        w: 38,
+    };
+    pub const DIE: Footprint = Footprint::Die { margin: 2 };
+
+    fn contains(&self, y_sensel: f64, x_sensel: f64, rows: usize, cols: usize) -> bool {
+        match *self {
+            Footprint::Die { margin } => {
+                let m = margin as f64;
+                y_sensel >= m
+                    && y_sensel < (rows - margin) as f64
+                    && x_sensel >= m
+                    && x_sensel < (cols - margin) as f64
+            }
+            Footprint::Ellipse { r0, c0, h, w } => {
+                let (cy, cx) = (r0 as f64 + h as f64 / 2.0, c0 as f64 + w as f64 / 2.0);
+                let (dy, dx) = (
+                    (y_sensel - cy) / (h as f64 / 2.0),
+                    (x_sensel - cx) / (w as f64 / 2.0),
+                );
+                dy * dy + dx * dx <= 1.0
+            }
+        }
+    }
+}
+
+/// A contact prepared once per press or stance: the surface split into its two scales and the
+/// footprint, ready for any load.
+pub struct Contact {
+    lo: Vec<f32>,
+    hi: Vec<f32>,
+    mask: Vec<bool>,
+    k_lo: f64,
+    k_hi: f64,
+}
+
+/// One PreSRS sensor: its fixed gain pattern, its faults and its scratch buffers.
+pub struct Skin {
+    pub params: SkinParams,
+    gain: Vec<f32>,
+    pub faults: Faults,
+    pressure: Field,
+    scratch: Vec<f32>,
+}
+
+fn series(a: f64, b: f64) -> f64 {
+    a * b / (a + b)
+}
+
+impl Skin {
+    pub fn new(params: SkinParams, faults: Faults, rng: &mut impl Rng) -> Self {
+        let n = params.rows * params.cols;
+        let g = Normal::new(1.0, params.gain_sd.max(0.0)).unwrap_or_else(|_| {
+            Normal::new(1.0, 0.0).unwrap_or_else(|_| unreachable!("constant normal parameters"))
+        });
+        let gain = (0..n).map(|_| g.sample(rng).max(0.5) as f32).collect();
+        let cell = params.pitch_mm / params.oversample as f64;
+        let pressure = Field::zeros(
+            params.rows * params.oversample,
+            params.cols * params.oversample,
+            cell,
+        );
+        Self {
+            params,
+            gain,
+            faults,
+            pressure,
+            scratch: Vec::new(),
+        }
+    }
+
+    /// The fine grid a surface for this sensor must have: (rows, cols, cell_mm).
+    pub fn grid(&self) -> (usize, usize, f64) {
+        let p = &self.params;
+        (
+            p.rows * p.oversample,
+            p.cols * p.oversample,
+            p.pitch_mm / p.oversample as f64,
+        )
+    }
+
+    /// Prepares the surface's two scales and masks the footprint.
+    pub fn contact(&mut self, surface: &Surface, footprint: Footprint) -> Contact {
+        let p = &self.params;
+        let lo = surface.height.clone();
+        let hi: Vec<f32> = match &surface.asperity {
+            Some(a) => {
+                let m = a.v.iter().map(|&x| x as f64).sum::<f64>() / a.v.len().max(1) as f64;
+                a.v.iter().map(|&x| x - m as f32).collect()
+            }
+            None => vec![0.0; lo.v.len()],
+        };
+        let os = p.oversample as f64;
+        let mask = (0..lo.rows * lo.cols)
+            .map(|i| {
+                let (r, c) = (i / lo.cols, i % lo.cols);
+                footprint.contains((r as f64 + 0.5) / os, (c as f64 + 0.5) / os, p.rows, p.cols)
+            })
+            .collect();
+        Contact {
+            lo: lo.v,
+            hi,
+            mask,
+            k_lo: series(p.felt_kpa_mm, surface.stiffness_kpa_mm),
+            k_hi: series(p.silicone_kpa_mm, surface.stiffness_kpa_mm),
+        }
+    }
+
+    /// The image of counts for `load_n` newtons pressed through `contact`, written to `out`
+    /// (`rows * cols`).
+    pub fn image(&mut self, contact: &Contact, load_n: f64, rng: &mut impl Rng, out: &mut [u16]) {
+        let cell_area = self.pressure.cell_mm * self.pressure.cell_mm;
+        let pressure_at = |i: usize, z: f64| -> f64 {
+            if !contact.mask[i] {
+                return 0.0;
+            }
+            (contact.k_lo * (contact.lo[i] as f64 - z) + contact.k_hi * contact.hi[i] as f64)
+                .max(0.0)
+        };
+        let force = |z: f64| -> f64 {
+            (0..contact.lo.len())
+                .map(|i| pressure_at(i, z))
+                .sum::<f64>()
+                * cell_area
+                / 1000.0
+        };
+        let target = load_n.max(0.0);
+        if target > 0.0 {
+            // The highest point: no force above it.
+            let mut z_hi = f64::MIN;
+            for i in 0..contact.lo.len() {
+                if contact.mask[i] {
+                    let z =
+                        contact.lo[i] as f64 + contact.k_hi / contact.k_lo * contact.hi[i] as f64;
+                    z_hi = z_hi.max(z);
+                }
+            }
+            let mut step = 0.01;
+            let mut z_lo = z_hi - step;
+            while force(z_lo) < target && step < 1e4 {
+                step *= 2.0;
+                z_lo = z_hi - step;
+            }
+            for _ in 0..40 {
+                let mid = 0.5 * (z_lo + z_hi);
+                if force(mid) > target {
+                    z_lo = mid;
+                } else {
+                    z_hi = mid;
+                }
+            }
+            let z = 0.5 * (z_lo + z_hi);
+            for i in 0..contact.lo.len() {
+                self.pressure.v[i] = pressure_at(i, z) as f32;
+            }
+            self.pressure
+                .blur(self.params.felt_spread_mm, &mut self.scratch);
+        } else {
+            self.pressure.v.fill(0.0);
+        }
+        let p = &self.params;
+        let os = p.oversample;
+        let fine_cols = p.cols * os;
+        let max = ((1u32 << p.bits) - 1) as f64;
+        let counts_per_kpa = max / p.full_scale_kpa;
+        for r in 0..p.rows {
+            for c in 0..p.cols {
+                let mut acc = 0.0f64;
+                for dr in 0..os {
+                    for dc in 0..os {
+                        acc += self.pressure.v[(r * os + dr) * fine_cols + c * os + dc] as f64;
+                    }
+                }
+                let kpa = acc / (os * os) as f64;
+                let i = r * p.cols + c;
+                let n: f64 = StandardNormal.sample(rng);
+                let v = kpa * counts_per_kpa * self.gain[i] as f64 * self.faults.drift_gain
+                    + n * p.noise_counts;
+                out[i] = if v < p.threshold_counts {
+                    0
+                } else {
+                    v.round().min(max) as u16
+                };
+            }
+        }
+        self.faults.apply(out, max as u16, rng);
+    }
+}

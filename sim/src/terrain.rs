@@ -1,0 +1,427 @@
+//! Terrain surfaces as the foot's skin meets them: a height field under the sensor (mm, on the
+//! fine grid), the terrain's local stiffness, and its bulk stiffness under the hopper.
+//!
+//! Every sample is a fresh random patch (stones, needles and particles placed anew), so no two
+//! samples are alike. The physical reasoning per surface is in `docs/sim.md`.
+
+use std::f64::consts::PI;
+use std::fmt;
+use std::str::FromStr;
+
+use rand::Rng;
+use rand_distr::{Distribution, Normal, Poisson};
+use serde::{Deserialize, Serialize};
+
+use crate::field::Field;
+use crate::hopper::Ground;
+
+/// The surfaces of the paper's three experiments.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Terrain {
+    Aluminum,
+    Sand,
+    PineNeedles,
+    Gravel,
+    Sandpaper220,
+    Sandpaper150,
+    Sandpaper100,
+    Sandpaper60,
+    Wood,
+    Carpet,
+    Clay,
+    Grass,
+}
+
+/// A terrain patch under the sensor.
+pub struct Surface {
+    /// Height of the surface at the felt's scale (a millimetre and up), mm; higher touches first.
+    pub height: Field,
+    /// Sub-millimetre asperities (mm about their mean) that the hard silicone rides on rather
+    /// than wrapping: the only way features far below the sensor pitch reach the sensels.
+    pub asperity: Option<Field>,
+    /// Local stiffness of the terrain itself, kPa/mm (in series with the skin).
+    pub stiffness_kpa_mm: f64,
+}
+
+impl Terrain {
+    pub const ALL: [Terrain; 12] = [
+        Terrain::Aluminum,
+        Terrain::Sand,
+        Terrain::PineNeedles,
+        Terrain::Gravel,
+        Terrain::Sandpaper220,
+        Terrain::Sandpaper150,
+        Terrain::Sandpaper100,
+        Terrain::Sandpaper60,
+        Terrain::Wood,
+        Terrain::Carpet,
+        Terrain::Clay,
+        Terrain::Grass,
+    ];
+    /// Section 4: the static set.
+    pub const STATIC: [Terrain; 4] = [
+        Terrain::Aluminum,
+        Terrain::Sand,
+        Terrain::PineNeedles,
+        Terrain::Gravel,
+    ];
+    /// Section 5: the sandpaper set.
+    pub const SANDPAPER: [Terrain; 5] = [
+        Terrain::Aluminum,
+        Terrain::Sandpaper220,
+        Terrain::Sandpaper150,
+        Terrain::Sandpaper100,
+        Terrain::Sandpaper60,
+    ];
+    /// Section 7: the dynamic set.
+    pub const DYNAMIC: [Terrain; 4] = [
+        Terrain::Wood,
+        Terrain::Carpet,
+        Terrain::Clay,
+        Terrain::Grass,
+    ];
+
+    /// The bus name (the protocol's terrain table).
+    pub fn name(self) -> &'static str {
+        protocol::messages::terrain_name(self.id()).unwrap_or("unknown")
+    }
+
+    /// The bus id (the protocol's terrain table).
+    pub fn id(self) -> u8 {
+        Self::ALL.iter().position(|t| *t == self).unwrap_or(0) as u8
+    }
+
+    pub fn from_id(id: u8) -> Option<Self> {
+        Self::ALL.get(id as usize).copied()
+    }
+
+    /// Aluminum-oxide particle diameter of a sandpaper, mm (the paper's Table 2).
+    pub fn grit_diameter_mm(self) -> Option<f64> {
+        match self {
+            Terrain::Sandpaper220 => Some(0.058),
+            Terrain::Sandpaper150 => Some(0.082),
+            Terrain::Sandpaper100 => Some(0.129),
+            Terrain::Sandpaper60 => Some(0.260),
+            _ => None,
+        }
+    }
+
+    /// The ground under the hopper: bulk stiffness and damping in series with the leg.
+    pub fn ground(self) -> Ground {
+        let (stiffness, damping) = match self {
+            // Rigid for a 2 kg hopper.
+            Terrain::Aluminum | Terrain::Wood | Terrain::Gravel => (2e5, 5.0),
+            Terrain::Sandpaper220
+            | Terrain::Sandpaper150
+            | Terrain::Sandpaper100
+            | Terrain::Sandpaper60 => (2e5, 5.0),
+            // Low-pile carpet on a hard floor: some give, some loss.
+            Terrain::Carpet => (3e4, 40.0),
+            // Semi-moist clay: soft and lossy (it deforms plastically).
+            Terrain::Clay => (1.5e4, 120.0),
+            // Thick grass: soft and springy.
+            Terrain::Grass => (8e3, 15.0),
+            Terrain::Sand => (1e4, 150.0),
+            Terrain::PineNeedles => (1.2e4, 60.0),
+        };
+        Ground { stiffness, damping }
+    }
+
+    /// A fresh random patch of this surface on a `rows x cols` grid of `cell_mm` cells.
+    pub fn surface(self, rows: usize, cols: usize, cell_mm: f64, rng: &mut impl Rng) -> Surface {
+        let w = cols as f64 * cell_mm;
+        let h = rows as f64 * cell_mm;
+        let mut asperity = None;
+        let (height, stiffness_kpa_mm) = match self {
+            Terrain::Aluminum => {
+                // Polished plate: a slight tilt against the die and sub-micron roughness.
+                asperity = Some(Field::random_smooth(rows, cols, cell_mm, 0.0005, 0.2, rng));
+                (plate(rows, cols, cell_mm, 0.0, rng), 1e6)
+            }
+            Terrain::Sand => {
+                // Dry beach sand settles under the die: mm-scale mottling of the bed and grains
+                // of 0.1-0.5 mm, on a bed far softer than the skin.
+                let mut f = Field::random_smooth(rows, cols, cell_mm, 0.12, 3.0, rng);
+                let grains = Field::random_smooth(rows, cols, cell_mm, 0.05, 0.2, rng);
+                for (a, b) in f.v.iter_mut().zip(&grains.v) {
+                    *a += b;
+                }
+                (f, 12.0)
+            }
+            Terrain::PineNeedles => (needles(rows, cols, cell_mm, w, h, rng), 60.0),
+            Terrain::Gravel => (stones(rows, cols, cell_mm, w, h, rng), 1e5),
+            Terrain::Sandpaper220
+            | Terrain::Sandpaper150
+            | Terrain::Sandpaper100
+            | Terrain::Sandpaper60 => {
+                let d = self.grit_diameter_mm().unwrap_or(0.1);
+                asperity = Some(grit(rows, cols, cell_mm, d, rng));
+                (plate(rows, cols, cell_mm, 0.0, rng), 1e5)
+            }
+            Terrain::Wood => {
+                // Planed pine: grain ridges about 2-4 mm apart (earlywood/latewood), a few
+                // microns to tens of microns high, along the plank; now and then a plank seam.
+                let mut f = plate(rows, cols, cell_mm, 0.002, rng);
+                let angle = rng.random_range(-0.15..0.15f64) + PI / 2.0;
+                let period = rng.random_range(2.0..4.0);
+                let phase = rng.random_range(0.0..1.0);
+                let (s, c) = angle.sin_cos();
+                let seam = rng.random_bool(0.3).then(|| rng.random_range(0.2..0.8) * w);
+                for r in 0..rows {
+                    for col in 0..cols {
+                        let (y, x) = f.pos(r, col);
+                        let u = x * c + y * s;
+                        let ring = (u / period + phase).fract();
+                        let mut z = if ring < 0.3 { 0.03 } else { 0.0 };
+                        if seam.is_some_and(|sx| (x - sx).abs() < 0.6) {
+                            z -= 0.5;
+                        }
+                        f.v[r * cols + col] += z as f32;
+                    }
+                }
+                (f, 2e3)
+            }
+            Terrain::Carpet => {
+                // Loop pile: tufts on a square gauge of about 2.5-3.2 mm, each a soft bump.
+                let mut f = Field::zeros(rows, cols, cell_mm);
+                let gauge = rng.random_range(2.5..3.2);
+                let (oy, ox) = (rng.random_range(0.0..gauge), rng.random_range(0.0..gauge));
+                let angle: f64 = rng.random_range(-0.2..0.2);
+                let (s, c) = angle.sin_cos();
+                let jitter = Normal::new(0.0, 0.08).unwrap_or_else(|_| unreachable_normal());
+                for r in 0..rows {
+                    for col in 0..cols {
+                        let (y, x) = f.pos(r, col);
+                        let (u, v) = (x * c + y * s + ox, -x * s + y * c + oy);
+                        let du = (u / gauge).fract() - 0.5;
+                        let dv = (v / gauge).fract() - 0.5;
+                        let r2 = (du * du + dv * dv) * gauge * gauge;
+                        let tuft = 1.2 * (-r2 / (2.0 * 0.6f64.powi(2))).exp();
+                        f.v[r * cols + col] = (tuft + jitter.sample(rng)) as f32;
+                    }
+                }
+                (f, 25.0)
+            }
+            Terrain::Clay => {
+                // Semi-moist clay dirt: a soft, mostly conforming bed with clods and a few
+                // embedded pebbles, and drying cracks.
+                let mut f = Field::random_smooth(rows, cols, cell_mm, 0.25, 5.0, rng);
+                let clods = Field::random_smooth(rows, cols, cell_mm, 0.10, 1.0, rng);
+                for (a, b) in f.v.iter_mut().zip(&clods.v) {
+                    *a += b;
+                }
+                for _ in 0..rng.random_range(1..4) {
+                    let (cy, cx, rad) = (
+                        rng.random_range(0.0..h),
+                        rng.random_range(0.0..w),
+                        rng.random_range(1.0..2.5),
+                    );
+                    bump(&mut f, cy, cx, rad, 0.6);
+                }
+                if rng.random_bool(0.5) {
+                    let (y0, a) = (rng.random_range(0.0..h), rng.random_range(0.0..PI));
+                    crack(&mut f, y0, a, 0.8, -1.0);
+                }
+                (f, 15.0)
+            }
+            Terrain::Grass => {
+                // Thick grass: many blades 3-6 mm wide lying in random directions at several
+                // heights; the foot presses the top layer.
+                (blades(rows, cols, cell_mm, w, h, rng), 20.0)
+            }
+        };
+        Surface {
+            height,
+            asperity,
+            stiffness_kpa_mm,
+        }
+    }
+}
+
+fn unreachable_normal() -> Normal<f64> {
+    // Normal::new only fails for a negative or NaN deviation, and the constants above are valid.
+    Normal::new(0.0, 1.0).unwrap_or_else(|_| unreachable!("constant normal parameters"))
+}
+
+/// A flat plate with a random tilt and waviness `rough_mm` (over about 2 mm).
+fn plate(rows: usize, cols: usize, cell_mm: f64, rough_mm: f64, rng: &mut impl Rng) -> Field {
+    let mut f = Field::random_smooth(rows, cols, cell_mm, rough_mm, 2.0, rng);
+    let (gy, gx) = (
+        rng.random_range(-4e-4..4e-4f64),
+        rng.random_range(-4e-4..4e-4f64),
+    );
+    for r in 0..rows {
+        for c in 0..cols {
+            let (y, x) = f.pos(r, c);
+            f.v[r * cols + c] += (gy * y + gx * x) as f32;
+        }
+    }
+    f
+}
+
+fn bump(f: &mut Field, cy: f64, cx: f64, rad: f64, height: f64) {
+    for r in 0..f.rows {
+        for c in 0..f.cols {
+            let (y, x) = f.pos(r, c);
+            let d2 = (y - cy).powi(2) + (x - cx).powi(2);
+            if d2 < rad * rad {
+                let z = height * (1.0 - d2 / (rad * rad)).sqrt();
+                let i = r * f.cols + c;
+                f.v[i] = f.v[i].max(z as f32);
+            }
+        }
+    }
+}
+
+fn crack(f: &mut Field, y0: f64, angle: f64, width: f64, depth: f64) {
+    let (s, c) = angle.sin_cos();
+    for r in 0..f.rows {
+        for col in 0..f.cols {
+            let (y, x) = f.pos(r, col);
+            let d = ((y - y0) * c - x * s).abs();
+            if d < width / 2.0 {
+                f.v[r * f.cols + col] += depth as f32;
+            }
+        }
+    }
+}
+
+/// Dolomite gravel of 10-50 mm stones: rounded tops at different heights, so under a flat foot
+/// only the highest few carry the load.
+fn stones(rows: usize, cols: usize, cell_mm: f64, w: f64, h: f64, rng: &mut impl Rng) -> Field {
+    let mut f = Field::zeros(rows, cols, cell_mm);
+    f.v.fill(-20.0);
+    // Enough stones to cover the patch and its surroundings.
+    let n = rng.random_range(6..12);
+    for _ in 0..n {
+        let size = rng.random_range(10.0..50.0f64);
+        let (cy, cx) = (
+            rng.random_range(-10.0..h + 10.0),
+            rng.random_range(-10.0..w + 10.0),
+        );
+        // Radius of curvature of the top: about half the stone, flattened stones more.
+        let radius = size * rng.random_range(0.4..0.9);
+        let top = rng.random_range(0.0..4.0) + 0.05 * size;
+        for r in 0..rows {
+            for c in 0..cols {
+                let (y, x) = f.pos(r, c);
+                let d2 = (y - cy).powi(2) + (x - cx).powi(2);
+                let z = top - d2 / (2.0 * radius);
+                let i = r * cols + c;
+                f.v[i] = f.v[i].max(z as f32);
+            }
+        }
+    }
+    f
+}
+
+/// Dry pine needles: cylinders 0.8-1.5 mm thick and 20-60 mm long in a loose random pile.
+fn needles(rows: usize, cols: usize, cell_mm: f64, w: f64, h: f64, rng: &mut impl Rng) -> Field {
+    let mut f = Field::zeros(rows, cols, cell_mm);
+    f.v.fill(-6.0);
+    let n = rng.random_range(35..60);
+    for _ in 0..n {
+        let len = rng.random_range(20.0..60.0f64);
+        let d = rng.random_range(0.8..1.5f64);
+        let (cy, cx) = (
+            rng.random_range(-10.0..h + 10.0),
+            rng.random_range(-10.0..w + 10.0),
+        );
+        let a: f64 = rng.random_range(0.0..PI);
+        let base = rng.random_range(-4.0..0.0f64);
+        // Needles sag and twist: a slight slope along their length.
+        let slope = rng.random_range(-0.03..0.03f64);
+        segment(&mut f, cy, cx, a, len, d / 2.0, base, slope);
+    }
+    f
+}
+
+/// Thick grass: flat blades 3-6 mm wide, 30-80 mm long, in several layers.
+fn blades(rows: usize, cols: usize, cell_mm: f64, w: f64, h: f64, rng: &mut impl Rng) -> Field {
+    let mut f = Field::zeros(rows, cols, cell_mm);
+    f.v.fill(-8.0);
+    let n = rng.random_range(40..70);
+    // A lawn is combed by the mower and the wind: blades share a loose main direction.
+    let main: f64 = rng.random_range(0.0..PI);
+    for _ in 0..n {
+        let len = rng.random_range(30.0..80.0f64);
+        let width = rng.random_range(3.0..6.0f64);
+        let (cy, cx) = (
+            rng.random_range(-10.0..h + 10.0),
+            rng.random_range(-10.0..w + 10.0),
+        );
+        let a = main + rng.random_range(-0.6..0.6);
+        let base = rng.random_range(-5.0..0.0f64);
+        let slope = rng.random_range(-0.05..0.05f64);
+        // A blade is flat with a raised midrib: model as a wide, low cylinder.
+        segment(&mut f, cy, cx, a, len, width / 2.0, base, slope);
+    }
+    f
+}
+
+/// Adds a cylinder of radius `rad` lying along a segment to the height field (max).
+#[allow(clippy::too_many_arguments)]
+fn segment(f: &mut Field, cy: f64, cx: f64, a: f64, len: f64, rad: f64, base: f64, slope: f64) {
+    let (s, c) = a.sin_cos();
+    for r in 0..f.rows {
+        for col in 0..f.cols {
+            let (y, x) = f.pos(r, col);
+            let (dy, dx) = (y - cy, x - cx);
+            let along = dx * c + dy * s;
+            if along.abs() > len / 2.0 {
+                continue;
+            }
+            let across = (-dx * s + dy * c).abs();
+            if across < rad {
+                let z = base + slope * along + rad + (rad * rad - across * across).sqrt();
+                let i = r * f.cols + col;
+                f.v[i] = f.v[i].max(z as f32);
+            }
+        }
+    }
+}
+
+/// Sandpaper: aluminum-oxide particles of diameter `d` mm bonded in resin, about 0.45/d^2
+/// particles per mm^2 (an open-to-closed coat). Each cell's height is its highest particle tip;
+/// far below the sensor pitch, so only the statistics of many particles reach a sensel.
+fn grit(rows: usize, cols: usize, cell_mm: f64, d: f64, rng: &mut impl Rng) -> Field {
+    let mut f = Field::zeros(rows, cols, cell_mm);
+    let lambda = 0.45 * cell_mm * cell_mm / (d * d);
+    let count = Poisson::new(lambda).ok();
+    let tip = Normal::new(0.5 * d, 0.15 * d).unwrap_or_else(|_| unreachable_normal());
+    // Resin bed: about 35 % of the particle height.
+    let bed = 0.35 * d;
+    for x in f.v.iter_mut() {
+        let n = count.as_ref().map_or(1.0, |p| p.sample(rng)) as usize;
+        let mut top = bed;
+        for _ in 0..n {
+            top = top.max(tip.sample(rng));
+        }
+        *x += top as f32;
+    }
+    f
+}
+
+impl fmt::Display for Terrain {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for Terrain {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Self::ALL
+            .iter()
+            .copied()
+            .find(|t| t.name() == s)
+            .ok_or_else(|| {
+                let names: Vec<&str> = Self::ALL.iter().map(|t| t.name()).collect();
+                format!(
+                    "unknown terrain '{s}': expected one of {}",
+                    names.join(", ")
+                )
+            })
+    }
+}
