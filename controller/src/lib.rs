@@ -1,9 +1,12 @@
 //! # presrs-controller: the hopper's control laws and per-terrain gait switching
 //!
 //! - [`laws`]: eq. (4), the AER stance leg length, and eq. (5), the flight touchdown angle;
-//! - [`gait`]: gaits `G_i(omega, phi, c, beta_des)`, the paper's G1..G3 as defaults.
+//! - [`gait`]: gaits `G_i(omega, phi, c, beta_des)`, the paper's G1..G3 as defaults;
+//! - [`machine`]: the state machine that runs the laws and switches gait per terrain.
 
 pub mod gait;
 pub mod laws;
+pub mod machine;
 
 pub use gait::Gait;
+pub use machine::{Controller, ControllerConfig};

@@ -6,3 +6,8 @@
 //! repair filter for dead sensor rows and columns.
 
 pub mod classifier;
+pub mod config;
+pub mod stance;
+
+pub use config::{NodeConfig, RepairMode};
+pub use stance::StancePipeline;

@@ -448,6 +448,11 @@ impl Reassembler {
         self.stats
     }
 
+    /// The image the last successful [`Reassembler::push`] returned.
+    pub fn last_image(&self) -> &TactileImage {
+        &self.out
+    }
+
     /// Feeds one segment's payload (the frame's data) received at `rx_us`. Returns the image
     /// when this segment completed one that checks.
     pub fn push(

@@ -4,5 +4,6 @@ pub mod faults;
 pub mod field;
 pub mod fixed_gait;
 pub mod hopper;
+pub mod runner;
 pub mod skin;
 pub mod terrain;

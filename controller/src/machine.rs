@@ -1,0 +1,357 @@
+//! The controller's state machine: stance and flight from the foot switch, eq. (4) in stance,
+//! eq. (5) at liftoff, and the gait chosen per terrain, switched only in flight.
+//!
+//! Time is passed in (`now_us`), so tests and the demo drive it with a simulated clock.
+
+use std::collections::BTreeMap;
+
+use protocol::messages::{
+    self, GaitReason, GaitStatus, LegCommand, Message, Phase, TERRAIN_UNKNOWN,
+};
+use serde::{Deserialize, Serialize};
+
+use crate::gait::Gait;
+use crate::laws;
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ControllerConfig {
+    pub gaits: Vec<Gait>,
+    /// Terrain name (the bus table) -> gait id.
+    pub terrain_gaits: BTreeMap<String, u8>,
+    pub initial_gait: u8,
+    /// Gait for unknown terrain and a lost node.
+    pub safe_gait: u8,
+    /// Consecutive steps of a new terrain before switching.
+    pub switch_after_steps: u32,
+    /// Minimum confidence of a TerrainClass that counts, percent.
+    pub min_confidence_pct: f64,
+    /// Node heartbeat timeout, ms.
+    pub heartbeat_timeout_ms: u64,
+    /// LegCommand rate, Hz.
+    pub command_hz: f64,
+    /// GaitStatus rate, Hz (and at every switch).
+    pub status_hz: f64,
+    /// The foot this controller runs.
+    pub foot: u8,
+    /// Switch edges closer than this to the last accepted edge are bounce, µs.
+    pub lockout_us: u64,
+}
+
+impl Default for ControllerConfig {
+    fn default() -> Self {
+        let terrain_gaits = [
+            ("wood", 3),
+            ("carpet", 3),
+            ("grass", 2),
+            ("clay", 1),
+            ("aluminum", 2),
+            ("sand", 1),
+            ("pine_needles", 1),
+            ("gravel", 1),
+        ]
+        .into_iter()
+        .map(|(t, g)| (t.to_string(), g))
+        .collect();
+        Self {
+            gaits: Gait::paper_gaits(),
+            terrain_gaits,
+            initial_gait: 2,
+            safe_gait: 1,
+            switch_after_steps: 2,
+            min_confidence_pct: 60.0,
+            heartbeat_timeout_ms: 500,
+            command_hz: 500.0,
+            status_hz: 10.0,
+            foot: 0,
+            lockout_us: 20_000,
+        }
+    }
+}
+
+impl ControllerConfig {
+    /// Checks every field; the error names the field and the allowed range.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.gaits.is_empty() {
+            return Err("gaits: at least one gait is needed".into());
+        }
+        for (i, g) in self.gaits.iter().enumerate() {
+            g.validate(&format!("gaits[{i}]"))?;
+        }
+        let has = |id: u8| self.gaits.iter().any(|g| g.id == id);
+        let ids: Vec<u8> = self.gaits.iter().map(|g| g.id).collect();
+        for (name, id) in [
+            ("initial_gait", self.initial_gait),
+            ("safe_gait", self.safe_gait),
+        ] {
+            if !has(id) {
+                return Err(format!("{name} = {id}: allowed gait ids {ids:?}"));
+            }
+        }
+        for (t, g) in &self.terrain_gaits {
+            if messages::terrain_id(t).is_none() {
+                return Err(format!("terrain_gaits.{t}: unknown terrain name"));
+            }
+            if !has(*g) {
+                return Err(format!("terrain_gaits.{t} = {g}: allowed gait ids {ids:?}"));
+            }
+        }
+        let range = |name: &str, v: f64, lo: f64, hi: f64| {
+            if v.is_finite() && (lo..=hi).contains(&v) {
+                Ok(())
+            } else {
+                Err(format!("{name} = {v}: allowed {lo}..={hi}"))
+            }
+        };
+        range(
+            "switch_after_steps",
+            self.switch_after_steps as f64,
+            1.0,
+            100.0,
+        )?;
+        range("min_confidence_pct", self.min_confidence_pct, 0.0, 100.0)?;
+        range(
+            "heartbeat_timeout_ms",
+            self.heartbeat_timeout_ms as f64,
+            50.0,
+            60_000.0,
+        )?;
+        range("command_hz", self.command_hz, 10.0, 5_000.0)?;
+        range("status_hz", self.status_hz, 0.1, 100.0)?;
+        range(
+            "foot",
+            self.foot as f64,
+            0.0,
+            (protocol::ids::MAX_FEET - 1) as f64,
+        )?;
+        Ok(())
+    }
+
+    /// Parses TOML or JSON (by the file's extension) and validates.
+    pub fn parse(text: &str, path: &str) -> Result<Self, String> {
+        let c: Self = if path.ends_with(".json") {
+            serde_json::from_str(text).map_err(|e| format!("{path}: {e}"))?
+        } else {
+            toml::from_str(text).map_err(|e| format!("{path}: {e}"))?
+        };
+        c.validate().map_err(|e| format!("{path}: {e}"))?;
+        Ok(c)
+    }
+}
+
+/// The controller.
+pub struct Controller {
+    cfg: ControllerConfig,
+    gait: Gait,
+    reason: GaitReason,
+    terrain: u8,
+    pending: Option<(Gait, GaitReason, u8)>,
+    stance: bool,
+    last_edge_us: Option<u64>,
+    touchdown_us: u64,
+    leg_angle: f64,
+    beta_td: f64,
+    next_beta_td: f64,
+    candidate: (u8, u32),
+    last_heartbeat_us: Option<u64>,
+    next_cmd_us: u64,
+    next_status_us: u64,
+    seq: u8,
+    pub switches: u64,
+}
+
+impl Controller {
+    pub fn new(cfg: ControllerConfig) -> Self {
+        let gait = cfg
+            .gaits
+            .iter()
+            .find(|g| g.id == cfg.initial_gait)
+            .cloned()
+            .unwrap_or_else(Gait::g2);
+        let b = gait.beta_des;
+        Self {
+            gait,
+            reason: GaitReason::Initial,
+            terrain: TERRAIN_UNKNOWN,
+            pending: None,
+            stance: false,
+            last_edge_us: None,
+            touchdown_us: 0,
+            leg_angle: 0.0,
+            beta_td: b,
+            next_beta_td: b,
+            candidate: (TERRAIN_UNKNOWN, 0),
+            last_heartbeat_us: None,
+            next_cmd_us: 0,
+            next_status_us: 0,
+            seq: 0,
+            switches: 0,
+            cfg,
+        }
+    }
+
+    pub fn gait(&self) -> &Gait {
+        &self.gait
+    }
+
+    pub fn reason(&self) -> GaitReason {
+        self.reason
+    }
+
+    fn gait_by_id(&self, id: u8) -> Option<Gait> {
+        self.cfg.gaits.iter().find(|g| g.id == id).cloned()
+    }
+
+    fn request(&mut self, gait_id: u8, reason: GaitReason, terrain: u8) {
+        let Some(g) = self.gait_by_id(gait_id) else {
+            return;
+        };
+        if g.id == self.gait.id && reason == self.reason {
+            self.pending = None;
+            return;
+        }
+        if g.id == self.gait.id {
+            // Same gait, new reason: no mechanical change, take it at once.
+            self.reason = reason;
+            self.terrain = terrain;
+            self.pending = None;
+            return;
+        }
+        self.pending = Some((g, reason, terrain));
+    }
+
+    /// Feeds one received message (foot is the message's foot index).
+    pub fn on_message(
+        &mut self,
+        foot: u8,
+        msg: &Message,
+        now_us: u64,
+        out: &mut impl FnMut(Message),
+    ) {
+        match *msg {
+            Message::NodeStatus(_) => self.last_heartbeat_us = Some(now_us),
+            Message::LegState(ls) if foot == self.cfg.foot => self.leg_angle = ls.leg_angle_rad,
+            Message::FootContact(fc) if foot == self.cfg.foot => {
+                if fc.stance == self.stance {
+                    return;
+                }
+                if self
+                    .last_edge_us
+                    .is_some_and(|t| now_us.saturating_sub(t) < self.cfg.lockout_us)
+                {
+                    return; // bounce
+                }
+                self.last_edge_us = Some(now_us);
+                self.stance = fc.stance;
+                if fc.stance {
+                    self.touchdown_us = now_us;
+                    self.beta_td = self.leg_angle;
+                } else {
+                    let beta_lo = laws::liftoff_angle_from_signed(self.leg_angle);
+                    let g = &self.gait;
+                    self.next_beta_td =
+                        laws::next_touchdown_angle(beta_lo, self.beta_td, g.c, g.beta_des)
+                            .clamp(0.0, 1.0);
+                    self.apply_pending(out);
+                }
+            }
+            Message::TerrainClass(tc) if foot == self.cfg.foot => {
+                if tc.terrain == TERRAIN_UNKNOWN {
+                    self.candidate = (TERRAIN_UNKNOWN, 0);
+                    self.request(self.cfg.safe_gait, GaitReason::Unknown, TERRAIN_UNKNOWN);
+                } else if tc.confidence_pct >= self.cfg.min_confidence_pct {
+                    if self.candidate.0 == tc.terrain {
+                        self.candidate.1 += 1;
+                    } else {
+                        self.candidate = (tc.terrain, 1);
+                    }
+                    if self.candidate.1 >= self.cfg.switch_after_steps {
+                        let name = messages::terrain_name(tc.terrain).unwrap_or("unknown");
+                        let gid = self
+                            .cfg
+                            .terrain_gaits
+                            .get(name)
+                            .copied()
+                            .unwrap_or(self.cfg.safe_gait);
+                        self.request(gid, GaitReason::Terrain, tc.terrain);
+                    }
+                }
+                if !self.stance {
+                    self.apply_pending(out);
+                }
+            }
+            _ => {}
+        }
+    }
+
+    fn apply_pending(&mut self, out: &mut impl FnMut(Message)) {
+        if let Some((g, reason, terrain)) = self.pending.take() {
+            self.gait = g;
+            self.reason = reason;
+            self.terrain = terrain;
+            self.switches += 1;
+            // The touchdown angle is not reset: eq. (5) walks it to the new beta_des over the
+            // next steps, which keeps the hopper on its feet (a jump of 0.3 rad at low speed
+            // throws it backwards).
+            out(Message::GaitStatus(self.status()));
+        }
+    }
+
+    pub fn status(&self) -> GaitStatus {
+        GaitStatus {
+            gait: self.gait.id,
+            terrain: self.terrain,
+            omega_rad_s: self.gait.omega,
+            beta_des_rad: self.gait.beta_des,
+            reason: self.reason,
+            foot: self.cfg.foot,
+        }
+    }
+
+    /// Time-driven outputs: LegCommand at the command rate, GaitStatus at the status rate, and
+    /// the heartbeat watchdog.
+    pub fn tick(&mut self, now_us: u64, out: &mut impl FnMut(Message)) {
+        let lost = match self.last_heartbeat_us {
+            Some(t) => now_us.saturating_sub(t) > self.cfg.heartbeat_timeout_ms * 1000,
+            None => now_us > self.cfg.heartbeat_timeout_ms * 1000,
+        };
+        if lost && self.reason != GaitReason::NodeLost {
+            self.candidate = (TERRAIN_UNKNOWN, 0);
+            self.request(self.cfg.safe_gait, GaitReason::NodeLost, TERRAIN_UNKNOWN);
+            if self.pending.is_none() {
+                self.reason = GaitReason::NodeLost;
+            }
+            if !self.stance {
+                self.apply_pending(out);
+            }
+        }
+        if now_us >= self.next_cmd_us {
+            self.next_cmd_us = now_us + (1e6 / self.cfg.command_hz) as u64;
+            let g = &self.gait;
+            let (phase, len) = if self.stance {
+                let t = now_us.saturating_sub(self.touchdown_us) as f64 * 1e-6;
+                (
+                    Phase::Stance,
+                    laws::aer_leg_length(t, g.zeta0, g.zeta_dev, g.omega, g.phi),
+                )
+            } else {
+                (
+                    Phase::Flight,
+                    laws::aer_leg_length(0.0, g.zeta0, g.zeta_dev, g.omega, g.phi),
+                )
+            };
+            self.seq = self.seq.wrapping_add(1);
+            out(Message::LegCommand(LegCommand {
+                leg_length_m: len,
+                touchdown_angle_rad: self.next_beta_td,
+                gait: g.id,
+                phase,
+                seq: self.seq,
+            }));
+        }
+        if now_us >= self.next_status_us {
+            self.next_status_us = now_us + (1e6 / self.cfg.status_hz) as u64;
+            out(Message::GaitStatus(self.status()));
+        }
+    }
+}

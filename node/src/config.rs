@@ -1,0 +1,103 @@
+//! The node's configuration file (`node.toml`).
+
+use protocol::IdConfig;
+use serde::{Deserialize, Serialize};
+
+/// How dead sensor lines are repaired before classification.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RepairMode {
+    /// No repair.
+    None,
+    /// The paper's filter on every image: fills every all-zero line, also legitimately empty ones.
+    PerImage,
+    /// Only lines learned dead from the stance history (zero while their neighbours carry load
+    /// for `dead_after_stances` stances in a row).
+    History,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct NodeConfig {
+    /// Feet served: 0..feet.
+    pub feet: u8,
+    /// Micro-switch debounce, µs.
+    pub debounce_us: u32,
+    /// Stance time of the sampled frame, ms (section 7.1: 70).
+    pub sample_ms: u32,
+    pub repair: RepairMode,
+    /// Stances in a row a line must stay dead before the history repair fills it.
+    pub dead_after_stances: u32,
+    /// Classify every frame in `window_ms` and sum log-posteriors.
+    pub multi_frame: bool,
+    pub window_ms: [u32; 2],
+    /// Below this confidence the TerrainClass carries LOW_CONFIDENCE.
+    pub low_confidence: f64,
+    /// NodeStatus rate, Hz.
+    pub status_hz: f64,
+    /// Incomplete tactile images are dropped after this long, µs.
+    pub reassembly_timeout_us: u64,
+    pub ids: IdConfig,
+}
+
+impl Default for NodeConfig {
+    fn default() -> Self {
+        Self {
+            feet: 1,
+            debounce_us: 5_000,
+            sample_ms: 70,
+            repair: RepairMode::History,
+            dead_after_stances: 5,
+            multi_frame: false,
+            window_ms: [40, 100],
+            low_confidence: 0.6,
+            status_hz: 10.0,
+            reassembly_timeout_us: 50_000,
+            ids: IdConfig::default(),
+        }
+    }
+}
+
+impl NodeConfig {
+    /// Parses and checks a TOML config; the error names the file, the field and the range.
+    pub fn from_toml(text: &str, path: &str) -> Result<Self, String> {
+        let c: Self = toml::from_str(text).map_err(|e| format!("{path}: {e}"))?;
+        c.validate().map_err(|e| format!("{path}: {e}"))?;
+        Ok(c)
+    }
+
+    pub fn validate(&self) -> Result<(), String> {
+        if self.feet == 0 || self.feet > protocol::ids::MAX_FEET {
+            return Err(format!(
+                "feet = {}: allowed 1..={}",
+                self.feet,
+                protocol::ids::MAX_FEET
+            ));
+        }
+        if self.debounce_us > 50_000 {
+            return Err(format!(
+                "debounce_us = {}: allowed 0..=50000",
+                self.debounce_us
+            ));
+        }
+        if !(10..=500).contains(&self.sample_ms) {
+            return Err(format!("sample_ms = {}: allowed 10..=500", self.sample_ms));
+        }
+        if self.window_ms[0] >= self.window_ms[1] {
+            return Err(format!(
+                "window_ms = {:?}: the start must be before the end",
+                self.window_ms
+            ));
+        }
+        if !(0.0..=1.0).contains(&self.low_confidence) {
+            return Err(format!(
+                "low_confidence = {}: allowed 0..=1",
+                self.low_confidence
+            ));
+        }
+        if !(0.1..=100.0).contains(&self.status_hz) {
+            return Err(format!("status_hz = {}: allowed 0.1..=100", self.status_hz));
+        }
+        self.ids.validate().map_err(|e| format!("ids: {e}"))
+    }
+}

@@ -1,0 +1,451 @@
+//! The simulated robot on a bus: the hopper on a circular track of terrains, its foot switch
+//! (with bounce), its leg state and its PreSRS images, obeying `LegCommand` when a controller
+//! sends them and holding a fixed gait when none does.
+//!
+//! [`SimRobot::advance_to`] moves simulated time forward and emits the frames the robot sends in
+//! that time, in order; the caller decides whether time runs in real time (a CAN process) or as
+//! fast as possible (the demo, tests).
+
+use controller::Gait;
+use protocol::messages::{FootContact, LegCommand, LegState, Message, Phase};
+use protocol::tactile::{ImageRef, Segmenter, Variant};
+use protocol::{CanFrame, IdConfig};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::faults::{FaultParams, Faults};
+use crate::fixed_gait::FixedGait;
+use crate::hopper::{Event, Hopper, HopperParams, LegCommands};
+use crate::skin::{Contact, Footprint, Skin, SkinParams};
+use crate::terrain::Terrain;
+
+/// One stretch of the track.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Segment {
+    pub terrain: Terrain,
+    /// Length along the track, m.
+    pub length_m: f64,
+}
+
+/// The paper's circular track (2.8 m diameter) made of terrain segments.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Track {
+    #[serde(default = "default_diameter")]
+    pub diameter_m: f64,
+    pub segments: Vec<Segment>,
+}
+
+fn default_diameter() -> f64 {
+    2.8
+}
+
+impl Default for Track {
+    /// Wood, grass, clay and carpet, a quarter of the circle each.
+    fn default() -> Self {
+        let q = std::f64::consts::PI * 2.8 / 4.0;
+        Self {
+            diameter_m: 2.8,
+            segments: [
+                Terrain::Wood,
+                Terrain::Grass,
+                Terrain::Clay,
+                Terrain::Carpet,
+            ]
+            .into_iter()
+            .map(|terrain| Segment {
+                terrain,
+                length_m: q,
+            })
+            .collect(),
+        }
+    }
+}
+
+impl Track {
+    /// Parses a TOML track file and checks it.
+    pub fn from_toml(text: &str, path: &str) -> Result<Self, String> {
+        let t: Self = toml::from_str(text).map_err(|e| format!("{path}: {e}"))?;
+        if t.segments.is_empty() {
+            return Err(format!("{path}: segments: at least one segment is needed"));
+        }
+        if let Some((i, s)) = t
+            .segments
+            .iter()
+            .enumerate()
+            .find(|(_, s)| s.length_m.is_nan() || s.length_m <= 0.0)
+        {
+            return Err(format!(
+                "{path}: segments[{i}].length_m = {}: must be > 0",
+                s.length_m
+            ));
+        }
+        Ok(t)
+    }
+
+    pub fn length(&self) -> f64 {
+        self.segments.iter().map(|s| s.length_m).sum()
+    }
+
+    /// The terrain at distance `x` m along the track (wrapping).
+    pub fn terrain_at(&self, x: f64) -> Terrain {
+        let mut x = x.rem_euclid(self.length().max(1e-9));
+        for s in &self.segments {
+            if x < s.length_m {
+                return s.terrain;
+            }
+            x -= s.length_m;
+        }
+        self.segments.last().map_or(Terrain::Wood, |s| s.terrain)
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SimConfig {
+    pub track: Track,
+    /// The gait held without a controller (G1..G3).
+    pub gait: u8,
+    pub feet: u8,
+    pub faults: FaultParams,
+    /// Commands older than this are ignored and the fixed gait takes over, ms.
+    pub command_timeout_ms: u64,
+    pub ids: IdConfig,
+}
+
+impl Default for SimConfig {
+    fn default() -> Self {
+        Self {
+            track: Track::default(),
+            gait: 2,
+            feet: 1,
+            faults: FaultParams::default(),
+            command_timeout_ms: 100,
+            ids: IdConfig::default(),
+        }
+    }
+}
+
+/// The leg's commands: the controller's when fresh, the fixed gait's otherwise.
+struct Commands {
+    fixed: FixedGait,
+    last: Option<(LegCommand, u64)>,
+    now_us: u64,
+    timeout_us: u64,
+}
+
+impl Commands {
+    fn external(&self) -> Option<&LegCommand> {
+        self.last
+            .as_ref()
+            .filter(|(_, t)| self.now_us.saturating_sub(*t) <= self.timeout_us)
+            .map(|(c, _)| c)
+    }
+}
+
+impl LegCommands for Commands {
+    fn stance_length(&mut self, t: f64) -> f64 {
+        match self.external() {
+            Some(c) if c.phase == Phase::Stance => c.leg_length_m,
+            _ => self.fixed.stance_length(t),
+        }
+    }
+    fn flight_length(&self) -> f64 {
+        self.fixed.flight_length()
+    }
+    fn touchdown_angle(&self) -> f64 {
+        self.external()
+            .map_or(self.fixed.touchdown_angle(), |c| c.touchdown_angle_rad)
+    }
+}
+
+/// One leg with its foot sensor.
+struct Leg {
+    hopper: Hopper,
+    cmd: Commands,
+    skin: Skin,
+    contact: Option<Contact>,
+    stance_terrain: Terrain,
+    pixels: Vec<u16>,
+    contact_seq: u8,
+    image_seq: u8,
+    /// Pending switch edges (time µs, state), bounce included.
+    edges: Vec<(u64, bool)>,
+}
+
+/// What the simulator knows about a step (ground truth for the demo and tests).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepTruth {
+    pub foot: u8,
+    pub touchdown_us: u64,
+    pub terrain: Terrain,
+    pub speed_m_s: f64,
+}
+
+pub struct SimRobot {
+    cfg: SimConfig,
+    legs: Vec<Leg>,
+    rng: ChaCha8Rng,
+    segmenter: Segmenter,
+    now_us: u64,
+    next_frame_us: u64,
+    /// Every touchdown so far (ground truth).
+    pub steps: Vec<StepTruth>,
+    last_td: Vec<Option<(f64, f64)>>,
+}
+
+const FRAME_US: u64 = 10_000;
+
+impl SimRobot {
+    pub fn new(cfg: SimConfig, seed: u64) -> Self {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let gait = Gait::by_name(&cfg.gait.to_string()).unwrap_or_else(Gait::g2);
+        let params = SkinParams::default();
+        let legs = (0..cfg.feet.max(1))
+            .map(|i| {
+                let faults = Faults::new(cfg.faults.clone(), params.rows, params.cols, &mut rng);
+                let skin = Skin::new(params.clone(), faults, &mut rng);
+                let v0 = 2.0 * gait.zeta0 * gait.beta_des.sin() / 0.14;
+                let mut hopper = Hopper::new(
+                    HopperParams::default(),
+                    gait.zeta0 + 0.02 + 0.005 * i as f64,
+                    v0,
+                );
+                hopper.x = i as f64 * 0.3;
+                Leg {
+                    hopper,
+                    cmd: Commands {
+                        fixed: FixedGait::new(gait.clone()),
+                        last: None,
+                        now_us: 0,
+                        timeout_us: cfg.command_timeout_ms * 1000,
+                    },
+                    skin,
+                    contact: None,
+                    stance_terrain: Terrain::Wood,
+                    pixels: vec![0; params.rows * params.cols],
+                    contact_seq: 0,
+                    image_seq: 0,
+                    edges: Vec::new(),
+                }
+            })
+            .collect();
+        let n = cfg.feet.max(1) as usize;
+        Self {
+            segmenter: Segmenter::new(Variant::Fd, cfg.ids.clone()),
+            legs,
+            rng,
+            now_us: 0,
+            next_frame_us: FRAME_US,
+            steps: Vec::new(),
+            last_td: vec![None; n],
+            cfg,
+        }
+    }
+
+    pub fn now_us(&self) -> u64 {
+        self.now_us
+    }
+
+    /// Forward speed of a leg's hopper, m/s, and its position along the track, m.
+    pub fn speed_and_position(&self, foot: u8) -> Option<(f64, f64)> {
+        self.legs
+            .get(foot as usize)
+            .map(|l| (l.hopper.vx, l.hopper.x))
+    }
+
+    pub fn terrain_under(&self, foot: u8) -> Option<Terrain> {
+        self.legs
+            .get(foot as usize)
+            .map(|l| self.cfg.track.terrain_at(l.hopper.x))
+    }
+
+    /// A frame from a controller.
+    pub fn on_frame(&mut self, frame: &CanFrame) {
+        if let Ok(Some((foot, Message::LegCommand(c)))) =
+            protocol::messages::decode(frame, &self.cfg.ids)
+            && let Some(l) = self.legs.get_mut(foot as usize)
+        {
+            l.cmd.last = Some((c, self.now_us));
+        }
+    }
+
+    /// Runs the robot up to `t_us`, emitting every frame it sends, in time order.
+    pub fn advance_to(&mut self, t_us: u64, emit: &mut impl FnMut(CanFrame)) {
+        while self.now_us < t_us {
+            let next = (self.now_us + 1000)
+                .min(t_us)
+                .min(self.next_frame_us.max(self.now_us + 1));
+            for foot in 0..self.legs.len() {
+                self.advance_leg(foot, next, emit);
+            }
+            self.now_us = next;
+            if self.now_us >= self.next_frame_us {
+                self.next_frame_us += FRAME_US;
+                for foot in 0..self.legs.len() {
+                    self.send_frame(foot, emit);
+                }
+            }
+        }
+    }
+
+    fn advance_leg(&mut self, foot: usize, t_us: u64, emit: &mut impl FnMut(CanFrame)) {
+        let ids = self.cfg.ids.clone();
+        let t_end = t_us as f64 * 1e-6;
+        loop {
+            let leg = &mut self.legs[foot];
+            leg.cmd.now_us = self.now_us;
+            let dt = t_end - leg.hopper.t;
+            if dt <= 1e-9 {
+                break;
+            }
+            let ground = self.cfg.track.terrain_at(leg.hopper.x).ground();
+            let ev = leg.hopper.advance(dt, ground, &mut leg.cmd);
+            let ev_us = (leg.hopper.t * 1e6) as u64;
+            match ev {
+                Some(Event::Touchdown { beta, .. }) => {
+                    leg.cmd.fixed.on_touchdown(beta);
+                    let terrain = self.cfg.track.terrain_at(leg.hopper.x);
+                    leg.stance_terrain = terrain;
+                    let (r, c, cell) = leg.skin.grid();
+                    let surface = terrain.surface(r, c, cell, &mut self.rng);
+                    leg.contact = Some(leg.skin.contact(&surface, Footprint::FOOT));
+                    leg.skin.faults.on_step(&mut self.rng);
+                    bounce(&mut leg.edges, ev_us, true, &mut self.rng);
+                    let speed = self.last_td[foot].map_or(leg.hopper.vx, |(t0, x0)| {
+                        (leg.hopper.x - x0) / (leg.hopper.t - t0).max(1e-3)
+                    });
+                    self.last_td[foot] = Some((leg.hopper.t, leg.hopper.x));
+                    self.steps.push(StepTruth {
+                        foot: foot as u8,
+                        touchdown_us: ev_us,
+                        terrain,
+                        speed_m_s: speed,
+                    });
+                    send_leg_state(
+                        &ids,
+                        foot as u8,
+                        beta,
+                        leg.cmd.fixed.flight_length(),
+                        ev_us,
+                        emit,
+                    );
+                }
+                Some(Event::Liftoff { beta, .. }) => {
+                    leg.cmd.fixed.on_liftoff(beta);
+                    bounce(&mut leg.edges, ev_us, false, &mut self.rng);
+                    let len = leg.hopper.leg_length(&leg.cmd);
+                    send_leg_state(&ids, foot as u8, -beta, len, ev_us, emit);
+                }
+                Some(Event::Fell { .. }) => {
+                    // Pick the hopper up and restart it where it fell (a lab would).
+                    let g = leg.cmd.fixed.gait.clone();
+                    let x = leg.hopper.x;
+                    leg.hopper = Hopper::new(
+                        HopperParams::default(),
+                        g.zeta0 + 0.02,
+                        2.0 * g.zeta0 * g.beta_des.sin() / 0.14,
+                    );
+                    leg.hopper.x = x;
+                    leg.hopper.t = t_end;
+                    tracing::warn!(foot, "simulated hopper fell; restarted");
+                }
+                None => {}
+            }
+        }
+        // Switch edges due by now.
+        let leg = &mut self.legs[foot];
+        leg.edges.sort_by_key(|e| e.0);
+        while let Some(&(t, state)) = leg.edges.first() {
+            if t > t_us {
+                break;
+            }
+            leg.edges.remove(0);
+            leg.contact_seq = leg.contact_seq.wrapping_add(1);
+            let m = Message::FootContact(FootContact {
+                stance: state,
+                seq: leg.contact_seq,
+                timestamp_us: t as u32,
+            });
+            if let Some(f) = m.to_frame(&ids, foot as u8) {
+                emit(f);
+            }
+        }
+    }
+
+    fn send_frame(&mut self, foot: usize, emit: &mut impl FnMut(CanFrame)) {
+        let leg = &mut self.legs[foot];
+        leg.skin.faults.on_time(FRAME_US as f64 * 1e-6);
+        let load = leg.hopper.foot_load();
+        match (&leg.contact, leg.hopper.in_stance()) {
+            (Some(c), true) => leg.skin.image(c, load, &mut self.rng, &mut leg.pixels),
+            _ => {
+                // In flight the array reads its noise floor (below threshold: zeros), faults apply.
+                leg.pixels.fill(0);
+                let max = 255;
+                leg.skin.faults.apply(&mut leg.pixels, max, &mut self.rng);
+            }
+        }
+        leg.image_seq = leg.image_seq.wrapping_add(1);
+        let img = ImageRef {
+            rows: 44,
+            cols: 44,
+            bits: 8,
+            timestamp_us: self.now_us as u32,
+            pixels: &leg.pixels,
+        };
+        let _ = self
+            .segmenter
+            .frames(foot as u8, leg.image_seq, &img, &mut *emit);
+        let angle = leg.hopper.leg_angle(&leg.cmd);
+        let len = leg.hopper.leg_length(&leg.cmd);
+        send_leg_state(&self.cfg.ids, foot as u8, angle, len, self.now_us, emit);
+    }
+
+    /// Ground truth of the step whose touchdown is nearest before `t_us` (foot clock).
+    pub fn step_at(&self, foot: u8, t_us: u64) -> Option<StepTruth> {
+        self.steps
+            .iter()
+            .rev()
+            .find(|s| s.foot == foot && s.touchdown_us <= t_us)
+            .copied()
+    }
+
+    pub fn gait_of(&self, foot: u8) -> Option<u8> {
+        self.legs
+            .get(foot as usize)
+            .map(|l| l.cmd.external().map_or(l.cmd.fixed.gait.id, |c| c.gait))
+    }
+}
+
+fn send_leg_state(
+    ids: &IdConfig,
+    foot: u8,
+    angle: f64,
+    len: f64,
+    t_us: u64,
+    emit: &mut impl FnMut(CanFrame),
+) {
+    let m = Message::LegState(LegState {
+        leg_angle_rad: angle,
+        leg_length_m: len,
+        timestamp_us: t_us as u32,
+    });
+    if let Some(f) = m.to_frame(ids, foot) {
+        emit(f);
+    }
+}
+
+/// A micro-switch edge with contact bounce: the final state at `t`, then 1-3 short reversals
+/// within the next 2 ms (typical for a small snap-action switch).
+fn bounce(edges: &mut Vec<(u64, bool)>, t: u64, state: bool, rng: &mut impl Rng) {
+    edges.push((t, state));
+    let mut at = t;
+    for _ in 0..rng.random_range(1..=3) {
+        at += rng.random_range(150..500);
+        edges.push((at, !state));
+        at += rng.random_range(100..400);
+        edges.push((at, state));
+    }
+}

@@ -1,0 +1,314 @@
+//! `presrs demo`: the simulator, the node and the controller in one process on the in-process
+//! bus, in simulated time (as fast as the machine runs).
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::time::Duration;
+
+use anyhow::{Context, Result};
+use controller::{Controller, ControllerConfig};
+use node::classifier::train::{Labelled, TrainOptions, train};
+use node::classifier::{ClassInfo, Crop, Model, PressureImage};
+use node::{NodeConfig, StancePipeline};
+use protocol::bus::{CanBus, InProcBus};
+use protocol::clock::ManualClock;
+use protocol::messages::{self, Message, NodeState, NodeStatus};
+use sim::runner::{SimConfig, SimRobot, Track};
+use sim::terrain::Terrain;
+
+/// Where the demo keeps the model it trains on first run.
+fn cache_path() -> PathBuf {
+    let base = std::env::var_os("XDG_CACHE_HOME")
+        .map(PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))
+        .unwrap_or_else(std::env::temp_dir);
+    base.join("presrs").join(format!(
+        "demo-model-v{}.json",
+        node::classifier::model::MODEL_VERSION
+    ))
+}
+
+/// A model for the dynamic terrains from simulator data of all three gaits.
+pub fn sim_model(seed: u64) -> Result<Model> {
+    let mut images = Vec::new();
+    for (i, g) in controller::Gait::paper_gaits().into_iter().enumerate() {
+        let opts = sim::dataset::Options {
+            kind: sim::dataset::Kind::Dynamic,
+            n: Some(30),
+            gait: g,
+            damage_pct: 0.0,
+            seed: seed + i as u64,
+        };
+        images.extend(sim::dataset::generate(&opts));
+    }
+    let classes: Vec<ClassInfo> = Terrain::DYNAMIC
+        .iter()
+        .map(|t| ClassInfo {
+            name: t.name().to_string(),
+            terrain_id: t.id(),
+        })
+        .collect();
+    let imgs: Vec<(PressureImage, usize)> = images
+        .iter()
+        .map(|s| {
+            let k = Terrain::DYNAMIC
+                .iter()
+                .position(|t| *t == s.terrain)
+                .unwrap_or(0);
+            (PressureImage::new(s.rows, s.cols, 8, s.pixels.clone()), k)
+        })
+        .collect();
+    let data: Vec<Labelled> = imgs
+        .iter()
+        .map(|(image, class)| Labelled {
+            image,
+            class: *class,
+        })
+        .collect();
+    let opts = TrainOptions {
+        per_class: 45,
+        train: 30,
+        crop: Crop {
+            top: 0,
+            bottom: 3,
+            left: 6,
+            right: 0,
+        },
+        seed,
+        ..Default::default()
+    };
+    let (model, _) = train(&data, &classes, &opts).context("training the demo model")?;
+    Ok(model)
+}
+
+fn load_or_train(model: Option<&Path>) -> Result<Model> {
+    if let Some(p) = model {
+        return Model::load(p).with_context(|| format!("loading --model {}", p.display()));
+    }
+    let cache = cache_path();
+    if let Ok(m) = Model::load(&cache) {
+        eprintln!("using the cached demo model {}", cache.display());
+        return Ok(m);
+    }
+    eprintln!("no model given: training one on simulated G1-G3 stances (first run only)...");
+    let m = sim_model(11)?;
+    if let Some(dir) = cache.parent() {
+        let _ = std::fs::create_dir_all(dir);
+    }
+    match m.save(&cache) {
+        Ok(()) => eprintln!("cached the model at {}", cache.display()),
+        Err(e) => eprintln!("could not cache the model ({e}); it will be trained again next time"),
+    }
+    Ok(m)
+}
+
+#[derive(Clone, Debug, serde::Serialize)]
+struct StepRow {
+    t_s: f64,
+    step: u16,
+    truth: String,
+    classified: String,
+    confidence_pct: f64,
+    gait: u8,
+    speed_m_s: f64,
+}
+
+pub struct DemoArgs {
+    pub steps: usize,
+    pub track: Option<PathBuf>,
+    pub model: Option<PathBuf>,
+    pub json: bool,
+    pub csv: PathBuf,
+    pub seed: u64,
+}
+
+pub fn run(a: DemoArgs) -> Result<ExitCode> {
+    let track = match &a.track {
+        Some(p) => {
+            let text = std::fs::read_to_string(p)
+                .with_context(|| format!("reading --track {}", p.display()))?;
+            Track::from_toml(&text, &p.display().to_string()).map_err(anyhow::Error::msg)?
+        }
+        None => Track::default(),
+    };
+    let model = load_or_train(a.model.as_deref())?;
+    let clock = ManualClock::new(0);
+    let bus = InProcBus::with_clock(Arc::new(clock.clone()), 1 << 16);
+    let (mut sim_ep, mut node_ep, mut ctrl_ep) = (bus.endpoint(), bus.endpoint(), bus.endpoint());
+    let sim_cfg = SimConfig {
+        track: track.clone(),
+        ..Default::default()
+    };
+    let ids = sim_cfg.ids.clone();
+    let mut robot = SimRobot::new(sim_cfg, a.seed);
+    let mut pipeline = StancePipeline::new(NodeConfig::default(), Some(model));
+    let mut ctrl = Controller::new(ControllerConfig::default());
+    let mut rows: Vec<StepRow> = Vec::new();
+    let mut t_us = 0u64;
+    let mut next_status = 0u64;
+    let mut heartbeat = 0u8;
+    let zero = Duration::ZERO;
+    let limit_us = (a.steps as u64 + 20) * 1_000_000;
+    let show = !a.json;
+    while rows.len() < a.steps && t_us < limit_us {
+        t_us += 1000;
+        clock.set_us(t_us);
+        let mut sent = Vec::new();
+        robot.advance_to(t_us, &mut |f| sent.push(f));
+        for f in &sent {
+            sim_ep.send(f).context("simulator send")?;
+        }
+        // The node.
+        while let Some(st) = node_ep.recv(zero).context("node receive")? {
+            let mut decided = Vec::new();
+            pipeline.on_frame(&st, &mut |foot, tc| decided.push((foot, tc)));
+            for (foot, tc) in decided {
+                if let Some(f) = pipeline.to_frame(foot, &tc) {
+                    node_ep.send(&f).context("node send")?;
+                }
+                let truth = robot
+                    .step_at(foot, t_us)
+                    .map(|s| s.terrain.name())
+                    .unwrap_or("?");
+                let (speed, _) = robot.speed_and_position(foot).unwrap_or((0.0, 0.0));
+                let row = StepRow {
+                    t_s: t_us as f64 * 1e-6,
+                    step: tc.step,
+                    truth: truth.to_string(),
+                    classified: messages::terrain_name(tc.terrain)
+                        .unwrap_or("?")
+                        .to_string(),
+                    confidence_pct: tc.confidence_pct,
+                    gait: ctrl.gait().id,
+                    speed_m_s: speed,
+                };
+                if show {
+                    println!(
+                        "t {:7.2} s  step {:4}  true {:<8} classified {:<8} {:5.1}%  gait G{}  {:.2} m/s",
+                        row.t_s,
+                        row.step,
+                        row.truth,
+                        row.classified,
+                        row.confidence_pct,
+                        row.gait,
+                        row.speed_m_s
+                    );
+                }
+                rows.push(row);
+            }
+        }
+        if t_us >= next_status {
+            next_status = t_us + 100_000;
+            heartbeat = heartbeat.wrapping_add(1);
+            let st = NodeStatus {
+                heartbeat,
+                state: NodeState::Running,
+                damage_pct: pipeline.damage_pct(),
+                ..Default::default()
+            };
+            if let Some(f) = Message::NodeStatus(st).to_frame(&ids, 0) {
+                node_ep.send(&f).context("node status send")?;
+            }
+        }
+        // The controller.
+        let mut out = Vec::new();
+        while let Some(st) = ctrl_ep.recv(zero).context("controller receive")? {
+            if let Ok(Some((foot, m))) = messages::decode(&st.frame, &ids) {
+                ctrl.on_message(foot, &m, t_us, &mut |o| out.push(o));
+            }
+        }
+        ctrl.tick(t_us, &mut |o| out.push(o));
+        for m in out {
+            if let Some(f) = m.to_frame(&ids, 0) {
+                ctrl_ep.send(&f).context("controller send")?;
+            }
+        }
+        // The robot hears the controller.
+        while let Some(st) = sim_ep.recv(zero).context("simulator receive")? {
+            robot.on_frame(&st.frame);
+        }
+    }
+    summarize(&rows, &track, &a)
+}
+
+fn summarize(rows: &[StepRow], track: &Track, a: &DemoArgs) -> Result<ExitCode> {
+    let n = rows.len();
+    let correct = rows.iter().filter(|r| r.truth == r.classified).count();
+    let accuracy = if n > 0 {
+        correct as f64 / n as f64
+    } else {
+        0.0
+    };
+    let mut switches = 0;
+    for w in rows.windows(2) {
+        switches += (w[0].gait != w[1].gait) as usize;
+    }
+    // Steps from each terrain change to the terrain's gait.
+    let cfg = ControllerConfig::default();
+    let mut delays = Vec::new();
+    let mut i = 1;
+    while i < n {
+        if rows[i].truth != rows[i - 1].truth {
+            let want = cfg.terrain_gaits.get(&rows[i].truth).copied();
+            let mut j = i;
+            while j < n && rows[j].truth == rows[i].truth && Some(rows[j].gait) != want {
+                j += 1;
+            }
+            if j < n && rows[j].truth == rows[i].truth && want.is_some() {
+                delays.push(j - i);
+            }
+        }
+        i += 1;
+    }
+    let mut speeds: std::collections::BTreeMap<(String, u8), (f64, usize)> = Default::default();
+    for r in rows {
+        let e = speeds.entry((r.truth.clone(), r.gait)).or_insert((0.0, 0));
+        e.0 += r.speed_m_s;
+        e.1 += 1;
+    }
+    let mut csv =
+        std::fs::File::create(&a.csv).with_context(|| format!("creating {}", a.csv.display()))?;
+    writeln!(
+        csv,
+        "t_s,step,true_terrain,classified,confidence_pct,gait,speed_m_s"
+    )?;
+    for r in rows {
+        writeln!(
+            csv,
+            "{:.3},{},{},{},{:.1},{},{:.3}",
+            r.t_s, r.step, r.truth, r.classified, r.confidence_pct, r.gait, r.speed_m_s
+        )?;
+    }
+    let max_delay = delays.iter().copied().max().unwrap_or(0);
+    if a.json {
+        let table: Vec<serde_json::Value> = speeds
+            .iter()
+            .map(|((t, g), (s, k))| serde_json::json!({"terrain": t, "gait": g, "mean_speed_m_s": s / *k as f64, "steps": k}))
+            .collect();
+        let j = serde_json::json!({
+            "steps": n,
+            "accuracy": accuracy,
+            "switches": switches,
+            "steps_to_switch": delays,
+            "steps_to_switch_max": max_delay,
+            "speed_per_terrain_and_gait": table,
+            "track_m": track.length(),
+            "csv": a.csv.display().to_string(),
+        });
+        println!("{j}");
+    } else {
+        println!(
+            "\nsummary: {n} steps, per-step accuracy {:.1}% ({correct}/{n}), {switches} gait switches",
+            accuracy * 100.0
+        );
+        println!("steps from a terrain change to its gait: {delays:?} (max {max_delay})");
+        println!("mean speed (m/s) per terrain and gait:");
+        for ((t, g), (s, k)) in &speeds {
+            println!("  {t:<8} G{g}: {:.2} ({k} steps)", s / *k as f64);
+        }
+        println!("step log: {}", a.csv.display());
+    }
+    Ok(ExitCode::SUCCESS)
+}
