@@ -355,3 +355,107 @@ impl Controller {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use protocol::messages::{FootContact, NodeStatus, TerrainClass};
+
+    fn tc(terrain: u8, conf: f64) -> Message {
+        Message::TerrainClass(TerrainClass {
+            terrain,
+            confidence_pct: conf,
+            ..Default::default()
+        })
+    }
+
+    fn contact(stance: bool) -> Message {
+        Message::FootContact(FootContact {
+            stance,
+            seq: 0,
+            timestamp_us: 0,
+        })
+    }
+
+    #[test]
+    fn switches_in_flight_after_two_confident_steps() {
+        let mut c = Controller::new(ControllerConfig::default());
+        let mut out = Vec::new();
+        let mut t = 0;
+        let hb = Message::NodeStatus(NodeStatus::default());
+        let wood = messages::terrain_id("wood").unwrap_or(8);
+        for step in 0..3 {
+            t += 100_000;
+            let before = c.gait().id;
+            c.on_message(0, &hb, t, &mut |m| out.push(m));
+            c.on_message(0, &contact(true), t, &mut |m| out.push(m));
+            c.on_message(0, &tc(wood, 90.0), t + 70_000, &mut |m| out.push(m));
+            // in stance: no switch yet, whatever the count
+            assert_eq!(c.gait().id, before, "step {step}: switched in stance");
+            c.on_message(0, &contact(false), t + 140_000, &mut |m| out.push(m));
+            t += 140_000;
+            let expect = if step >= 1 { 3 } else { 2 };
+            assert_eq!(c.gait().id, expect, "after step {step}");
+        }
+        assert_eq!(c.switches, 1);
+        assert_eq!(c.reason(), GaitReason::Terrain);
+        // A low-confidence step neither counts nor resets the gait.
+        c.on_message(
+            0,
+            &tc(messages::terrain_id("clay").unwrap_or(10), 10.0),
+            t,
+            &mut |m| out.push(m),
+        );
+        assert_eq!(c.gait().id, 3);
+    }
+
+    #[test]
+    fn lost_heartbeat_goes_to_the_safe_gait() {
+        let mut c = Controller::new(ControllerConfig::default());
+        let mut out = Vec::new();
+        c.on_message(
+            0,
+            &Message::NodeStatus(NodeStatus::default()),
+            0,
+            &mut |m| out.push(m),
+        );
+        c.tick(400_000, &mut |m| out.push(m));
+        assert_eq!(c.gait().id, 2);
+        c.tick(501_000, &mut |m| out.push(m));
+        assert_eq!((c.gait().id, c.reason()), (1, GaitReason::NodeLost));
+        assert!(
+            out.iter()
+                .any(|m| matches!(m, Message::GaitStatus(g) if g.reason == GaitReason::NodeLost))
+        );
+    }
+
+    #[test]
+    fn stance_commands_follow_eq4_and_bounce_is_ignored() {
+        let mut c = Controller::new(ControllerConfig::default());
+        let mut out = Vec::new();
+        c.on_message(0, &contact(true), 1_000_000, &mut |m| out.push(m));
+        c.on_message(0, &contact(false), 1_000_400, &mut |m| out.push(m)); // bounce
+        out.clear();
+        c.tick(1_070_000, &mut |m| out.push(m));
+        let g = c.gait().clone();
+        let want = laws::aer_leg_length(0.07, g.zeta0, g.zeta_dev, g.omega, g.phi);
+        let cmd = out.iter().find_map(|m| match m {
+            Message::LegCommand(lc) => Some(*lc),
+            _ => None,
+        });
+        let cmd = cmd.unwrap_or_default();
+        assert_eq!(cmd.phase, Phase::Stance);
+        assert!((cmd.leg_length_m - want).abs() < 1e-9);
+    }
+
+    #[test]
+    fn invalid_config_names_the_field() {
+        let e = ControllerConfig::parse("safe_gait = 9", "c.toml").unwrap_err();
+        assert!(e.contains("safe_gait = 9"), "{e}");
+        let e = ControllerConfig::parse("min_confidence_pct = 120.0", "c.toml").unwrap_err();
+        assert!(
+            e.contains("min_confidence_pct") && e.contains("0..=100"),
+            "{e}"
+        );
+    }
+}
