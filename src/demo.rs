@@ -115,12 +115,25 @@ struct StepRow {
     speed_m_s: f64,
 }
 
+#[derive(clap::Args)]
 pub struct DemoArgs {
+    /// Steps to run.
+    #[arg(long, default_value_t = 120)]
     pub steps: usize,
+    /// Track file (TOML: diameter_m, [[segments]] terrain, length_m); default: wood, grass,
+    /// clay, carpet.
+    #[arg(long)]
     pub track: Option<PathBuf>,
+    /// Model file; default: one trained on simulated data on first run, then cached.
+    #[arg(long)]
     pub model: Option<PathBuf>,
+    /// Print the summary as one JSON object.
+    #[arg(long)]
     pub json: bool,
+    /// Step log (CSV).
+    #[arg(long, default_value = "demo-steps.csv")]
     pub csv: PathBuf,
+    #[arg(long, default_value_t = 1)]
     pub seed: u64,
 }
 
@@ -144,7 +157,8 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
     let ids = sim_cfg.ids.clone();
     let mut robot = SimRobot::new(sim_cfg, a.seed);
     let mut pipeline = StancePipeline::new(NodeConfig::default(), Some(model));
-    let mut ctrl = Controller::new(ControllerConfig::default());
+    let ctrl_cfg = ControllerConfig::default();
+    let mut ctrl = Controller::new(ctrl_cfg.clone());
     let mut rows: Vec<StepRow> = Vec::new();
     let mut t_us = 0u64;
     let mut next_status = 0u64;
@@ -152,19 +166,21 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
     let zero = Duration::ZERO;
     let limit_us = (a.steps as u64 + 20) * 1_000_000;
     let show = !a.json;
+    // Reused every millisecond: the loop allocates only when a step is logged.
+    let mut sent = Vec::new();
+    let mut decided = Vec::new();
+    let mut out = Vec::new();
     while rows.len() < a.steps && t_us < limit_us {
         t_us += 1000;
         clock.set_us(t_us);
-        let mut sent = Vec::new();
         robot.advance_to(t_us, &mut |f| sent.push(f));
-        for f in &sent {
-            sim_ep.send(f).context("simulator send")?;
+        for f in sent.drain(..) {
+            sim_ep.send(&f).context("simulator send")?;
         }
         // The node.
         while let Some(st) = node_ep.recv(zero).context("node receive")? {
-            let mut decided = Vec::new();
             pipeline.on_frame(&st, &mut |foot, tc| decided.push((foot, tc)));
-            for (foot, tc) in decided {
+            for (foot, tc) in decided.drain(..) {
                 if let Some(f) = pipeline.to_frame(foot, &tc) {
                     node_ep.send(&f).context("node send")?;
                 }
@@ -213,14 +229,13 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
             }
         }
         // The controller.
-        let mut out = Vec::new();
         while let Some(st) = ctrl_ep.recv(zero).context("controller receive")? {
             if let Ok(Some((foot, m))) = messages::decode(&st.frame, &ids) {
                 ctrl.on_message(foot, &m, t_us, &mut |o| out.push(o));
             }
         }
         ctrl.tick(t_us, &mut |o| out.push(o));
-        for m in out {
+        for m in out.drain(..) {
             if let Some(f) = m.to_frame(&ids, 0) {
                 ctrl_ep.send(&f).context("controller send")?;
             }
@@ -230,10 +245,15 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
             robot.on_frame(&st.frame);
         }
     }
-    summarize(&rows, &track, &a)
+    summarize(&rows, &track, &ctrl_cfg, &a)
 }
 
-fn summarize(rows: &[StepRow], track: &Track, a: &DemoArgs) -> Result<ExitCode> {
+fn summarize(
+    rows: &[StepRow],
+    track: &Track,
+    cfg: &ControllerConfig,
+    a: &DemoArgs,
+) -> Result<ExitCode> {
     let n = rows.len();
     let correct = rows.iter().filter(|r| r.truth == r.classified).count();
     let accuracy = if n > 0 {
@@ -246,7 +266,6 @@ fn summarize(rows: &[StepRow], track: &Track, a: &DemoArgs) -> Result<ExitCode> 
         switches += (w[0].gait != w[1].gait) as usize;
     }
     // Steps from each terrain change to the terrain's gait.
-    let cfg = ControllerConfig::default();
     let mut delays = Vec::new();
     let mut i = 1;
     while i < n {

@@ -38,26 +38,7 @@ enum Cmd {
     /// Run the simulated hopper and foot (not implemented yet: issue 4).
     Sim,
     /// Simulator, node and controller in one process on the in-process bus: the closed loop.
-    Demo {
-        /// Steps to run.
-        #[arg(long, default_value_t = 120)]
-        steps: usize,
-        /// Track file (TOML: diameter_m, [[segments]] terrain, length_m); default: wood, grass,
-        /// clay, carpet.
-        #[arg(long)]
-        track: Option<PathBuf>,
-        /// Model file; default: one trained on simulated data on first run, then cached.
-        #[arg(long)]
-        model: Option<PathBuf>,
-        /// Print the summary as one JSON object.
-        #[arg(long)]
-        json: bool,
-        /// Step log (CSV).
-        #[arg(long, default_value = "demo-steps.csv")]
-        csv: PathBuf,
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-    },
+    Demo(demo::DemoArgs),
     /// Train a terrain classifier on DIR/<class>/<images> (the paper's 13/7 split per class).
     Train {
         #[arg(long)]
@@ -181,21 +162,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Cmd::Node => not_yet("node", 5),
         Cmd::Controller => not_yet("controller", 6),
         Cmd::Sim => not_yet("sim", 4),
-        Cmd::Demo {
-            steps,
-            track,
-            model,
-            json,
-            csv,
-            seed,
-        } => demo::run(demo::DemoArgs {
-            steps,
-            track,
-            model,
-            json,
-            csv,
-            seed,
-        }),
+        Cmd::Demo(args) => demo::run(args),
         Cmd::Train {
             data,
             out,

@@ -34,6 +34,9 @@ struct LineHealth {
     col_runs: Vec<u32>,
     dead_rows: Vec<bool>,
     dead_cols: Vec<bool>,
+    /// Line sums of the image being observed (sized once, reused).
+    row_sums: Vec<u32>,
+    col_sums: Vec<u32>,
 }
 
 impl LineHealth {
@@ -45,37 +48,28 @@ impl LineHealth {
             col_runs: vec![0; cols],
             dead_rows: vec![false; rows],
             dead_cols: vec![false; cols],
+            row_sums: vec![0; rows],
+            col_sums: vec![0; cols],
         }
     }
 
     /// One stance's image: a line is a suspect when it is all zero while a neighbour carries
     /// load; `k` suspect stances in a row make it dead; any reading brings it back.
     fn observe(&mut self, img: &[u16], k: u32) {
-        let (rows, cols) = (self.rows, self.cols);
-        let row_sum = |r: usize| (0..cols).map(|c| img[r * cols + c] as u32).sum::<u32>();
-        let col_sum = |c: usize| (0..rows).map(|r| img[r * cols + c] as u32).sum::<u32>();
-        for r in 0..rows {
-            let s = row_sum(r);
-            let neighbour = (r > 0 && row_sum(r - 1) > 0) || (r + 1 < rows && row_sum(r + 1) > 0);
-            update(
-                &mut self.row_runs[r],
-                &mut self.dead_rows[r],
-                s,
-                neighbour,
-                k,
-            );
+        self.row_sums.fill(0);
+        self.col_sums.fill(0);
+        for (r, row) in img.chunks_exact(self.cols).enumerate() {
+            for (c, &v) in row.iter().enumerate() {
+                self.row_sums[r] += v as u32;
+                self.col_sums[c] += v as u32;
+            }
         }
-        for c in 0..cols {
-            let s = col_sum(c);
-            let neighbour = (c > 0 && col_sum(c - 1) > 0) || (c + 1 < cols && col_sum(c + 1) > 0);
-            update(
-                &mut self.col_runs[c],
-                &mut self.dead_cols[c],
-                s,
-                neighbour,
-                k,
-            );
-        }
+        observe_lines(&self.row_sums, &mut self.row_runs, &mut self.dead_rows, k);
+        observe_lines(&self.col_sums, &mut self.col_runs, &mut self.dead_cols, k);
+    }
+
+    fn any_dead(&self) -> bool {
+        self.dead_rows.iter().chain(&self.dead_cols).any(|&d| d)
     }
 
     fn damage_pct(&self) -> f64 {
@@ -85,14 +79,20 @@ impl LineHealth {
     }
 }
 
-fn update(run: &mut u32, dead: &mut bool, sum: u32, neighbour: bool, k: u32) {
-    if sum > 0 {
-        *run = 0;
-        *dead = false;
-    } else if neighbour {
-        *run = run.saturating_add(1);
-        if *run >= k {
-            *dead = true;
+/// Updates the runs and dead flags of one direction's lines from their sums.
+fn observe_lines(sums: &[u32], runs: &mut [u32], dead: &mut [bool], k: u32) {
+    for i in 0..sums.len() {
+        if sums[i] > 0 {
+            runs[i] = 0;
+            dead[i] = false;
+            continue;
+        }
+        let neighbour = (i > 0 && sums[i - 1] > 0) || sums.get(i + 1).is_some_and(|&s| s > 0);
+        if neighbour {
+            runs[i] = runs[i].saturating_add(1);
+            if runs[i] >= k {
+                dead[i] = true;
+            }
         }
     }
 }
@@ -114,7 +114,8 @@ struct Foot {
     /// Multi-frame: summed log-posteriors and frames used.
     sum_lp: [f64; MAX_CLASSES],
     used: u32,
-    last_rx_us: u64,
+    /// A line of this stance's frames was filled.
+    repaired: bool,
     health: LineHealth,
 }
 
@@ -124,6 +125,8 @@ pub struct StancePipeline {
     classifier: Option<Classifier>,
     reassembler: Reassembler,
     feet: Vec<Foot>,
+    /// Receive time of the frame being processed: a decision's latency ends here.
+    now_rx_us: u64,
     pub counters: Counters,
 }
 
@@ -133,6 +136,7 @@ impl StancePipeline {
             reassembler: Reassembler::new(cfg.reassembly_timeout_us),
             classifier: None,
             feet: Vec::new(),
+            now_rx_us: 0,
             counters: Counters::default(),
             cfg,
         };
@@ -159,7 +163,7 @@ impl StancePipeline {
                 best: vec![0; input],
                 sum_lp: [0.0; MAX_CLASSES],
                 used: 0,
-                last_rx_us: 0,
+                repaired: false,
                 health: LineHealth::new(rows, cols),
             })
             .collect();
@@ -188,6 +192,7 @@ impl StancePipeline {
     /// Processes one received frame; every TerrainClass it decides goes to `out`.
     pub fn on_frame(&mut self, st: &Stamped, out: &mut impl FnMut(u8, TerrainClass)) {
         self.counters.frames += 1;
+        self.now_rx_us = st.t_us;
         let decoded = match messages::decode(&st.frame, &self.cfg.ids) {
             Ok(d) => d,
             Err(_) => {
@@ -197,7 +202,7 @@ impl StancePipeline {
         };
         match decoded {
             Some((foot, Message::FootContact(fc))) if foot < self.cfg.feet => {
-                self.on_contact(foot, fc, st.t_us, out)
+                self.on_contact(foot, fc, out)
             }
             Some((foot, Message::TactileSegment(v))) if foot < self.cfg.feet => {
                 let done = self
@@ -213,20 +218,13 @@ impl StancePipeline {
         }
     }
 
-    fn on_contact(
-        &mut self,
-        foot: u8,
-        fc: FootContact,
-        rx_us: u64,
-        out: &mut impl FnMut(u8, TerrainClass),
-    ) {
+    fn on_contact(&mut self, foot: u8, fc: FootContact, out: &mut impl FnMut(u8, TerrainClass)) {
         let f = &mut self.feet[foot as usize];
         if !f.have_raw || fc.stance != f.raw {
             f.raw = fc.stance;
             f.raw_since = fc.timestamp_us;
             f.have_raw = true;
         }
-        f.last_rx_us = rx_us;
         self.settle(foot, fc.timestamp_us, out);
     }
 
@@ -245,6 +243,7 @@ impl StancePipeline {
             f.best_err = None;
             f.sum_lp = [0.0; MAX_CLASSES];
             f.used = 0;
+            f.repaired = false;
             f.step = f.step.wrapping_add(1);
             self.counters.steps += 1;
         } else if !f.decided {
@@ -279,12 +278,14 @@ impl StancePipeline {
         }
         if multi {
             if dt >= w0 && dt <= w1 {
-                f.best[..rows * cols].copy_from_slice(img.pixels());
+                f.best.copy_from_slice(img.pixels());
                 f.best_rx_us = rx_us;
-                let n = f.best.len();
-                if let Some(d) =
-                    classify(cls, &mut f.best[..n], rows, cols, &mut f.health, &self.cfg)
+                // The stance history learns from one frame per stance, not every frame.
+                let observe = f.used == 0;
+                if let Some((d, repaired)) =
+                    classify(cls, &f.best, rows, cols, &mut f.health, observe, &self.cfg)
                 {
+                    f.repaired |= repaired;
                     for k in 0..d.n_classes {
                         f.sum_lp[k] += d.log_posteriors[k];
                     }
@@ -299,7 +300,7 @@ impl StancePipeline {
         let err = dt.abs_diff(sample_us);
         if f.best_err.is_none_or(|e| err < e) {
             f.best_err = Some(err);
-            f.best[..rows * cols].copy_from_slice(img.pixels());
+            f.best.copy_from_slice(img.pixels());
             f.best_rx_us = rx_us;
         }
         // The next frame can only be further from the sample time: decide now.
@@ -316,7 +317,7 @@ impl StancePipeline {
             step: f.step,
             terrain: messages::TERRAIN_UNKNOWN,
             confidence_pct: 0.0,
-            damage_pct: f.health.damage_pct(),
+            damage_pct: 0.0,
             flags: 0,
             latency_us: 0,
         };
@@ -334,8 +335,10 @@ impl StancePipeline {
             Some(cls) if !cfg.multi_frame && f.best_err.is_some() => {
                 let m = cls.model();
                 let (rows, cols) = (m.input_rows, m.input_cols);
-                let n = rows * cols;
-                if let Some(d) = classify(cls, &mut f.best[..n], rows, cols, &mut f.health, cfg) {
+                if let Some((d, repaired)) =
+                    classify(cls, &f.best, rows, cols, &mut f.health, true, cfg)
+                {
+                    f.repaired = repaired;
                     tc.terrain = d.terrain_id;
                     tc.confidence_pct = d.confidence * 100.0;
                     if d.class.is_none() {
@@ -353,49 +356,46 @@ impl StancePipeline {
             if tc.confidence_pct < cfg.low_confidence * 100.0 {
                 tc.flags |= flags::LOW_CONFIDENCE;
             }
-            if f.health.damage_pct() > 0.0 && cfg.repair != RepairMode::None {
+            if f.repaired {
                 tc.flags |= flags::REPAIRED;
             }
         }
         tc.damage_pct = f.health.damage_pct();
-        tc.latency_us = f
-            .last_rx_us
-            .max(f.best_rx_us)
+        tc.latency_us = self
+            .now_rx_us
             .saturating_sub(f.best_rx_us)
             .min(u32::MAX as u64) as u32;
         out(foot, tc);
     }
 
-    /// The frame for a sent TerrainClass, with the latency measured from the sampled frame's
-    /// last segment to `now_us` (receive clock).
+    /// The frame that carries a decided TerrainClass.
     pub fn to_frame(&self, foot: u8, tc: &TerrainClass) -> Option<CanFrame> {
         Message::TerrainClass(*tc).to_frame(&self.cfg.ids, foot)
     }
-
-    /// Receive time of the frame the last decision of `foot` used.
-    pub fn sampled_rx_us(&self, foot: u8) -> u64 {
-        self.feet.get(foot as usize).map_or(0, |f| f.best_rx_us)
-    }
 }
 
+/// Crop, repair and decision for one frame. Returns the decision and whether any line was
+/// filled; `observe` feeds the frame to the stance history (once per stance).
 fn classify(
     cls: &mut Classifier,
-    pixels: &mut [u16],
+    pixels: &[u16],
     rows: usize,
     cols: usize,
     health: &mut LineHealth,
+    observe: bool,
     cfg: &NodeConfig,
-) -> Option<crate::classifier::Decision> {
+) -> Option<(crate::classifier::Decision, bool)> {
     cls.prepare(pixels, rows, cols).ok()?;
     let (wr, wc) = cls.work_size();
-    match cfg.repair {
-        RepairMode::None => {}
-        RepairMode::PerImage => {
-            cls.repair_work();
-        }
+    let repaired = match cfg.repair {
+        RepairMode::None => false,
+        RepairMode::PerImage => cls.repair_work() > 0,
         RepairMode::History => {
-            health.observe(cls.work_mut(), cfg.dead_after_stances);
-            if health.dead_rows.iter().chain(&health.dead_cols).any(|&d| d) {
+            if observe {
+                health.observe(cls.work_mut(), cfg.dead_after_stances);
+            }
+            let any = health.any_dead();
+            if any {
                 repair::repair_lines(
                     cls.work_mut(),
                     wr,
@@ -405,7 +405,8 @@ fn classify(
                     None,
                 );
             }
+            any
         }
-    }
-    Some(cls.decide())
+    };
+    Some((cls.decide(), repaired))
 }

@@ -16,7 +16,7 @@ pub const STATIC_LOAD_N: f64 = 10.0;
 /// When the dynamic image is taken, s after touchdown (section 7.1).
 pub const STANCE_SAMPLE_S: f64 = 0.07;
 /// Sensor frame period, s (100 Hz).
-pub const FRAME_PERIOD_S: f64 = 0.01;
+pub const FRAME_PERIOD_S: f64 = crate::skin::FRAME_PERIOD_US as f64 * 1e-6;
 
 /// Which experiment.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -123,9 +123,7 @@ pub fn press(
     fp: Footprint,
     rng: &mut impl Rng,
 ) -> Sample {
-    let (r, c, cell) = skin.grid();
-    let surface = terrain.surface(r, c, cell, rng);
-    let contact = skin.contact(&surface, fp);
+    let contact = skin.contact_on(terrain, fp, rng);
     let (rows, cols) = (skin.params.rows, skin.params.cols);
     let mut pixels = vec![0; rows * cols];
     skin.image(&contact, load_n, rng, &mut pixels);
@@ -151,11 +149,7 @@ pub fn stances(
 ) -> Vec<Sample> {
     let mut out = Vec::with_capacity(n);
     let ground = terrain.ground();
-    let mut hopper = Hopper::new(
-        HopperParams::default(),
-        gait.zeta0 + 0.02,
-        2.0 * gait.zeta0 * gait.beta_des.sin() / 0.14,
-    );
+    let mut hopper = Hopper::launch(HopperParams::default(), gait);
     let mut cmd = FixedGait::new(gait.clone());
     let phase = rng.random_range(0.0..FRAME_PERIOD_S);
     let (rows, cols) = (skin.params.rows, skin.params.cols);
@@ -174,9 +168,7 @@ pub fn stances(
                 let x0 = hopper.x;
                 match hopper.advance(t_frame - t, ground, &mut cmd) {
                     None => {
-                        let (r, c, cell) = skin.grid();
-                        let surface = terrain.surface(r, c, cell, rng);
-                        let contact = skin.contact(&surface, Footprint::FOOT);
+                        let contact = skin.contact_on(terrain, Footprint::FOOT, rng);
                         let mut pixels = vec![0; rows * cols];
                         let load = hopper.foot_load();
                         skin.image(&contact, load, rng, &mut pixels);
@@ -206,11 +198,7 @@ pub fn stances(
             }
             Some(Event::Fell { .. }) => {
                 // Restart the run; a fall is a hopper problem, not a sensor one.
-                hopper = Hopper::new(
-                    HopperParams::default(),
-                    gait.zeta0 + 0.02,
-                    2.0 * gait.zeta0 * gait.beta_des.sin() / 0.14,
-                );
+                hopper = Hopper::launch(HopperParams::default(), gait);
                 cmd = FixedGait::new(gait.clone());
                 last_td = None;
             }

@@ -1,7 +1,7 @@
 //! Scalar fields on the fine grid under the sensor, and the few operations the physics needs.
 
 use rand::Rng;
-use rand_distr::{Distribution, StandardNormal};
+use rand_distr::{Distribution, Normal, StandardNormal};
 
 /// A row-major field of `rows x cols` cells of `cell_mm` mm.
 #[derive(Clone, Debug)]
@@ -91,4 +91,12 @@ impl Field {
         }
         f
     }
+}
+
+/// A normal distribution; a negative or NaN deviation (a bad config value) counts as 0.
+pub fn normal(mean: f64, sd: f64) -> Normal<f64> {
+    let sd = if sd.is_finite() && sd > 0.0 { sd } else { 0.0 };
+    let mean = if mean.is_finite() { mean } else { 0.0 };
+    // Normal::new fails only for a negative or non-finite deviation, excluded just above.
+    Normal::new(mean, sd).unwrap_or_else(|_| unreachable!("finite, non-negative deviation"))
 }

@@ -126,6 +126,13 @@ impl Hopper {
         }
     }
 
+    /// A hopper launched into `gait`: in flight 2 cm above touchdown height, at the speed whose
+    /// stance of about 140 ms sweeps the leg from `beta_des` to `-beta_des`.
+    pub fn launch(params: HopperParams, gait: &controller::Gait) -> Self {
+        let v0 = 2.0 * gait.zeta0 * gait.beta_des.sin() / 0.14;
+        Self::new(params, gait.zeta0 + 0.02, v0)
+    }
+
     pub fn in_stance(&self) -> bool {
         matches!(self.phase, Phase::Stance { .. })
     }

@@ -17,7 +17,7 @@ use serde::{Deserialize, Serialize};
 use crate::faults::{FaultParams, Faults};
 use crate::fixed_gait::FixedGait;
 use crate::hopper::{Event, Hopper, HopperParams, LegCommands};
-use crate::skin::{Contact, Footprint, Skin, SkinParams};
+use crate::skin::{Contact, FRAME_PERIOD_US, Footprint, Skin, SkinParams};
 use crate::terrain::Terrain;
 
 /// One stretch of the track.
@@ -195,7 +195,7 @@ pub struct SimRobot {
     last_td: Vec<Option<(f64, f64)>>,
 }
 
-const FRAME_US: u64 = 10_000;
+const FRAME_US: u64 = FRAME_PERIOD_US;
 
 impl SimRobot {
     pub fn new(cfg: SimConfig, seed: u64) -> Self {
@@ -206,12 +206,9 @@ impl SimRobot {
             .map(|i| {
                 let faults = Faults::new(cfg.faults.clone(), params.rows, params.cols, &mut rng);
                 let skin = Skin::new(params.clone(), faults, &mut rng);
-                let v0 = 2.0 * gait.zeta0 * gait.beta_des.sin() / 0.14;
-                let mut hopper = Hopper::new(
-                    HopperParams::default(),
-                    gait.zeta0 + 0.02 + 0.005 * i as f64,
-                    v0,
-                );
+                let mut hopper = Hopper::launch(HopperParams::default(), &gait);
+                // Stagger the legs so their steps do not coincide.
+                hopper.y += 0.005 * i as f64;
                 hopper.x = i as f64 * 0.3;
                 Leg {
                     hopper,
@@ -255,12 +252,6 @@ impl SimRobot {
             .map(|l| (l.hopper.vx, l.hopper.x))
     }
 
-    pub fn terrain_under(&self, foot: u8) -> Option<Terrain> {
-        self.legs
-            .get(foot as usize)
-            .map(|l| self.cfg.track.terrain_at(l.hopper.x))
-    }
-
     /// A frame from a controller.
     pub fn on_frame(&mut self, frame: &CanFrame) {
         if let Ok(Some((foot, Message::LegCommand(c)))) =
@@ -291,7 +282,7 @@ impl SimRobot {
     }
 
     fn advance_leg(&mut self, foot: usize, t_us: u64, emit: &mut impl FnMut(CanFrame)) {
-        let ids = self.cfg.ids.clone();
+        let ids = &self.cfg.ids;
         let t_end = t_us as f64 * 1e-6;
         loop {
             let leg = &mut self.legs[foot];
@@ -308,9 +299,8 @@ impl SimRobot {
                     leg.cmd.fixed.on_touchdown(beta);
                     let terrain = self.cfg.track.terrain_at(leg.hopper.x);
                     leg.stance_terrain = terrain;
-                    let (r, c, cell) = leg.skin.grid();
-                    let surface = terrain.surface(r, c, cell, &mut self.rng);
-                    leg.contact = Some(leg.skin.contact(&surface, Footprint::FOOT));
+                    leg.contact =
+                        Some(leg.skin.contact_on(terrain, Footprint::FOOT, &mut self.rng));
                     leg.skin.faults.on_step(&mut self.rng);
                     bounce(&mut leg.edges, ev_us, true, &mut self.rng);
                     let speed = self.last_td[foot].map_or(leg.hopper.vx, |(t0, x0)| {
@@ -324,7 +314,7 @@ impl SimRobot {
                         speed_m_s: speed,
                     });
                     send_leg_state(
-                        &ids,
+                        ids,
                         foot as u8,
                         beta,
                         leg.cmd.fixed.flight_length(),
@@ -336,17 +326,12 @@ impl SimRobot {
                     leg.cmd.fixed.on_liftoff(beta);
                     bounce(&mut leg.edges, ev_us, false, &mut self.rng);
                     let len = leg.hopper.leg_length(&leg.cmd);
-                    send_leg_state(&ids, foot as u8, -beta, len, ev_us, emit);
+                    send_leg_state(ids, foot as u8, -beta, len, ev_us, emit);
                 }
                 Some(Event::Fell { .. }) => {
                     // Pick the hopper up and restart it where it fell (a lab would).
-                    let g = leg.cmd.fixed.gait.clone();
                     let x = leg.hopper.x;
-                    leg.hopper = Hopper::new(
-                        HopperParams::default(),
-                        g.zeta0 + 0.02,
-                        2.0 * g.zeta0 * g.beta_des.sin() / 0.14,
-                    );
+                    leg.hopper = Hopper::launch(HopperParams::default(), &leg.cmd.fixed.gait);
                     leg.hopper.x = x;
                     leg.hopper.t = t_end;
                     tracing::warn!(foot, "simulated hopper fell; restarted");
@@ -368,7 +353,7 @@ impl SimRobot {
                 seq: leg.contact_seq,
                 timestamp_us: t as u32,
             });
-            if let Some(f) = m.to_frame(&ids, foot as u8) {
+            if let Some(f) = m.to_frame(ids, foot as u8) {
                 emit(f);
             }
         }
@@ -410,12 +395,6 @@ impl SimRobot {
             .rev()
             .find(|s| s.foot == foot && s.touchdown_us <= t_us)
             .copied()
-    }
-
-    pub fn gait_of(&self, foot: u8) -> Option<u8> {
-        self.legs
-            .get(foot as usize)
-            .map(|l| l.cmd.external().map_or(l.cmd.fixed.gait.id, |c| c.gait))
     }
 }
 

@@ -8,12 +8,15 @@
 //! 8-bit counts with sensel-to-sensel gain spread, noise, a noise threshold and saturation.
 
 use rand::Rng;
-use rand_distr::{Distribution, Normal, StandardNormal};
+use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
 
 use crate::faults::Faults;
-use crate::field::Field;
-use crate::terrain::Surface;
+use crate::field::{Field, normal};
+use crate::terrain::{Surface, Terrain};
+
+/// Frame period of the acquisition (100 Hz), µs.
+pub const FRAME_PERIOD_US: u64 = 10_000;
 
 /// Parameters of the sensor and skin model.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -135,9 +138,7 @@ fn series(a: f64, b: f64) -> f64 {
 impl Skin {
     pub fn new(params: SkinParams, faults: Faults, rng: &mut impl Rng) -> Self {
         let n = params.rows * params.cols;
-        let g = Normal::new(1.0, params.gain_sd.max(0.0)).unwrap_or_else(|_| {
-            Normal::new(1.0, 0.0).unwrap_or_else(|_| unreachable!("constant normal parameters"))
-        });
+        let g = normal(1.0, params.gain_sd);
         let gain = (0..n).map(|_| g.sample(rng).max(0.5) as f32).collect();
         let cell = params.pitch_mm / params.oversample as f64;
         let pressure = Field::zeros(
@@ -162,6 +163,18 @@ impl Skin {
             p.cols * p.oversample,
             p.pitch_mm / p.oversample as f64,
         )
+    }
+
+    /// A fresh random patch of `terrain` under `footprint`: one static press or one stance.
+    pub fn contact_on(
+        &mut self,
+        terrain: Terrain,
+        footprint: Footprint,
+        rng: &mut impl Rng,
+    ) -> Contact {
+        let (r, c, cell) = self.grid();
+        let surface = terrain.surface(r, c, cell, rng);
+        self.contact(&surface, footprint)
     }
 
     /// Prepares the surface's two scales and masks the footprint.

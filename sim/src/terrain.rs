@@ -9,10 +9,10 @@ use std::fmt;
 use std::str::FromStr;
 
 use rand::Rng;
-use rand_distr::{Distribution, Normal, Poisson};
+use rand_distr::{Distribution, Poisson};
 use serde::{Deserialize, Serialize};
 
-use crate::field::Field;
+use crate::field::{Field, normal};
 use crate::hopper::Ground;
 
 /// The surfaces of the paper's three experiments.
@@ -149,7 +149,7 @@ impl Terrain {
                 }
                 (f, 12.0)
             }
-            Terrain::PineNeedles => (needles(rows, cols, cell_mm, w, h, rng), 60.0),
+            Terrain::PineNeedles => (strands(&NEEDLES, rows, cols, cell_mm, w, h, rng), 60.0),
             Terrain::Gravel => (stones(rows, cols, cell_mm, w, h, rng), 1e5),
             Terrain::Sandpaper220
             | Terrain::Sandpaper150
@@ -189,7 +189,7 @@ impl Terrain {
                 let (oy, ox) = (rng.random_range(0.0..gauge), rng.random_range(0.0..gauge));
                 let angle: f64 = rng.random_range(-0.2..0.2);
                 let (s, c) = angle.sin_cos();
-                let jitter = Normal::new(0.0, 0.08).unwrap_or_else(|_| unreachable_normal());
+                let jitter = normal(0.0, 0.08);
                 for r in 0..rows {
                     for col in 0..cols {
                         let (y, x) = f.pos(r, col);
@@ -228,7 +228,7 @@ impl Terrain {
             Terrain::Grass => {
                 // Thick grass: many blades 3-6 mm wide lying in random directions at several
                 // heights; the foot presses the top layer.
-                (blades(rows, cols, cell_mm, w, h, rng), 20.0)
+                (strands(&BLADES, rows, cols, cell_mm, w, h, rng), 20.0)
             }
         };
         Surface {
@@ -237,11 +237,6 @@ impl Terrain {
             stiffness_kpa_mm,
         }
     }
-}
-
-fn unreachable_normal() -> Normal<f64> {
-    // Normal::new only fails for a negative or NaN deviation, and the constants above are valid.
-    Normal::new(0.0, 1.0).unwrap_or_else(|_| unreachable!("constant normal parameters"))
 }
 
 /// A flat plate with a random tilt and waviness `rough_mm` (over about 2 mm).
@@ -316,46 +311,71 @@ fn stones(rows: usize, cols: usize, cell_mm: f64, w: f64, h: f64, rng: &mut impl
     f
 }
 
-/// Dry pine needles: cylinders 0.8-1.5 mm thick and 20-60 mm long in a loose random pile.
-fn needles(rows: usize, cols: usize, cell_mm: f64, w: f64, h: f64, rng: &mut impl Rng) -> Field {
-    let mut f = Field::zeros(rows, cols, cell_mm);
-    f.v.fill(-6.0);
-    let n = rng.random_range(35..60);
-    for _ in 0..n {
-        let len = rng.random_range(20.0..60.0f64);
-        let d = rng.random_range(0.8..1.5f64);
-        let (cy, cx) = (
-            rng.random_range(-10.0..h + 10.0),
-            rng.random_range(-10.0..w + 10.0),
-        );
-        let a: f64 = rng.random_range(0.0..PI);
-        let base = rng.random_range(-4.0..0.0f64);
-        // Needles sag and twist: a slight slope along their length.
-        let slope = rng.random_range(-0.03..0.03f64);
-        segment(&mut f, cy, cx, a, len, d / 2.0, base, slope);
-    }
-    f
+/// A loose pile of long thin things (needles, blades) as cylinders at random heights.
+struct Strands {
+    /// Height of the gaps between strands, mm.
+    background: f32,
+    count: std::ops::Range<usize>,
+    length_mm: std::ops::Range<f64>,
+    thickness_mm: std::ops::Range<f64>,
+    /// `None`: any direction; `Some(s)`: within `s` rad of a common direction.
+    spread: Option<f64>,
+    base_mm: std::ops::Range<f64>,
+    /// Largest slope along a strand (they sag and twist).
+    slope: f64,
 }
 
-/// Thick grass: flat blades 3-6 mm wide, 30-80 mm long, in several layers.
-fn blades(rows: usize, cols: usize, cell_mm: f64, w: f64, h: f64, rng: &mut impl Rng) -> Field {
+/// Dry pine needles: cylinders 0.8-1.5 mm thick and 20-60 mm long in a loose random pile.
+const NEEDLES: Strands = Strands {
+    background: -6.0,
+    count: 35..60,
+    length_mm: 20.0..60.0,
+    thickness_mm: 0.8..1.5,
+    spread: None,
+    base_mm: -4.0..0.0,
+    slope: 0.03,
+};
+
+/// Thick grass: flat blades 3-6 mm wide, 30-80 mm long, in several layers. A lawn is combed by
+/// the mower and the wind, so blades share a loose main direction; a blade is flat with a
+/// raised midrib, modelled as a wide, low cylinder.
+const BLADES: Strands = Strands {
+    background: -8.0,
+    count: 40..70,
+    length_mm: 30.0..80.0,
+    thickness_mm: 3.0..6.0,
+    spread: Some(0.6),
+    base_mm: -5.0..0.0,
+    slope: 0.05,
+};
+
+fn strands(
+    spec: &Strands,
+    rows: usize,
+    cols: usize,
+    cell_mm: f64,
+    w: f64,
+    h: f64,
+    rng: &mut impl Rng,
+) -> Field {
     let mut f = Field::zeros(rows, cols, cell_mm);
-    f.v.fill(-8.0);
-    let n = rng.random_range(40..70);
-    // A lawn is combed by the mower and the wind: blades share a loose main direction.
-    let main: f64 = rng.random_range(0.0..PI);
+    f.v.fill(spec.background);
+    let n = rng.random_range(spec.count.clone());
+    let main = spec.spread.map(|_| rng.random_range(0.0..PI));
     for _ in 0..n {
-        let len = rng.random_range(30.0..80.0f64);
-        let width = rng.random_range(3.0..6.0f64);
+        let len = rng.random_range(spec.length_mm.clone());
+        let thickness = rng.random_range(spec.thickness_mm.clone());
         let (cy, cx) = (
             rng.random_range(-10.0..h + 10.0),
             rng.random_range(-10.0..w + 10.0),
         );
-        let a = main + rng.random_range(-0.6..0.6);
-        let base = rng.random_range(-5.0..0.0f64);
-        let slope = rng.random_range(-0.05..0.05f64);
-        // A blade is flat with a raised midrib: model as a wide, low cylinder.
-        segment(&mut f, cy, cx, a, len, width / 2.0, base, slope);
+        let a = match (main, spec.spread) {
+            (Some(m), Some(s)) => m + rng.random_range(-s..s),
+            _ => rng.random_range(0.0..PI),
+        };
+        let base = rng.random_range(spec.base_mm.clone());
+        let slope = rng.random_range(-spec.slope..spec.slope);
+        segment(&mut f, cy, cx, a, len, thickness / 2.0, base, slope);
     }
     f
 }
@@ -389,7 +409,7 @@ fn grit(rows: usize, cols: usize, cell_mm: f64, d: f64, rng: &mut impl Rng) -> F
     let mut f = Field::zeros(rows, cols, cell_mm);
     let lambda = 0.45 * cell_mm * cell_mm / (d * d);
     let count = Poisson::new(lambda).ok();
-    let tip = Normal::new(0.5 * d, 0.15 * d).unwrap_or_else(|_| unreachable_normal());
+    let tip = normal(0.5 * d, 0.15 * d);
     // Resin bed: about 35 % of the particle height.
     let bed = 0.35 * d;
     for x in f.v.iter_mut() {

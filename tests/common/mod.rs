@@ -31,22 +31,14 @@ pub fn signals(m: &Message) -> BTreeMap<&'static str, f64> {
             s.insert("TerrainId", c.terrain as f64);
             s.insert("Confidence", c.confidence_pct);
             s.insert("DamagePercent", c.damage_pct);
-            s.insert(
-                "FlagRepaired",
-                (c.flags & flags::REPAIRED != 0) as u8 as f64,
-            );
-            s.insert(
-                "FlagLowConfidence",
-                (c.flags & flags::LOW_CONFIDENCE != 0) as u8 as f64,
-            );
-            s.insert(
-                "FlagNoSample",
-                (c.flags & flags::NO_SAMPLE != 0) as u8 as f64,
-            );
-            s.insert(
-                "FlagMultiFrame",
-                (c.flags & flags::MULTI_FRAME != 0) as u8 as f64,
-            );
+            for (name, bit) in [
+                ("FlagRepaired", flags::REPAIRED),
+                ("FlagLowConfidence", flags::LOW_CONFIDENCE),
+                ("FlagNoSample", flags::NO_SAMPLE),
+                ("FlagMultiFrame", flags::MULTI_FRAME),
+            ] {
+                s.insert(name, (c.flags & bit != 0) as u8 as f64);
+            }
             s.insert("LatencyUs", c.latency_us as f64);
         }
         Message::NodeStatus(c) => {

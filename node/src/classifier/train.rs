@@ -293,7 +293,7 @@ fn parzen(
     let mut mx = [f64::NEG_INFINITY; MAX_CLASSES];
     let mut cnt = [0usize; MAX_CLASSES];
     for (i, &k) in labels.iter().enumerate() {
-        let d2: f64 = (0..h).map(|j| ((t[i * h + j] - q[j]) as f64).powi(2)).sum();
+        let d2 = sq_dist(&t[i * h..(i + 1) * h], q);
         e[i] = -d2 * inv;
         mx[k] = mx[k].max(e[i]);
         cnt[k] += 1;
@@ -316,6 +316,11 @@ fn parzen(
     (best, ld[truth] - ld[best] - z.ln())
 }
 
+/// Squared Euclidean distance of two projected samples.
+fn sq_dist(a: &[f32], b: &[f32]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| ((x - y) as f64).powi(2)).sum()
+}
+
 /// Median over stored samples of the distance to the nearest other sample.
 fn median_nn_distance(p: &[f32], h: usize) -> f64 {
     let m = p.len() / h;
@@ -323,11 +328,7 @@ fn median_nn_distance(p: &[f32], h: usize) -> f64 {
         .map(|i| {
             (0..m)
                 .filter(|&j| j != i)
-                .map(|j| {
-                    (0..h)
-                        .map(|k| ((p[i * h + k] - p[j * h + k]) as f64).powi(2))
-                        .sum::<f64>()
-                })
+                .map(|j| sq_dist(&p[i * h..(i + 1) * h], &p[j * h..(j + 1) * h]))
                 .fold(f64::INFINITY, f64::min)
                 .sqrt()
         })
@@ -351,10 +352,10 @@ fn unknown_threshold(m: &Model) -> f64 {
         let others: Vec<f64> = (0..m.n_samples())
             .filter(|&j| j != i && m.sample_classes[j] == k)
             .map(|j| {
-                -(0..h)
-                    .map(|t| ((m.samples[i * h + t] - m.samples[j * h + t]) as f64).powi(2))
-                    .sum::<f64>()
-                    / s2
+                -sq_dist(
+                    &m.samples[i * h..(i + 1) * h],
+                    &m.samples[j * h..(j + 1) * h],
+                ) / s2
             })
             .collect();
         if others.is_empty() {
