@@ -215,6 +215,13 @@ fn toml_from_str<T: serde::de::DeserializeOwned>(s: &str) -> Result<T> {
 }
 
 fn main() -> ExitCode {
+    // A command-line tool piped into `head` should stop quietly, as `cat` does, not panic on
+    // EPIPE: restore the default SIGPIPE action that the Rust runtime sets to "ignore".
+    #[cfg(unix)]
+    // SAFETY: called before any thread starts; SIG_DFL is a valid action for SIGPIPE.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),

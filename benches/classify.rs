@@ -1,0 +1,123 @@
+//! Issue 3's speed targets, on the simulator's static set: one 44x44 image cropped to 40x40,
+//! features (2048-point FFT), PCA to 52 and the Parzen decision over 80 stored samples
+//! (target: median <= 10 us); and training on those 80 samples (target: < 50 ms).
+//!
+//! `cargo bench --bench classify`. The same figures, per image, come from `presrs eval --json`.
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use node::classifier::image::{Crop, PressureImage};
+use node::classifier::model::ClassInfo;
+use node::classifier::pwe::Classifier;
+use node::classifier::train::{Labelled, TrainOptions, train};
+use sim::dataset::{Kind, Options, generate};
+
+fn static_set(n: usize, seed: u64) -> (Vec<PressureImage>, Vec<usize>, Vec<ClassInfo>) {
+    let samples = generate(&Options {
+        kind: Kind::Static,
+        n: Some(n),
+        gait: controller::gait::Gait::g2(),
+        damage_pct: 0.0,
+        seed,
+    });
+    let mut classes: Vec<ClassInfo> = Vec::new();
+    let mut images = Vec::new();
+    let mut labels = Vec::new();
+    for s in samples {
+        let k = match classes.iter().position(|c| c.terrain_id == s.terrain.id()) {
+            Some(k) => k,
+            None => {
+                classes.push(ClassInfo {
+                    name: s.terrain.name().to_string(),
+                    terrain_id: s.terrain.id(),
+                });
+                classes.len() - 1
+            }
+        };
+        images.push(PressureImage::new(s.rows, s.cols, 8, s.pixels));
+        labels.push(k);
+    }
+    (images, labels, classes)
+}
+
+fn options() -> TrainOptions {
+    TrainOptions {
+        crop: Crop {
+            top: 2,
+            bottom: 2,
+            left: 2,
+            right: 2,
+        },
+        h: Some(52),
+        ..Default::default()
+    }
+}
+
+fn bench(c: &mut Criterion) {
+    // 20 per class x 4 classes = the 80 stored samples; the other 20 per class are test images.
+    let (images, labels, classes) = static_set(40, 7);
+    let data: Vec<Labelled<'_>> = images
+        .iter()
+        .zip(&labels)
+        .map(|(image, &class)| Labelled { image, class })
+        .collect();
+    let (model, split) = match train(&data, &classes, &options()) {
+        Ok(m) => m,
+        Err(e) => panic!("training the bench model: {e}"),
+    };
+    assert_eq!(model.n_samples(), 80);
+    assert_eq!(model.h, 52);
+    let test: Vec<&PressureImage> = split.test.iter().map(|&i| &images[i]).collect();
+    let mut classifier = Classifier::new(model);
+
+    let mut i = 0;
+    c.bench_function("classify 44x44 -> 40x40, PCA 52, 80 samples", |b| {
+        b.iter(|| {
+            let img = test[i % test.len()];
+            i += 1;
+            classifier
+                .classify(&img.pixels, img.rows, img.cols, false)
+                .map(|d| d.best)
+        })
+    });
+    // The stages on their own, to see where the time goes.
+    let mut fx = node::classifier::features::FeatureExtractor::new(40 * 40);
+    let work: Vec<u16> = match test[0].crop(&options().crop) {
+        Some(w) => w.pixels,
+        None => panic!("crop"),
+    };
+    let mut feat = vec![0.0f32; fx.feature_len()];
+    c.bench_function("stage: feature vector (40x40, N = 2048)", |b| {
+        b.iter(|| {
+            fx.extract(&work, 1.0, &mut feat);
+            feat[1]
+        })
+    });
+    let mut i = 0;
+    c.bench_function("classify with the per-image repair filter", |b| {
+        b.iter(|| {
+            let img = test[i % test.len()];
+            i += 1;
+            classifier
+                .classify(&img.pixels, img.rows, img.cols, true)
+                .map(|d| d.best)
+        })
+    });
+    let train_data: Vec<Labelled<'_>> = split
+        .train
+        .iter()
+        .chain(&split.validation)
+        .map(|&i| Labelled {
+            image: &images[i],
+            class: labels[i],
+        })
+        .collect();
+    let mut g = c.benchmark_group("train");
+    g.sample_size(20);
+    g.bench_function("train on 80 samples (PCA 52, kernel width on V)", |b| {
+        b.iter(|| train(&train_data, &classes, &options()).map(|(m, _)| m.kernel_width))
+    });
+    g.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);
