@@ -138,14 +138,7 @@ pub struct DemoArgs {
 }
 
 pub fn run(a: DemoArgs) -> Result<ExitCode> {
-    let track = match &a.track {
-        Some(p) => {
-            let text = std::fs::read_to_string(p)
-                .with_context(|| format!("reading --track {}", p.display()))?;
-            Track::from_toml(&text, &p.display().to_string()).map_err(anyhow::Error::msg)?
-        }
-        None => Track::default(),
-    };
+    let track = crate::sim_cmd::load_track(a.track.as_deref())?;
     let model = load_or_train(a.model.as_deref())?;
     let clock = ManualClock::new(0);
     let bus = InProcBus::with_clock(Arc::new(clock.clone()), 1 << 16);

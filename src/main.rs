@@ -7,7 +7,11 @@ use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 
 mod cli;
+mod controller_cmd;
 mod demo;
+mod node_cmd;
+mod runtime;
+mod sim_cmd;
 
 #[derive(Parser)]
 #[command(
@@ -31,12 +35,13 @@ enum Cmd {
         #[arg(long)]
         out: Option<PathBuf>,
     },
-    /// Run the terrain node on a CAN interface (not implemented yet: issue 5).
-    Node,
-    /// Run the gait controller on a CAN interface (not implemented yet: issue 6).
-    Controller,
-    /// Run the simulated hopper and foot (not implemented yet: issue 4).
-    Sim,
+    /// The terrain node: foot switch and tactile frames in, one TerrainClass per step out
+    /// (on a CAN interface, or `--replay` of a candump log).
+    Node(node_cmd::NodeArgs),
+    /// The gait controller on a CAN interface: LegCommand out, gait switched per terrain.
+    Controller(controller_cmd::ControllerArgs),
+    /// The simulated hopper and foot on a CAN interface, in real time.
+    Sim(sim_cmd::SimArgs),
     /// Simulator, node and controller in one process on the in-process bus: the closed loop.
     Demo(demo::DemoArgs),
     /// Train a terrain classifier on DIR/<class>/<images> (the paper's 13/7 split per class).
@@ -159,9 +164,9 @@ fn run(cli: Cli) -> Result<ExitCode> {
             }
             Ok(ExitCode::SUCCESS)
         }
-        Cmd::Node => not_yet("node", 5),
-        Cmd::Controller => not_yet("controller", 6),
-        Cmd::Sim => not_yet("sim", 4),
+        Cmd::Node(a) => node_cmd::run(a),
+        Cmd::Controller(a) => controller_cmd::run(a),
+        Cmd::Sim(a) => sim_cmd::run(a),
         Cmd::Demo(args) => demo::run(args),
         Cmd::Train {
             data,

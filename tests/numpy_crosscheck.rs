@@ -25,9 +25,19 @@ fn numpy_and_sklearn_pick_the_same_terrains_as_presrs() {
     let d = data.to_str().expect("utf-8 temp path");
     let m = model.to_str().expect("utf-8 temp path");
     run(&["dataset", "static", "--out", d, "--n", "30", "--seed", "5"]);
-    run(&["train", "--data", d, "--out", m, "--crop", "2,2,2,2", "--dims", "52"]);
+    run(&[
+        "train", "--data", d, "--out", m, "--crop", "2,2,2,2", "--dims", "52",
+    ]);
     let out = Command::new("python3")
-        .args(["scripts/compare_numpy.py", "--model", m, "--data", d, "--presrs", bin])
+        .args([
+            "scripts/compare_numpy.py",
+            "--model",
+            m,
+            "--data",
+            d,
+            "--presrs",
+            bin,
+        ])
         .args(["--repeats", "1"])
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .output()

@@ -279,3 +279,223 @@ fn missing_interface_names_the_fix() {
         "{msg}"
     );
 }
+
+// ---- System tests: `presrs sim`, `presrs node` and `presrs controller` as separate processes
+// on vcan0, watched by the test through its own socket.
+
+/// The binary under test: PRESRS_BIN (run.sh passes the release build: the simulator must keep
+/// real time, in the VM too), else this build's.
+fn presrs() -> std::path::PathBuf {
+    std::env::var_os("PRESRS_BIN")
+        .map(Into::into)
+        .unwrap_or_else(|| env!("CARGO_BIN_EXE_presrs").into())
+}
+
+/// A model trained on simulated G2 stances; run.sh makes it on the host (PRESRS_MODEL).
+fn system_model() -> std::path::PathBuf {
+    let p: std::path::PathBuf = std::env::var_os("PRESRS_MODEL").map(Into::into).expect(
+        "PRESRS_MODEL must name a model (tests/vcan/run.sh trains one on simulated G2 data)",
+    );
+    assert!(p.exists(), "PRESRS_MODEL {} does not exist", p.display());
+    p
+}
+
+/// A child process killed when dropped, so that a failing test leaves nothing running.
+struct Proc(std::process::Child);
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn spawn(args: &[&str]) -> Proc {
+    Proc(
+        std::process::Command::new(presrs())
+            .args(args)
+            .env("RUST_LOG", "warn")
+            .spawn()
+            .unwrap_or_else(|e| panic!("starting presrs {args:?}: {e}")),
+    )
+}
+
+#[test]
+fn sim_traffic_is_recorded_by_candump_and_decoded_by_cantools() {
+    let iface = fd_iface();
+    let log_path = std::env::temp_dir().join(format!("presrs-simdump-{}.log", std::process::id()));
+    let file = std::fs::File::create(&log_path).unwrap();
+    let mut candump = Proc(
+        std::process::Command::new("candump")
+            .args(["-L", &iface])
+            .stdout(file)
+            .spawn()
+            .expect("candump from can-utils must be installed (apt-get install can-utils)"),
+    );
+    std::thread::sleep(Duration::from_millis(500));
+    let status = std::process::Command::new(presrs())
+        .args(["sim", "--iface", &iface, "--duration", "3", "--seed", "2"])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    std::thread::sleep(Duration::from_millis(500));
+    let _ = candump.0.kill();
+    let _ = candump.0.wait();
+    let dbc = root().join("protocol/presrs.dbc");
+    let out = python(&["log", dbc.to_str().unwrap(), log_path.to_str().unwrap()]);
+    let v: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    eprintln!("presrs sim, 3 s simulated, as candump logged and cantools decoded it: {v}");
+    // 100 Hz for 3 s: 300 images, each a header + 32 pixel segments; LegState at 100 Hz.
+    let images = v["tactile_headers"].as_u64().unwrap();
+    assert!((295..=301).contains(&images), "{images} tactile images");
+    assert!(v["kinds"]["LegState"].as_u64().unwrap() >= 295);
+    assert!(
+        v["kinds"]["FootContact"].as_u64().unwrap() >= 6,
+        "a few steps with bounce"
+    );
+}
+
+#[test]
+fn sim_node_and_controller_as_processes_classify_steps_and_survive_a_node_restart() {
+    let iface = fd_iface();
+    let ids = IdConfig::default();
+    let model = system_model();
+    let model_s = model.to_str().unwrap();
+    let report = std::env::temp_dir().join(format!("presrs-loop-{}.json", std::process::id()));
+    let mut watch = open(&iface);
+    // The robot's time runs at `speed` of the wall clock: under TCG emulation the simulator
+    // cannot keep real time (3 s simulated took 5.4 s alone). The node runs on the foot's
+    // timestamps; the controller is told the rate. Times below are in robot time.
+    let speed: f64 = std::env::var("PRESRS_SYSTEM_SPEED")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1.0);
+    let wall = |robot_s: f64| Duration::from_secs_f64(robot_s / speed);
+    let mut node = spawn(&["node", "--iface", &iface, "--model", model_s]);
+    // The controller watches the node's heartbeat; it runs a foot the simulator does not have
+    // (foot 1), so the hopper holds its fixed G2 and the node is scored on a steady gait.
+    let ctrl_cfg = std::env::temp_dir().join(format!("presrs-ctrl-{}.toml", std::process::id()));
+    std::fs::write(&ctrl_cfg, "foot = 1\n").unwrap();
+    let _controller = spawn(&[
+        "controller",
+        "--iface",
+        &iface,
+        "--config",
+        ctrl_cfg.to_str().unwrap(),
+        "--time-scale",
+        &speed.to_string(),
+    ]);
+    std::thread::sleep(Duration::from_millis(1500));
+    let sim_s = 40.0;
+    let mut sim = spawn(&[
+        "sim",
+        "--iface",
+        &iface,
+        "--duration",
+        &sim_s.to_string(),
+        "--seed",
+        "3",
+        "--speed",
+        &speed.to_string(),
+        "--report",
+        report.to_str().unwrap(),
+    ]);
+    let t0 = Instant::now();
+    let (kill_at, restart_at) = (wall(24.0), wall(27.0));
+    let mut killed: Option<Instant> = None;
+    let mut restarted: Option<Instant> = None;
+    let mut node_lost_after: Option<Duration> = None;
+    let mut first_class_after_restart: Option<Duration> = None;
+    let mut classes_before_kill = 0usize;
+    let mut sim_done = false;
+    while !sim_done {
+        if let Some(st) = watch.recv(Duration::from_millis(5)).unwrap() {
+            match decode(&st.frame, &ids) {
+                Ok(Some((_, Message::TerrainClass(_)))) => {
+                    if killed.is_none() {
+                        classes_before_kill += 1;
+                    }
+                    if let (Some(r), None) = (restarted, first_class_after_restart) {
+                        first_class_after_restart = Some(r.elapsed().mul_f64(speed));
+                    }
+                }
+                Ok(Some((_, Message::GaitStatus(g)))) => {
+                    if let (Some(k), None, None) = (killed, node_lost_after, restarted)
+                        && g.reason == protocol::messages::GaitReason::NodeLost
+                    {
+                        node_lost_after = Some(k.elapsed().mul_f64(speed));
+                    }
+                }
+                _ => {}
+            }
+        }
+        if killed.is_none() && t0.elapsed() >= kill_at {
+            let _ = node.0.kill();
+            let _ = node.0.wait();
+            killed = Some(Instant::now());
+        }
+        if restarted.is_none() && t0.elapsed() >= restart_at {
+            node = spawn(&["node", "--iface", &iface, "--model", model_s]);
+            restarted = Some(Instant::now());
+        }
+        if let Ok(Some(status)) = sim.0.try_wait() {
+            assert!(status.success(), "presrs sim exited with {status}");
+            sim_done = true;
+        }
+        assert!(t0.elapsed() < wall(sim_s) * 3, "presrs sim did not finish");
+    }
+    drop(node);
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let steps = r["steps"].as_array().unwrap();
+    let touchdowns = r["touchdowns"].as_u64().unwrap() as usize;
+    let correct = steps
+        .iter()
+        .filter(|s| s["truth"] == s["classified"])
+        .count();
+    let accuracy = correct as f64 / steps.len().max(1) as f64;
+    // Steps from each terrain change to that terrain's gait (the controller's default table).
+    let table = controller::ControllerConfig::default().terrain_gaits;
+    let mut delays = Vec::new();
+    for i in 1..steps.len() {
+        if steps[i]["truth"] != steps[i - 1]["truth"] {
+            let truth = steps[i]["truth"].as_str().unwrap();
+            let want = table.get(truth).copied().map(u64::from);
+            if let Some(j) = (i..steps.len())
+                .take_while(|&j| steps[j]["truth"] == steps[i]["truth"])
+                .find(|&j| steps[j]["gait"].as_u64() == want)
+            {
+                delays.push(j - i);
+            }
+        }
+    }
+    eprintln!(
+        "closed loop over vcan, 3 processes, robot time at {speed} x wall: {:.1} s simulated in {:.1} s wall; {touchdowns} touchdowns, \
+         {} TerrainClass, per-step accuracy {:.1}% ({correct}/{}); steps from a terrain change to its gait {delays:?}; \
+         node killed: controller reported NodeLost after {node_lost_after:?}; restarted node's first TerrainClass after {first_class_after_restart:?}",
+        r["simulated_s"].as_f64().unwrap(),
+        r["wall_s"].as_f64().unwrap(),
+        steps.len(),
+        accuracy * 100.0,
+        steps.len()
+    );
+    // The node answered every step it was up for: touchdowns minus about 5 s (of 40) of downtime.
+    assert!(classes_before_kill > 0);
+    assert!(
+        steps.len() * 10 >= touchdowns * 7,
+        "{} TerrainClass for {touchdowns} touchdowns",
+        steps.len()
+    );
+    let lost = node_lost_after.expect("the controller never reported NodeLost after the kill");
+    assert!(
+        lost <= Duration::from_millis(600),
+        "NodeLost after {lost:?}"
+    );
+    let back = first_class_after_restart.expect("no TerrainClass after the node restarted");
+    assert!(
+        back <= Duration::from_secs(4),
+        "first TerrainClass {back:?} after restart"
+    );
+    // A regression floor well above chance (25%), not the issue's target: see the printed figure.
+    assert!(accuracy >= 0.5, "per-step accuracy {accuracy}");
+}

@@ -36,6 +36,8 @@ pub struct ControllerConfig {
     pub foot: u8,
     /// Switch edges closer than this to the last accepted edge are bounce, µs.
     pub lockout_us: u64,
+    /// CAN identifier map (the same `[ids]` table as the node's and the DBC's).
+    pub ids: protocol::ids::IdConfig,
 }
 
 impl Default for ControllerConfig {
@@ -65,6 +67,7 @@ impl Default for ControllerConfig {
             status_hz: 10.0,
             foot: 0,
             lockout_us: 20_000,
+            ids: protocol::ids::IdConfig::default(),
         }
     }
 }
@@ -124,6 +127,7 @@ impl ControllerConfig {
             0.0,
             (protocol::ids::MAX_FEET - 1) as f64,
         )?;
+        self.ids.validate().map_err(|e| format!("ids: {e}"))?;
         Ok(())
     }
 

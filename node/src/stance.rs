@@ -148,7 +148,16 @@ impl StancePipeline {
     pub fn set_model(&mut self, model: Option<Model>) {
         let (rows, cols) = model.as_ref().and_then(|m| m.work_size()).unwrap_or((1, 1));
         let input = model.as_ref().map_or(1, |m| m.input_rows * m.input_cols);
+        let same_size = self.classifier.as_ref().is_some_and(|c| {
+            let m = c.model();
+            c.work_size() == (rows, cols) && m.input_rows * m.input_cols == input
+        });
         self.classifier = model.map(Classifier::new);
+        if same_size && !self.feet.is_empty() {
+            // A reload of a model for the same images keeps each foot's stance, step count and
+            // learned sensor health: the step in progress still gets its one TerrainClass.
+            return;
+        }
         self.feet = (0..self.cfg.feet)
             .map(|_| Foot {
                 raw: false,

@@ -252,6 +252,13 @@ impl SimRobot {
             .map(|l| (l.hopper.vx, l.hopper.x))
     }
 
+    /// The gait a leg runs now: the controller's (from a fresh LegCommand) or the fixed one.
+    pub fn gait_in_effect(&self, foot: u8) -> Option<u8> {
+        self.legs
+            .get(foot as usize)
+            .map(|l| l.cmd.external().map_or(l.cmd.fixed.gait.id, |c| c.gait))
+    }
+
     /// A frame from a controller.
     pub fn on_frame(&mut self, frame: &CanFrame) {
         if let Ok(Some((foot, Message::LegCommand(c)))) =

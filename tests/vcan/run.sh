@@ -17,6 +17,20 @@ for l in sys.stdin:
     if m.get("reason")=="compiler-artifact" and m["target"]["name"]=="vcan" and m.get("executable"): print(m["executable"])' | tail -1)
 [ -n "$bin" ] || { echo "vcan suite: could not build the vcan test binary" >&2; exit 1; }
 
+# The system tests run `presrs sim/node/controller` as processes: the release build keeps real
+# time (also under TCG), and the node needs a model trained on simulated G2 stances.
+echo "vcan suite: building presrs (release) and training the system tests' G2 model"
+cargo build --release --quiet
+export PRESRS_BIN="$root/target/release/presrs"
+work="$root/target/vcan-system"
+if [ ! -s "$work/g2-model.json" ] || [ "$PRESRS_BIN" -nt "$work/g2-model.json" ]; then
+  rm -rf "$work" && mkdir -p "$work"
+  "$PRESRS_BIN" dataset dynamic --gait G2 --n 45 --seed 21 --out "$work/g2" >/dev/null
+  "$PRESRS_BIN" train --data "$work/g2" --out "$work/g2-model.json" --crop 0,3,6,0 \
+    --per-class 30 --train 20 --seed 21
+fi
+export PRESRS_MODEL="$work/g2-model.json"
+
 setup='modprobe vcan 2>/dev/null || true
 ip link add dev vcan0 type vcan 2>/dev/null || true; ip link set vcan0 mtu 72 up
 ip link add dev vcan1 type vcan 2>/dev/null || true; ip link set vcan1 mtu 16 up'
@@ -32,17 +46,20 @@ can_here() {
 if [ "${PRESRS_VCAN_FORCE_VM:-0}" != 1 ] && can_here; then
   where="on this kernel"
   bash -c "$setup"
-  set +e; "$bin" --test-threads=1 2>&1 | tee "$log"; rc=${PIPESTATUS[0]}; set -e
+  set +e; "$bin" --test-threads=1 --nocapture 2>&1 | tee "$log"; rc=${PIPESTATUS[0]}; set -e
 else
   where="inside a virtme-ng VM (this kernel has no CAN: AF_CAN unavailable)"
+  # TCG emulation runs the simulator at about half real time, so the system tests run the
+  # robot's clock at 0.35 of the wall clock (the simulator, node and controller all follow it).
   "$root/scripts/install-deps.sh" --vm
   kernel=$(ls /boot/vmlinuz-*-amd64 | sort -V | tail -1)
   echo "vcan suite: booting $kernel under TCG (KVM unavailable here)"
   set +e
   timeout 1200 vng -r "$kernel" --user root --disable-kvm --cpus 2 --memory 2G \
     --exec "$setup
-export PATH='$PATH' HOME='$HOME'
-cd '$root' && '$bin' --test-threads=1; echo VCAN_EXIT=\$?" 2>&1 | tee "$log"
+export PATH='$PATH' HOME='$HOME' PRESRS_BIN='$PRESRS_BIN' PRESRS_MODEL='$PRESRS_MODEL'
+export PRESRS_SYSTEM_SPEED='${PRESRS_SYSTEM_SPEED:-0.35}'
+cd '$root' && '$bin' --test-threads=1 --nocapture; echo VCAN_EXIT=\$?" 2>&1 | tee "$log"
   set -e
   rc=$(grep -a -o 'VCAN_EXIT=[0-9]*' "$log" | tail -1 | cut -d= -f2)
   rc=${rc:-1}

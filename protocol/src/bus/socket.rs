@@ -140,11 +140,17 @@ impl CanBus for SocketCanBus {
     }
 
     fn recv(&mut self, timeout: Duration) -> Result<Option<Stamped>, BusError> {
-        let timeout = timeout.max(Duration::from_micros(1));
+        // A zero timeout is a poll: a non-blocking read. (SO_RCVTIMEO cannot express it: the
+        // kernel rounds a 1 µs timeout up to a scheduler tick, several ms per empty poll.)
         if self.read_timeout != Some(timeout) {
-            self.sock
-                .set_read_timeout(timeout)
-                .map_err(|e| self.io_err(e))?;
+            let r = if timeout.is_zero() {
+                self.sock.set_nonblocking(true)
+            } else {
+                self.sock
+                    .set_nonblocking(false)
+                    .and_then(|()| self.sock.set_read_timeout(timeout))
+            };
+            r.map_err(|e| self.io_err(e))?;
             self.read_timeout = Some(timeout);
         }
         loop {

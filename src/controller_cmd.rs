@@ -1,0 +1,104 @@
+//! `presrs controller`: the gait controller as a process on a CAN interface. It follows the foot
+//! switch and leg angle, sends LegCommand at `command_hz` (eq. (4) in stance, the eq. (5) angle in
+//! flight), switches gait per the terrain the node reports, falls back to the safe gait when the
+//! node's heartbeat stops, and sends GaitStatus at every switch and at `status_hz`.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result};
+use controller::{Controller, ControllerConfig};
+use protocol::messages::{self, Message};
+
+use crate::runtime::{Backoff, Signals, open_with_retry};
+
+#[derive(clap::Args)]
+pub struct ControllerArgs {
+    /// CAN interface (can0, vcan0).
+    #[arg(long)]
+    pub iface: String,
+    /// Gaits and policy (TOML or JSON by extension); see `examples/controller.toml`.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// The controller's clock rate relative to the wall clock; match `presrs sim --speed` when
+    /// the simulator runs slower or faster than real time (on a robot: 1).
+    #[arg(long, default_value_t = 1.0)]
+    pub time_scale: f64,
+}
+
+pub fn load_config(path: Option<&std::path::Path>) -> Result<ControllerConfig> {
+    match path {
+        None => Ok(ControllerConfig::default()),
+        Some(p) => {
+            let text = std::fs::read_to_string(p)
+                .with_context(|| format!("reading --config {}", p.display()))?;
+            ControllerConfig::parse(&text, &p.display().to_string()).map_err(anyhow::Error::msg)
+        }
+    }
+}
+
+pub fn run(a: ControllerArgs) -> Result<ExitCode> {
+    anyhow::ensure!(
+        a.time_scale > 0.0 && a.time_scale.is_finite(),
+        "--time-scale {}: expected a positive factor (1 = real time)",
+        a.time_scale
+    );
+    let cfg = load_config(a.config.as_deref())?;
+    let ids = cfg.ids.clone();
+    let foot = cfg.foot;
+    let signals = Signals::install()?;
+    let mut ctrl = Controller::new(cfg);
+    let start = Instant::now();
+    let scale = a.time_scale;
+    let now_us = || (start.elapsed().as_secs_f64() * scale * 1e6) as u64;
+    let mut out: Vec<Message> = Vec::with_capacity(8);
+    let mut backoff = Backoff::default();
+    let mut switches_logged = 0;
+    'open: while !signals.stopping() {
+        let Some(mut bus) = open_with_retry(&a.iface, &signals.stop, "controller", &mut || {})
+        else {
+            break;
+        };
+        backoff.reset();
+        tracing::info!(iface = %a.iface, foot, gait = ctrl.gait().id, "presrs controller running");
+        while !signals.stopping() {
+            match bus.recv(Duration::from_millis(1)) {
+                Ok(Some(st)) => {
+                    // Undecodable frames (other traffic, garbage) are not ours: ignored.
+                    if let Ok(Some((f, m))) = messages::decode(&st.frame, &ids) {
+                        ctrl.on_message(f, &m, now_us(), &mut |o| out.push(o));
+                    }
+                }
+                Ok(None) => {}
+                Err(e) => {
+                    tracing::warn!(
+                        "controller receive: {e}; reopening in {:?}",
+                        backoff.delay()
+                    );
+                    backoff.wait(&signals.stop);
+                    continue 'open;
+                }
+            }
+            ctrl.tick(now_us(), &mut |o| out.push(o));
+            for m in out.drain(..) {
+                if let Message::GaitStatus(g) = &m
+                    && ctrl.switches != switches_logged
+                {
+                    switches_logged = ctrl.switches;
+                    tracing::info!(gait = g.gait, terrain = g.terrain, reason = ?g.reason, "gait switch");
+                }
+                let Some(f) = m.to_frame(&ids, foot) else {
+                    continue;
+                };
+                if let Err(e) = bus.send(&f) {
+                    tracing::warn!("controller send: {e}; reopening in {:?}", backoff.delay());
+                    backoff.wait(&signals.stop);
+                    continue 'open;
+                }
+            }
+        }
+    }
+    tracing::info!(switches = ctrl.switches, "presrs controller stopped");
+    Ok(ExitCode::SUCCESS)
+}

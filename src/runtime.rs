@@ -1,0 +1,106 @@
+//! What the CAN processes (`presrs node`, `sim`, `controller`) share: signal flags and opening an
+//! interface with retry and backoff. A process on a robot must outlive a CAN interface that is
+//! missing at boot or goes down: it waits and reopens, it never exits on a bus error.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+use anyhow::{Context, Result};
+use protocol::bus::{CanBus, SocketCanBus};
+
+/// Set by SIGINT/SIGTERM (`stop`) and SIGHUP (`reload`, cleared by whoever acts on it).
+#[derive(Clone)]
+pub struct Signals {
+    pub stop: Arc<AtomicBool>,
+    pub reload: Arc<AtomicBool>,
+}
+
+impl Signals {
+    pub fn install() -> Result<Self> {
+        use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
+        let s = Self {
+            stop: Arc::new(AtomicBool::new(false)),
+            reload: Arc::new(AtomicBool::new(false)),
+        };
+        for sig in [SIGINT, SIGTERM] {
+            signal_hook::flag::register(sig, s.stop.clone())
+                .with_context(|| format!("installing the handler for signal {sig}"))?;
+        }
+        signal_hook::flag::register(SIGHUP, s.reload.clone())
+            .context("installing the SIGHUP handler")?;
+        Ok(s)
+    }
+
+    pub fn stopping(&self) -> bool {
+        self.stop.load(Ordering::Relaxed)
+    }
+
+    /// True once per SIGHUP.
+    pub fn take_reload(&self) -> bool {
+        self.reload.swap(false, Ordering::Relaxed)
+    }
+}
+
+/// Exponential backoff from 100 ms to 5 s, reset after a success.
+pub struct Backoff {
+    next: Duration,
+}
+
+impl Default for Backoff {
+    fn default() -> Self {
+        Self {
+            next: Duration::from_millis(100),
+        }
+    }
+}
+
+impl Backoff {
+    pub fn reset(&mut self) {
+        *self = Self::default();
+    }
+
+    /// Sleeps the current delay in short slices (so a stop is seen quickly) and doubles it.
+    /// Returns false when asked to stop.
+    pub fn wait(&mut self, stop: &AtomicBool) -> bool {
+        let end = std::time::Instant::now() + self.next;
+        while std::time::Instant::now() < end {
+            if stop.load(Ordering::Relaxed) {
+                return false;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        self.next = (self.next * 2).min(Duration::from_secs(5));
+        !stop.load(Ordering::Relaxed)
+    }
+
+    pub fn delay(&self) -> Duration {
+        self.next
+    }
+}
+
+/// Opens `iface`, retrying with backoff until it opens or `stop` is set. Each failure is logged
+/// once per attempt with the fix the error names; `on_fail` sees it (for a status flag).
+pub fn open_with_retry(
+    iface: &str,
+    stop: &AtomicBool,
+    role: &str,
+    on_fail: &mut dyn FnMut(),
+) -> Option<Box<dyn CanBus>> {
+    let mut backoff = Backoff::default();
+    loop {
+        match SocketCanBus::open(iface) {
+            Ok(b) => {
+                tracing::info!(%iface, role, "CAN interface open");
+                return Some(Box::new(b));
+            }
+            Err(e) => {
+                on_fail();
+                tracing::warn!(role, "{e}; retrying in {:?}", backoff.delay());
+                if !backoff.wait(stop) {
+                    return None;
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,194 @@
+//! `presrs sim`: the simulated hopper and foot on a CAN interface, in real time (or `--speed`
+//! times faster), as a separate process: it publishes FootContact, LegState and the tactile
+//! frames, obeys LegCommand, and holds its configured gait when no controller is on the bus.
+//!
+//! Because the simulator knows the truth, it also scores what others put on the bus: every
+//! TerrainClass it hears is matched to the stance in progress on that foot, and the gait the
+//! leg runs is recorded per step. `--report FILE.json` writes that record at exit; the system
+//! tests read it.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result};
+use protocol::bus::CanBus;
+use protocol::messages::{self, Message};
+use sim::faults::FaultParams;
+use sim::runner::{SimConfig, SimRobot, Track};
+
+use crate::runtime::{Backoff, Signals, open_with_retry};
+
+#[derive(clap::Args)]
+pub struct SimArgs {
+    /// CAN interface (vcan0, can0). Must carry CAN FD (MTU 72): the tactile frames are FD.
+    #[arg(long)]
+    pub iface: String,
+    /// Track file (TOML: diameter_m, [[segments]] terrain, length_m); default: a quarter each of
+    /// wood, grass, clay and carpet on the paper's 2.8 m circle.
+    #[arg(long)]
+    pub track: Option<PathBuf>,
+    /// Legs, each with its foot sensor (foot ids 0..N).
+    #[arg(long, default_value_t = 1)]
+    pub feet: u8,
+    /// Simulated time per wall-clock time: 1 is real time, 2 twice as fast.
+    #[arg(long, default_value_t = 1.0)]
+    pub speed: f64,
+    /// Gait held without a controller: G1, G2 or G3.
+    #[arg(long, default_value = "G2")]
+    pub gait: String,
+    /// Sensor damage from the start, percent of sensels on dead lines (eq. 6).
+    #[arg(long, default_value_t = 0.0)]
+    pub damage: f64,
+    /// Stop after this much simulated time, s (default: run until SIGINT/SIGTERM).
+    #[arg(long)]
+    pub duration: Option<f64>,
+    /// Write the per-step record (truth, what the node said, the gait run) as JSON at exit.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+}
+
+#[derive(serde::Serialize)]
+struct StepRecord {
+    t_s: f64,
+    foot: u8,
+    /// The node's step counter from its TerrainClass.
+    step: u16,
+    truth: String,
+    classified: String,
+    confidence_pct: f64,
+    damage_pct: f64,
+    /// The gait the leg ran when the TerrainClass arrived.
+    gait: u8,
+    speed_m_s: f64,
+}
+
+/// The `--track` file, or the default track (wood, grass, clay, carpet quarters).
+pub fn load_track(path: Option<&std::path::Path>) -> Result<Track> {
+    match path {
+        Some(p) => {
+            let text = std::fs::read_to_string(p)
+                .with_context(|| format!("reading --track {}", p.display()))?;
+            Track::from_toml(&text, &p.display().to_string()).map_err(anyhow::Error::msg)
+        }
+        None => Ok(Track::default()),
+    }
+}
+
+pub fn run(a: SimArgs) -> Result<ExitCode> {
+    anyhow::ensure!(
+        a.speed > 0.0 && a.speed.is_finite(),
+        "--speed {}: expected a positive factor (1 = real time)",
+        a.speed
+    );
+    anyhow::ensure!(
+        (0.0..=100.0).contains(&a.damage),
+        "--damage {}: expected a percentage in 0..=100",
+        a.damage
+    );
+    let gait = controller::Gait::by_name(&a.gait)
+        .with_context(|| format!("--gait {}: expected G1, G2 or G3", a.gait))?;
+    let track = load_track(a.track.as_deref())?;
+    let cfg = SimConfig {
+        track,
+        gait: gait.id,
+        feet: a.feet.max(1),
+        faults: FaultParams {
+            initial_damage_pct: a.damage,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let ids = cfg.ids.clone();
+    let signals = Signals::install()?;
+    let mut robot = SimRobot::new(cfg, a.seed);
+    let Some(mut bus) = open_with_retry(&a.iface, &signals.stop, "sim", &mut || {}) else {
+        return Ok(ExitCode::SUCCESS);
+    };
+    tracing::info!(iface = %a.iface, feet = a.feet, speed = a.speed, gait = %a.gait, "presrs sim running");
+    let start = Instant::now();
+    let end_us = a.duration.map(|d| (d * 1e6) as u64);
+    let mut records: Vec<StepRecord> = Vec::new();
+    let mut out = Vec::with_capacity(128);
+    let mut backoff = Backoff::default();
+    let mut send_errors = 0u64;
+    let mut t_us = 0u64;
+    loop {
+        if signals.stopping() || end_us.is_some_and(|e| t_us >= e) {
+            break;
+        }
+        // Simulated time follows the wall clock; 1 ms steps, sleeping when ahead.
+        let target = (start.elapsed().as_secs_f64() * a.speed * 1e6) as u64;
+        if target < t_us + 1000 {
+            std::thread::sleep(Duration::from_micros(300));
+            continue;
+        }
+        // When far behind (a slow machine), catch up at most 20 ms per pass so that the bus
+        // is still read in between.
+        t_us = target.min(t_us + 20_000);
+        robot.advance_to(t_us, &mut |f| out.push(f));
+        for f in out.drain(..) {
+            if let Err(e) = bus.send(&f) {
+                send_errors += 1;
+                // A lost frame is what a real foot would cause too; a dead bus is reopened.
+                if send_errors.is_power_of_two() {
+                    tracing::warn!("sim send: {e} ({send_errors} send errors so far)");
+                }
+                if matches!(e, protocol::BusError::Down { .. }) {
+                    backoff.wait(&signals.stop);
+                    if let Some(b) = open_with_retry(&a.iface, &signals.stop, "sim", &mut || {}) {
+                        bus = b;
+                    }
+                    break;
+                }
+            }
+        }
+        while let Ok(Some(st)) = bus.recv(Duration::ZERO) {
+            robot.on_frame(&st.frame);
+            if let Ok(Some((foot, Message::TerrainClass(tc)))) = messages::decode(&st.frame, &ids) {
+                let truth = robot.step_at(foot, t_us).map_or("?", |s| s.terrain.name());
+                let (speed, _) = robot.speed_and_position(foot).unwrap_or((0.0, 0.0));
+                records.push(StepRecord {
+                    t_s: t_us as f64 * 1e-6,
+                    foot,
+                    step: tc.step,
+                    truth: truth.to_string(),
+                    classified: messages::terrain_name(tc.terrain)
+                        .unwrap_or("unknown")
+                        .to_string(),
+                    confidence_pct: tc.confidence_pct,
+                    damage_pct: tc.damage_pct,
+                    gait: robot.gait_in_effect(foot).unwrap_or(0),
+                    speed_m_s: speed,
+                });
+            }
+        }
+    }
+    let n = records.len();
+    let correct = records.iter().filter(|r| r.truth == r.classified).count();
+    let wall = start.elapsed().as_secs_f64();
+    eprintln!(
+        "presrs sim: {:.1} s simulated in {wall:.1} s wall; {} touchdowns; {n} TerrainClass heard, {correct} correct{}; {send_errors} send errors",
+        t_us as f64 * 1e-6,
+        robot.steps.len(),
+        if n > 0 {
+            format!(" ({:.1}%)", 100.0 * correct as f64 / n as f64)
+        } else {
+            String::new()
+        }
+    );
+    if let Some(p) = &a.report {
+        let j = serde_json::json!({
+            "simulated_s": t_us as f64 * 1e-6,
+            "wall_s": wall,
+            "touchdowns": robot.steps.len(),
+            "send_errors": send_errors,
+            "steps": records,
+        });
+        std::fs::write(p, serde_json::to_string_pretty(&j)?)
+            .with_context(|| format!("writing --report {}", p.display()))?;
+    }
+    Ok(ExitCode::SUCCESS)
+}

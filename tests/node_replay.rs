@@ -1,0 +1,147 @@
+//! `presrs node --replay`: the node's pipeline on a candump log, with the log's timestamps.
+//! The log comes from the simulated robot; the expected stream is the library pipeline run on the
+//! same records in-process, so the command must neither lose, add nor reorder a decision.
+
+use std::process::Command;
+
+use node::classifier::train::{Labelled, TrainOptions, train};
+use node::classifier::{ClassInfo, Crop, PressureImage};
+use node::{NodeConfig, StancePipeline};
+use protocol::Stamped;
+use sim::runner::{SimConfig, SimRobot};
+use sim::terrain::Terrain;
+
+fn small_model(dir: &std::path::Path) -> std::path::PathBuf {
+    let samples = sim::dataset::generate(&sim::dataset::Options {
+        kind: sim::dataset::Kind::Dynamic,
+        n: Some(20),
+        gait: controller::Gait::g2(),
+        damage_pct: 0.0,
+        seed: 4,
+    });
+    let classes: Vec<ClassInfo> = Terrain::DYNAMIC
+        .iter()
+        .map(|t| ClassInfo {
+            name: t.name().into(),
+            terrain_id: t.id(),
+        })
+        .collect();
+    let images: Vec<(PressureImage, usize)> = samples
+        .iter()
+        .map(|s| {
+            let k = Terrain::DYNAMIC
+                .iter()
+                .position(|t| *t == s.terrain)
+                .unwrap();
+            (PressureImage::new(s.rows, s.cols, 8, s.pixels.clone()), k)
+        })
+        .collect();
+    let data: Vec<Labelled> = images
+        .iter()
+        .map(|(image, class)| Labelled {
+            image,
+            class: *class,
+        })
+        .collect();
+    let opts = TrainOptions {
+        crop: Crop {
+            top: 0,
+            bottom: 3,
+            left: 6,
+            right: 0,
+        },
+        ..Default::default()
+    };
+    let (model, _) = train(&data, &classes, &opts).unwrap();
+    let path = dir.join("model.json");
+    model.save(&path).unwrap();
+    path
+}
+
+#[test]
+fn replay_prints_the_pipelines_decisions_with_the_logs_timestamps() {
+    let dir = std::env::temp_dir().join(format!("presrs-replay-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let model_path = small_model(&dir);
+    // 6 s of the robot on the default track, as candump would have logged it.
+    let mut robot = SimRobot::new(SimConfig::default(), 9);
+    let mut records = Vec::new();
+    let base = 1_700_000_000_000_000u64;
+    let mut t = 0;
+    while t < 6_000_000 {
+        t += 1000;
+        robot.advance_to(t, &mut |frame| {
+            records.push(Stamped {
+                t_us: base + t,
+                frame,
+            })
+        });
+    }
+    let log = dir.join("run.log");
+    let mut w = std::io::BufWriter::new(std::fs::File::create(&log).unwrap());
+    for r in &records {
+        protocol::candump::write_record(&mut w, "vcan0", r).unwrap();
+    }
+    drop(w);
+
+    let model = node::classifier::Model::load(&model_path).unwrap();
+    let mut p = StancePipeline::new(NodeConfig::default(), Some(model));
+    let mut want = Vec::new();
+    for r in &records {
+        p.on_frame(r, &mut |foot, tc| want.push((r.t_us, foot, tc)));
+    }
+    assert!(want.len() > 5, "only {} decisions in 6 s", want.len());
+
+    let out = Command::new(env!("CARGO_BIN_EXE_presrs"))
+        .args(["node", "--replay", log.to_str().unwrap()])
+        .args(["--model", model_path.to_str().unwrap(), "--json"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let got: Vec<serde_json::Value> = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(got.len(), want.len());
+    for (g, (t_us, foot, tc)) in got.iter().zip(&want) {
+        assert_eq!(g["t_us"], *t_us);
+        assert_eq!(g["foot"], *foot);
+        assert_eq!(g["step"], tc.step);
+        assert_eq!(g["terrain_id"], tc.terrain);
+        assert_eq!(g["flags"], tc.flags);
+    }
+
+    // A damaged log: the error names the line and the expected format, nothing is printed.
+    let bad = dir.join("bad.log");
+    let mut text = std::fs::read_to_string(&log).unwrap();
+    text.insert_str(0, "(1.0) vcan0 12Z#00\n");
+    std::fs::write(&bad, text).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_presrs"))
+        .args(["node", "--replay", bad.to_str().unwrap()])
+        .args(["--model", model_path.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("line 1") && err.contains("bad.log"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn the_example_configs_parse_and_equal_the_defaults() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let p = root.join("examples/node.toml");
+    let node = NodeConfig::from_toml(&std::fs::read_to_string(&p).unwrap(), "node.toml").unwrap();
+    assert_eq!(node, NodeConfig::default());
+    let p = root.join("examples/controller.toml");
+    let c = controller::ControllerConfig::parse(
+        &std::fs::read_to_string(&p).unwrap(),
+        "controller.toml",
+    )
+    .unwrap();
+    assert_eq!(c, controller::ControllerConfig::default());
+}
