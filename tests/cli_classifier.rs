@@ -154,5 +154,9 @@ fn train_eval_classify_features_repair() {
     ]);
     assert!(!ok && err.contains("not a PreSRS model"), "{err}");
     let (ok, _, err) = presrs(&["sim"]);
+    assert!(!ok && err.contains("--iface"), "{err}");
+    let (ok, _, err) = presrs(&["node", "--model", "m.json"]);
+    assert!(!ok && err.contains("--iface"), "{err}");
+    let (ok, _, err) = presrs(&["experiment"]);
     assert!(!ok && err.contains("not implemented yet"), "{err}");
 }
