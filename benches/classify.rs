@@ -6,12 +6,12 @@
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use node::classifier::image::{Crop, PressureImage};
-use node::classifier::model::ClassInfo;
 use node::classifier::pwe::Classifier;
 use node::classifier::train::{Labelled, TrainOptions, train};
+use presrs::simdata::TrainingSet;
 use sim::dataset::{Kind, Options, generate};
 
-fn static_set(n: usize, seed: u64) -> (Vec<PressureImage>, Vec<usize>, Vec<ClassInfo>) {
+fn static_set(n: usize, seed: u64) -> TrainingSet {
     let samples = generate(&Options {
         kind: Kind::Static,
         n: Some(n),
@@ -19,24 +19,7 @@ fn static_set(n: usize, seed: u64) -> (Vec<PressureImage>, Vec<usize>, Vec<Class
         damage_pct: 0.0,
         seed,
     });
-    let mut classes: Vec<ClassInfo> = Vec::new();
-    let mut images = Vec::new();
-    let mut labels = Vec::new();
-    for s in samples {
-        let k = match classes.iter().position(|c| c.terrain_id == s.terrain.id()) {
-            Some(k) => k,
-            None => {
-                classes.push(ClassInfo {
-                    name: s.terrain.name().to_string(),
-                    terrain_id: s.terrain.id(),
-                });
-                classes.len() - 1
-            }
-        };
-        images.push(PressureImage::new(s.rows, s.cols, 8, s.pixels));
-        labels.push(k);
-    }
-    (images, labels, classes)
+    TrainingSet::from_samples(samples, Kind::Static.terrains())
 }
 
 fn options() -> TrainOptions {
@@ -54,13 +37,10 @@ fn options() -> TrainOptions {
 
 fn bench(c: &mut Criterion) {
     // 20 per class x 4 classes = the 80 stored samples; the other 20 per class are test images.
-    let (images, labels, classes) = static_set(40, 7);
-    let data: Vec<Labelled<'_>> = images
-        .iter()
-        .zip(&labels)
-        .map(|(image, &class)| Labelled { image, class })
-        .collect();
-    let (model, split) = match train(&data, &classes, &options()) {
+    let set = static_set(40, 7);
+    let (classes, images, labels) = (&set.classes, &set.images, &set.labels);
+    let data = set.labelled();
+    let (model, split) = match train(&data, classes, &options()) {
         Ok(m) => m,
         Err(e) => panic!("training the bench model: {e}"),
     };
@@ -114,7 +94,7 @@ fn bench(c: &mut Criterion) {
     let mut g = c.benchmark_group("train");
     g.sample_size(20);
     g.bench_function("train on 80 samples (PCA 52, kernel width on V)", |b| {
-        b.iter(|| train(&train_data, &classes, &options()).map(|(m, _)| m.kernel_width))
+        b.iter(|| train(&train_data, classes, &options()).map(|(m, _)| m.kernel_width))
     });
     g.finish();
 }

@@ -11,7 +11,7 @@ use anyhow::{Context, Result};
 use controller::{Controller, ControllerConfig};
 use protocol::messages::{self, Message};
 
-use crate::runtime::{Backoff, Signals, open_with_retry};
+use crate::runtime::{Backoff, Signals, after_bus_error, open_with_retry};
 
 #[derive(clap::Args)]
 pub struct ControllerArgs {
@@ -72,11 +72,7 @@ pub fn run(a: ControllerArgs) -> Result<ExitCode> {
                 }
                 Ok(None) => {}
                 Err(e) => {
-                    tracing::warn!(
-                        "controller receive: {e}; reopening in {:?}",
-                        backoff.delay()
-                    );
-                    backoff.wait(&signals.stop);
+                    after_bus_error("controller receive", &e, &mut backoff, &signals.stop);
                     continue 'open;
                 }
             }
@@ -92,8 +88,7 @@ pub fn run(a: ControllerArgs) -> Result<ExitCode> {
                     continue;
                 };
                 if let Err(e) = bus.send(&f) {
-                    tracing::warn!("controller send: {e}; reopening in {:?}", backoff.delay());
-                    backoff.wait(&signals.stop);
+                    after_bus_error("controller send", &e, &mut backoff, &signals.stop);
                     continue 'open;
                 }
             }

@@ -9,9 +9,10 @@ use std::time::Duration;
 
 use anyhow::{Context, Result};
 use controller::{Controller, ControllerConfig};
-use node::classifier::train::{Labelled, TrainOptions, train};
-use node::classifier::{ClassInfo, Crop, Model, PressureImage};
+use node::classifier::train::{TrainOptions, train};
+use node::classifier::{Crop, Model};
 use node::{NodeConfig, StancePipeline};
+use presrs::simdata::TrainingSet;
 use protocol::bus::{CanBus, InProcBus};
 use protocol::clock::ManualClock;
 use protocol::messages::{self, Message, NodeState, NodeStatus};
@@ -32,7 +33,7 @@ fn cache_path() -> PathBuf {
 
 /// A model for the dynamic terrains from simulator data of all three gaits.
 pub fn sim_model(seed: u64) -> Result<Model> {
-    let mut images = Vec::new();
+    let mut samples = Vec::new();
     for (i, g) in controller::Gait::paper_gaits().into_iter().enumerate() {
         let opts = sim::dataset::Options {
             kind: sim::dataset::Kind::Dynamic,
@@ -41,32 +42,9 @@ pub fn sim_model(seed: u64) -> Result<Model> {
             damage_pct: 0.0,
             seed: seed + i as u64,
         };
-        images.extend(sim::dataset::generate(&opts));
+        samples.extend(sim::dataset::generate(&opts));
     }
-    let classes: Vec<ClassInfo> = Terrain::DYNAMIC
-        .iter()
-        .map(|t| ClassInfo {
-            name: t.name().to_string(),
-            terrain_id: t.id(),
-        })
-        .collect();
-    let imgs: Vec<(PressureImage, usize)> = images
-        .iter()
-        .map(|s| {
-            let k = Terrain::DYNAMIC
-                .iter()
-                .position(|t| *t == s.terrain)
-                .unwrap_or(0);
-            (PressureImage::new(s.rows, s.cols, 8, s.pixels.clone()), k)
-        })
-        .collect();
-    let data: Vec<Labelled> = imgs
-        .iter()
-        .map(|(image, class)| Labelled {
-            image,
-            class: *class,
-        })
-        .collect();
+    let set = TrainingSet::from_samples(samples, &Terrain::DYNAMIC);
     let opts = TrainOptions {
         per_class: 45,
         train: 30,
@@ -79,7 +57,8 @@ pub fn sim_model(seed: u64) -> Result<Model> {
         seed,
         ..Default::default()
     };
-    let (model, _) = train(&data, &classes, &opts).context("training the demo model")?;
+    let (model, _) =
+        train(&set.labelled(), &set.classes, &opts).context("training the demo model")?;
     Ok(model)
 }
 

@@ -24,7 +24,7 @@ use node::{NodeConfig, StancePipeline};
 use protocol::frame::{CanFrame, Stamped};
 use protocol::messages::{self, Message, NodeState, NodeStatus, TerrainClass};
 
-use crate::runtime::{Backoff, Signals, open_with_retry};
+use crate::runtime::{Backoff, Signals, after_bus_error, open_with_retry};
 
 #[derive(clap::Args)]
 pub struct NodeArgs {
@@ -225,8 +225,7 @@ fn receive_loop(iface: &str, sig: &Signals, sh: &Shared, to_pipeline: Sender<Sta
                 Err(e) => {
                     sh.bus_errors.fetch_add(1, Ordering::Relaxed);
                     sh.state.store(NodeState::Degraded as u8, Ordering::Relaxed);
-                    tracing::warn!("receive: {e}; reopening in {:?}", backoff.delay());
-                    if !backoff.wait(&sig.stop) {
+                    if !after_bus_error("receive", &e, &mut backoff, &sig.stop) {
                         return;
                     }
                     break;
@@ -248,6 +247,7 @@ fn pipeline_loop(
     let mut pipeline = StancePipeline::new(cfg, Some(model));
     let mut decided: Vec<(u8, TerrainClass)> = Vec::with_capacity(8);
     let mut last_log = Instant::now();
+    let mut last_publish = Instant::now();
     let mut last_counters = pipeline.counters;
     loop {
         if sig.take_reload() {
@@ -279,7 +279,12 @@ fn pipeline_loop(
             }
             Err(RecvTimeoutError::Disconnected) => break,
         }
-        // Counters for NodeStatus, and a log line every 10 s (never per frame).
+        // Counters for NodeStatus every 50 ms (twice per status at 10 Hz), a log line every
+        // 10 s: never per frame.
+        if last_publish.elapsed() < Duration::from_millis(50) {
+            continue;
+        }
+        last_publish = Instant::now();
         let r = pipeline.reassembly_stats();
         sh.crc_failures.store(r.crc_failures, Ordering::Relaxed);
         sh.incomplete.store(r.incomplete, Ordering::Relaxed);
@@ -326,12 +331,8 @@ fn send_loop(
         loop {
             let stopping = sig.stopping();
             let wait = next_status.saturating_duration_since(Instant::now());
-            let frame = match from_pipeline.recv_timeout(wait) {
-                Ok(f) => Some(f),
-                Err(RecvTimeoutError::Timeout) => None,
-                Err(RecvTimeoutError::Disconnected) => None,
-            };
-            let mut to_send: [Option<CanFrame>; 2] = [frame, None];
+            // Nothing (timeout, or the pipeline has stopped) still sends the status when due.
+            let mut to_send = [from_pipeline.recv_timeout(wait).ok(), None];
             if Instant::now() >= next_status || stopping {
                 next_status += status_period;
                 heartbeat = heartbeat.wrapping_add(1);
@@ -360,8 +361,7 @@ fn send_loop(
                         sh.bus_errors.fetch_add(1, Ordering::Relaxed);
                         sh.tx_dropped.fetch_add(1, Ordering::Relaxed);
                         sh.state.store(NodeState::Degraded as u8, Ordering::Relaxed);
-                        tracing::warn!("send: {e}; reopening in {:?}", backoff.delay());
-                        if !backoff.wait(&sig.stop) {
+                        if !after_bus_error("send", &e, &mut backoff, &sig.stop) {
                             break 'open;
                         }
                         continue 'open;

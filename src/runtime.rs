@@ -79,6 +79,19 @@ impl Backoff {
     }
 }
 
+/// After a bus error on an open interface: logs it with the delay, waits (growing the backoff so
+/// that a flapping interface is not hammered), and returns false when asked to stop. The caller
+/// then reopens with [`open_with_retry`].
+pub fn after_bus_error(
+    role: &str,
+    e: &protocol::BusError,
+    backoff: &mut Backoff,
+    stop: &AtomicBool,
+) -> bool {
+    tracing::warn!(role, "{e}; reopening in {:?}", backoff.delay());
+    backoff.wait(stop)
+}
+
 /// Opens `iface`, retrying with backoff until it opens or `stop` is set. Each failure is logged
 /// once per attempt with the fix the error names; `on_fail` sees it (for a status flag).
 pub fn open_with_retry(

@@ -17,7 +17,7 @@ use protocol::messages::{self, Message};
 use sim::faults::FaultParams;
 use sim::runner::{SimConfig, SimRobot, Track};
 
-use crate::runtime::{Backoff, Signals, open_with_retry};
+use crate::runtime::{Backoff, Signals, after_bus_error, open_with_retry};
 
 #[derive(clap::Args)]
 pub struct SimArgs {
@@ -137,7 +137,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
                     tracing::warn!("sim send: {e} ({send_errors} send errors so far)");
                 }
                 if matches!(e, protocol::BusError::Down { .. }) {
-                    backoff.wait(&signals.stop);
+                    after_bus_error("sim", &e, &mut backoff, &signals.stop);
                     if let Some(b) = open_with_retry(&a.iface, &signals.stop, "sim", &mut || {}) {
                         bus = b;
                     }

@@ -4,9 +4,10 @@
 
 use std::process::Command;
 
-use node::classifier::train::{Labelled, TrainOptions, train};
-use node::classifier::{ClassInfo, Crop, PressureImage};
+use node::classifier::Crop;
+use node::classifier::train::{TrainOptions, train};
 use node::{NodeConfig, StancePipeline};
+use presrs::simdata::TrainingSet;
 use protocol::Stamped;
 use sim::runner::{SimConfig, SimRobot};
 use sim::terrain::Terrain;
@@ -19,30 +20,7 @@ fn small_model(dir: &std::path::Path) -> std::path::PathBuf {
         damage_pct: 0.0,
         seed: 4,
     });
-    let classes: Vec<ClassInfo> = Terrain::DYNAMIC
-        .iter()
-        .map(|t| ClassInfo {
-            name: t.name().into(),
-            terrain_id: t.id(),
-        })
-        .collect();
-    let images: Vec<(PressureImage, usize)> = samples
-        .iter()
-        .map(|s| {
-            let k = Terrain::DYNAMIC
-                .iter()
-                .position(|t| *t == s.terrain)
-                .unwrap();
-            (PressureImage::new(s.rows, s.cols, 8, s.pixels.clone()), k)
-        })
-        .collect();
-    let data: Vec<Labelled> = images
-        .iter()
-        .map(|(image, class)| Labelled {
-            image,
-            class: *class,
-        })
-        .collect();
+    let set = TrainingSet::from_samples(samples, &Terrain::DYNAMIC);
     let opts = TrainOptions {
         crop: Crop {
             top: 0,
@@ -52,7 +30,7 @@ fn small_model(dir: &std::path::Path) -> std::path::PathBuf {
         },
         ..Default::default()
     };
-    let (model, _) = train(&data, &classes, &opts).unwrap();
+    let (model, _) = train(&set.labelled(), &set.classes, &opts).unwrap();
     let path = dir.join("model.json");
     model.save(&path).unwrap();
     path

@@ -119,6 +119,27 @@ struct Foot {
     health: LineHealth,
 }
 
+impl Foot {
+    fn new(input: usize, rows: usize, cols: usize) -> Self {
+        Self {
+            raw: false,
+            raw_since: 0,
+            state: false,
+            have_raw: false,
+            touchdown_us: 0,
+            decided: true,
+            step: 0,
+            best_err: None,
+            best_rx_us: 0,
+            best: vec![0; input],
+            sum_lp: [0.0; MAX_CLASSES],
+            used: 0,
+            repaired: false,
+            health: LineHealth::new(rows, cols),
+        }
+    }
+}
+
 /// The node's pipeline, one thread's worth.
 pub struct StancePipeline {
     cfg: NodeConfig,
@@ -145,37 +166,26 @@ impl StancePipeline {
     }
 
     /// Installs a model (SIGHUP reload); sizes every buffer for it.
+    ///
+    /// Stance tracking does not depend on the model, so a reload keeps each foot's switch state,
+    /// stance and step count: the step in progress still gets its one TerrainClass. Only what the
+    /// model sizes changes: a sample of another image size is dropped, and the sensor health is
+    /// learned afresh when the working image's size changes.
     pub fn set_model(&mut self, model: Option<Model>) {
         let (rows, cols) = model.as_ref().and_then(|m| m.work_size()).unwrap_or((1, 1));
         let input = model.as_ref().map_or(1, |m| m.input_rows * m.input_cols);
-        let same_size = self.classifier.as_ref().is_some_and(|c| {
-            let m = c.model();
-            c.work_size() == (rows, cols) && m.input_rows * m.input_cols == input
-        });
         self.classifier = model.map(Classifier::new);
-        if same_size && !self.feet.is_empty() {
-            // A reload of a model for the same images keeps each foot's stance, step count and
-            // learned sensor health: the step in progress still gets its one TerrainClass.
-            return;
+        self.feet
+            .resize_with(self.cfg.feet as usize, || Foot::new(input, rows, cols));
+        for f in &mut self.feet {
+            if f.best.len() != input {
+                f.best = vec![0; input];
+                f.best_err = None;
+            }
+            if (f.health.rows, f.health.cols) != (rows, cols) {
+                f.health = LineHealth::new(rows, cols);
+            }
         }
-        self.feet = (0..self.cfg.feet)
-            .map(|_| Foot {
-                raw: false,
-                raw_since: 0,
-                state: false,
-                have_raw: false,
-                touchdown_us: 0,
-                decided: true,
-                step: 0,
-                best_err: None,
-                best_rx_us: 0,
-                best: vec![0; input],
-                sum_lp: [0.0; MAX_CLASSES],
-                used: 0,
-                repaired: false,
-                health: LineHealth::new(rows, cols),
-            })
-            .collect();
     }
 
     pub fn model(&self) -> Option<&Model> {

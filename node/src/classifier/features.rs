@@ -118,14 +118,10 @@ impl FeatureExtractor {
 /// X[k] for 0 < k < N/2 from the half-length transform Z, as magnitudes into `out[1..N/2]`.
 fn split_spectrum(z: &[Complex<f32>], twiddles: &[Complex<f32>], out: &mut [f32]) {
     #[cfg(target_arch = "x86_64")]
-    {
-        // Eight lanes instead of baseline x86-64's four, where the CPU has them (checked once
-        // per call: a cached flag).
-        if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
-            // SAFETY: the CPU supports the features the function was compiled for.
-            unsafe { split_spectrum_avx2(z, twiddles, out) };
-            return;
-        }
+    if super::has_avx2_fma() {
+        // SAFETY: the CPU supports the features the function was compiled for.
+        unsafe { split_spectrum_avx2(z, twiddles, out) };
+        return;
     }
     split_spectrum_portable(z, twiddles, out);
 }

@@ -266,14 +266,10 @@ impl Classifier {
 /// (52 x 1025 multiply-adds for the paper's sizes).
 fn project(w: &[f32], c: &[f32], q: &mut [f32]) {
     #[cfg(target_arch = "x86_64")]
-    {
-        // The portable build targets baseline x86-64 (SSE2); robots' and CI's CPUs nearly all
-        // have AVX2 and FMA, which halve this loop. Checked once per call (a cached flag read).
-        if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
-            // SAFETY: the CPU supports the features the function was compiled for.
-            unsafe { project_avx2(w, c, q) };
-            return;
-        }
+    if super::has_avx2_fma() {
+        // SAFETY: the CPU supports the features the function was compiled for.
+        unsafe { project_avx2(w, c, q) };
+        return;
     }
     project_portable(w, c, q);
 }
