@@ -26,8 +26,9 @@ fn cache_path() -> PathBuf {
         .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))
         .unwrap_or_else(std::env::temp_dir);
     base.join("presrs").join(format!(
-        "demo-model-v{}.json",
-        node::classifier::model::MODEL_VERSION
+        "demo-model-v{}-sim{}.json",
+        node::classifier::model::MODEL_VERSION,
+        sim::SIM_VERSION
     ))
 }
 
@@ -62,7 +63,7 @@ pub fn sim_model(seed: u64) -> Result<Model> {
     Ok(model)
 }
 
-fn load_or_train(model: Option<&Path>) -> Result<Model> {
+pub(crate) fn load_or_train(model: Option<&Path>) -> Result<Model> {
     if let Some(p) = model {
         return Model::load(p).with_context(|| format!("loading --model {}", p.display()));
     }
@@ -84,14 +85,14 @@ fn load_or_train(model: Option<&Path>) -> Result<Model> {
 }
 
 #[derive(Clone, Debug, serde::Serialize)]
-struct StepRow {
-    t_s: f64,
-    step: u16,
-    truth: String,
-    classified: String,
-    confidence_pct: f64,
-    gait: u8,
-    speed_m_s: f64,
+pub(crate) struct StepRow {
+    pub t_s: f64,
+    pub step: u16,
+    pub truth: String,
+    pub classified: String,
+    pub confidence_pct: f64,
+    pub gait: u8,
+    pub speed_m_s: f64,
 }
 
 #[derive(clap::Args)]
@@ -119,6 +120,21 @@ pub struct DemoArgs {
 pub fn run(a: DemoArgs) -> Result<ExitCode> {
     let track = crate::sim_cmd::load_track(a.track.as_deref())?;
     let model = load_or_train(a.model.as_deref())?;
+    let ctrl_cfg = ControllerConfig::default();
+    let rows = closed_loop(&track, model, &ctrl_cfg, a.steps, a.seed, !a.json)?;
+    summarize(&rows, &track, &ctrl_cfg, &a)
+}
+
+/// Simulator, node and controller on one in-process bus, 1 ms at a time, for `steps` steps:
+/// one row per TerrainClass (printed as it comes when `show`).
+pub(crate) fn closed_loop(
+    track: &Track,
+    model: Model,
+    ctrl_cfg: &ControllerConfig,
+    steps: usize,
+    seed: u64,
+    show: bool,
+) -> Result<Vec<StepRow>> {
     let clock = ManualClock::new(0);
     let bus = InProcBus::with_clock(Arc::new(clock.clone()), 1 << 16);
     let (mut sim_ep, mut node_ep, mut ctrl_ep) = (bus.endpoint(), bus.endpoint(), bus.endpoint());
@@ -127,22 +143,20 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
         ..Default::default()
     };
     let ids = sim_cfg.ids.clone();
-    let mut robot = SimRobot::new(sim_cfg, a.seed);
+    let mut robot = SimRobot::new(sim_cfg, seed);
     let mut pipeline = StancePipeline::new(NodeConfig::default(), Some(model));
-    let ctrl_cfg = ControllerConfig::default();
     let mut ctrl = Controller::new(ctrl_cfg.clone());
     let mut rows: Vec<StepRow> = Vec::new();
     let mut t_us = 0u64;
     let mut next_status = 0u64;
     let mut heartbeat = 0u8;
     let zero = Duration::ZERO;
-    let limit_us = (a.steps as u64 + 20) * 1_000_000;
-    let show = !a.json;
+    let limit_us = (steps as u64 + 20) * 1_000_000;
     // Reused every millisecond: the loop allocates only when a step is logged.
     let mut sent = Vec::new();
     let mut decided = Vec::new();
     let mut out = Vec::new();
-    while rows.len() < a.steps && t_us < limit_us {
+    while rows.len() < steps && t_us < limit_us {
         t_us += 1000;
         clock.set_us(t_us);
         robot.advance_to(t_us, &mut |f| sent.push(f));
@@ -217,7 +231,7 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
             robot.on_frame(&st.frame);
         }
     }
-    summarize(&rows, &track, &ctrl_cfg, &a)
+    Ok(rows)
 }
 
 fn summarize(

@@ -6,9 +6,11 @@ use std::process::ExitCode;
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 
+mod bench_node;
 mod cli;
 mod controller_cmd;
 mod demo;
+mod experiment;
 mod node_cmd;
 mod runtime;
 mod sim_cmd;
@@ -44,6 +46,9 @@ enum Cmd {
     Sim(sim_cmd::SimArgs),
     /// Simulator, node and controller in one process on the in-process bus: the closed loop.
     Demo(demo::DemoArgs),
+    /// The node's speed: sampled frame -> TerrainClass latency, CPU and memory with N feet at
+    /// 100 Hz (in-process, or `presrs node` on `--iface`).
+    BenchNode(bench_node::BenchNodeArgs),
     /// Train a terrain classifier on DIR/<class>/<images> (the paper's 13/7 split per class).
     Train {
         #[arg(long)]
@@ -128,13 +133,8 @@ enum Cmd {
         #[arg(long, default_value_t = 1)]
         seed: u64,
     },
-    /// Reproduce the paper's tables and figures (not implemented yet: issue 7).
-    Experiment,
-}
-
-fn not_yet(name: &str, issue: u32) -> Result<ExitCode> {
-    eprintln!("presrs {name}: not implemented yet (tracked in issue {issue}).");
-    Ok(ExitCode::from(2))
+    /// Reproduce the paper's tables and figures on simulated data: Markdown and PNG plots.
+    Experiment(experiment::ExperimentArgs),
 }
 
 fn run(cli: Cli) -> Result<ExitCode> {
@@ -168,6 +168,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Cmd::Controller(a) => controller_cmd::run(a),
         Cmd::Sim(a) => sim_cmd::run(a),
         Cmd::Demo(args) => demo::run(args),
+        Cmd::BenchNode(args) => bench_node::run(args),
         Cmd::Train {
             data,
             out,
@@ -211,7 +212,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             damage,
             seed,
         } => cli::dataset(kind, &out, n, &gait, damage, seed),
-        Cmd::Experiment => not_yet("experiment", 7),
+        Cmd::Experiment(args) => experiment::run(args),
     }
 }
 

@@ -24,7 +24,7 @@ use node::{NodeConfig, StancePipeline};
 use protocol::frame::{CanFrame, Stamped};
 use protocol::messages::{self, Message, NodeState, NodeStatus, TerrainClass};
 
-use crate::runtime::{Backoff, Signals, after_bus_error, open_with_retry};
+use crate::runtime::{Backoff, BusSource, Signals, after_bus_error, open_source_with_retry};
 
 #[derive(clap::Args)]
 pub struct NodeArgs {
@@ -60,7 +60,17 @@ pub fn run(a: NodeArgs) -> Result<ExitCode> {
     let model = Model::load(&a.model).with_context(|| format!("--model {}", a.model.display()))?;
     match (&a.replay, &a.iface) {
         (Some(log), _) => replay(cfg, model, log, a.json),
-        (None, Some(iface)) => live(cfg, model, &a.model, iface),
+        (None, Some(iface)) => {
+            let signals = Signals::install()?;
+            live(
+                cfg,
+                model,
+                &a.model,
+                BusSource::Iface(iface.clone()),
+                signals,
+            )?;
+            Ok(ExitCode::SUCCESS)
+        }
         (None, None) => anyhow::bail!("give --iface IFACE or --replay FILE.log"),
     }
 }
@@ -124,17 +134,17 @@ fn print_class(t_us: u64, foot: u8, tc: &TerrainClass, json: bool) {
 
 /// What the send thread reports in NodeStatus, written by the other threads.
 #[derive(Default)]
-struct Shared {
+pub struct Shared {
     state: AtomicU8,
     model_id: AtomicU64,
     damage_bits: AtomicU64,
     crc_failures: AtomicU64,
     incomplete: AtomicU64,
-    bus_errors: AtomicU64,
-    rx_frames: AtomicU64,
-    rx_dropped: AtomicU64,
-    tx_frames: AtomicU64,
-    tx_dropped: AtomicU64,
+    pub bus_errors: AtomicU64,
+    pub rx_frames: AtomicU64,
+    pub rx_dropped: AtomicU64,
+    pub tx_frames: AtomicU64,
+    pub tx_dropped: AtomicU64,
 }
 
 fn state_from(v: u8) -> NodeState {
@@ -147,13 +157,20 @@ fn state_from(v: u8) -> NodeState {
     }
 }
 
-fn live(cfg: NodeConfig, model: Model, model_path: &Path, iface: &str) -> Result<ExitCode> {
-    let signals = Signals::install()?;
+/// The live node on `source` until `signals` says stop; returns its counters.
+pub fn live(
+    cfg: NodeConfig,
+    model: Model,
+    model_path: &Path,
+    source: BusSource,
+    signals: Signals,
+) -> Result<Arc<Shared>> {
     let shared = Arc::new(Shared::default());
     shared.model_id.store(model.id(), Ordering::Relaxed);
     // About 0.4 s of one foot's FD tactile stream: room for the pipeline to fall briefly behind.
     let (rx_tx, rx_rx) = bounded::<Stamped>(16_384);
     let (out_tx, out_rx) = bounded::<CanFrame>(256);
+    let iface = source.label().to_string();
     tracing::info!(
         %iface,
         model = %model_path.display(),
@@ -167,10 +184,10 @@ fn live(cfg: NodeConfig, model: Model, model_path: &Path, iface: &str) -> Result
     let ids = cfg.ids.clone();
 
     let receive = {
-        let (iface, sig, sh) = (iface.to_string(), signals.clone(), shared.clone());
+        let (src, sig, sh) = (source.clone(), signals.clone(), shared.clone());
         std::thread::Builder::new()
             .name("receive".into())
-            .spawn(move || receive_loop(&iface, &sig, &sh, rx_tx))?
+            .spawn(move || receive_loop(&src, &sig, &sh, rx_tx))?
     };
     let pipeline = {
         let (sig, sh, path) = (signals.clone(), shared.clone(), model_path.to_path_buf());
@@ -179,10 +196,10 @@ fn live(cfg: NodeConfig, model: Model, model_path: &Path, iface: &str) -> Result
             .spawn(move || pipeline_loop(cfg, model, &path, &sig, &sh, rx_rx, out_tx))?
     };
     let send = {
-        let (iface, sig, sh) = (iface.to_string(), signals.clone(), shared.clone());
+        let (src, sig, sh) = (source, signals.clone(), shared.clone());
         std::thread::Builder::new()
             .name("send".into())
-            .spawn(move || send_loop(&iface, &sig, &sh, out_rx, &ids, status_period))?
+            .spawn(move || send_loop(&src, &sig, &sh, out_rx, &ids, status_period))?
     };
     for (name, h) in [("receive", receive), ("pipeline", pipeline), ("send", send)] {
         if h.join().is_err() {
@@ -197,14 +214,14 @@ fn live(cfg: NodeConfig, model: Model, model_path: &Path, iface: &str) -> Result
         bus_errors = shared.bus_errors.load(Ordering::Relaxed),
         "presrs node stopped"
     );
-    Ok(ExitCode::SUCCESS)
+    Ok(shared)
 }
 
-fn receive_loop(iface: &str, sig: &Signals, sh: &Shared, to_pipeline: Sender<Stamped>) {
+fn receive_loop(source: &BusSource, sig: &Signals, sh: &Shared, to_pipeline: Sender<Stamped>) {
     let mut backoff = Backoff::default();
     let degrade = &mut || sh.state.store(NodeState::Degraded as u8, Ordering::Relaxed);
     while !sig.stopping() {
-        let Some(mut bus) = open_with_retry(iface, &sig.stop, "receive", degrade) else {
+        let Some(mut bus) = open_source_with_retry(source, &sig.stop, "receive", degrade) else {
             break;
         };
         backoff.reset();
@@ -312,7 +329,7 @@ fn pipeline_loop(
 }
 
 fn send_loop(
-    iface: &str,
+    source: &BusSource,
     sig: &Signals,
     sh: &Shared,
     from_pipeline: Receiver<CanFrame>,
@@ -323,7 +340,7 @@ fn send_loop(
     let mut backoff = Backoff::default();
     let degrade = &mut || sh.state.store(NodeState::Degraded as u8, Ordering::Relaxed);
     'open: while !sig.stopping() {
-        let Some(mut bus) = open_with_retry(iface, &sig.stop, "send", degrade) else {
+        let Some(mut bus) = open_source_with_retry(source, &sig.stop, "send", degrade) else {
             break;
         };
         backoff.reset();

@@ -7,7 +7,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use anyhow::{Context, Result};
-use protocol::bus::{CanBus, SocketCanBus};
+use protocol::BusError;
+use protocol::bus::{CanBus, InProcBus, SocketCanBus};
 
 /// Set by SIGINT/SIGTERM (`stop`) and SIGHUP (`reload`, cleared by whoever acts on it).
 #[derive(Clone)]
@@ -30,6 +31,14 @@ impl Signals {
         signal_hook::flag::register(SIGHUP, s.reload.clone())
             .context("installing the SIGHUP handler")?;
         Ok(s)
+    }
+
+    /// Flags no signal sets: a caller in this process (the node benchmark) stops the threads.
+    pub fn manual() -> Self {
+        Self {
+            stop: Arc::new(AtomicBool::new(false)),
+            reload: Arc::new(AtomicBool::new(false)),
+        }
     }
 
     pub fn stopping(&self) -> bool {
@@ -92,6 +101,30 @@ pub fn after_bus_error(
     backoff.wait(stop)
 }
 
+/// Where a process's threads get their bus handles: a CAN interface, or an in-process bus (the
+/// node benchmark runs the node's own threads on one).
+#[derive(Clone)]
+pub enum BusSource {
+    Iface(String),
+    InProc(InProcBus),
+}
+
+impl BusSource {
+    pub fn open(&self) -> Result<Box<dyn CanBus>, BusError> {
+        match self {
+            BusSource::Iface(i) => Ok(Box::new(SocketCanBus::open(i)?)),
+            BusSource::InProc(b) => Ok(Box::new(b.endpoint())),
+        }
+    }
+
+    pub fn label(&self) -> &str {
+        match self {
+            BusSource::Iface(i) => i,
+            BusSource::InProc(_) => "inproc",
+        }
+    }
+}
+
 /// Opens `iface`, retrying with backoff until it opens or `stop` is set. Each failure is logged
 /// once per attempt with the fix the error names; `on_fail` sees it (for a status flag).
 pub fn open_with_retry(
@@ -100,12 +133,23 @@ pub fn open_with_retry(
     role: &str,
     on_fail: &mut dyn FnMut(),
 ) -> Option<Box<dyn CanBus>> {
+    open_source_with_retry(&BusSource::Iface(iface.to_string()), stop, role, on_fail)
+}
+
+/// [`open_with_retry`] for any [`BusSource`].
+pub fn open_source_with_retry(
+    source: &BusSource,
+    stop: &AtomicBool,
+    role: &str,
+    on_fail: &mut dyn FnMut(),
+) -> Option<Box<dyn CanBus>> {
     let mut backoff = Backoff::default();
+    let iface = source.label();
     loop {
-        match SocketCanBus::open(iface) {
+        match source.open() {
             Ok(b) => {
                 tracing::info!(%iface, role, "CAN interface open");
-                return Some(Box::new(b));
+                return Some(b);
             }
             Err(e) => {
                 on_fail();

@@ -157,6 +157,6 @@ fn train_eval_classify_features_repair() {
     assert!(!ok && err.contains("--iface"), "{err}");
     let (ok, _, err) = presrs(&["node", "--model", "m.json"]);
     assert!(!ok && err.contains("--iface"), "{err}");
-    let (ok, _, err) = presrs(&["experiment"]);
-    assert!(!ok && err.contains("not implemented yet"), "{err}");
+    let (ok, _, err) = presrs(&["experiment", "tables"]);
+    assert!(!ok && err.contains("invalid value 'tables'"), "{err}");
 }

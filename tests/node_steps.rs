@@ -40,3 +40,49 @@ fn exactly_one_terrain_class_per_step_despite_switch_bounce() {
         decided.len() + (steps - decided.len())
     );
 }
+
+/// The single-frame rule decides on the arrival of the frame nearest 70 ms, not on the frame
+/// after it: every classified step's latency (sampled frame received -> decision) is zero in
+/// this harness, where a frame's receive time is its 1 ms tick. Waiting for the next frame
+/// would show 10 000 µs here.
+#[test]
+fn the_decision_comes_with_the_sampled_frame_not_a_frame_later() {
+    let samples = sim::dataset::generate(&sim::dataset::Options {
+        kind: sim::dataset::Kind::Dynamic,
+        n: Some(20),
+        gait: controller::Gait::g2(),
+        damage_pct: 0.0,
+        seed: 3,
+    });
+    let set = presrs::simdata::TrainingSet::from_samples(samples, &sim::terrain::Terrain::DYNAMIC);
+    let opts = node::classifier::train::TrainOptions {
+        per_class: 20,
+        train: 13,
+        ..Default::default()
+    };
+    let model = match node::classifier::train::train(&set.labelled(), &set.classes, &opts) {
+        Ok((m, _)) => m,
+        Err(e) => panic!("training: {e}"),
+    };
+    let mut robot = SimRobot::new(SimConfig::default(), 5);
+    let mut p = StancePipeline::new(NodeConfig::default(), Some(model));
+    let mut latencies = Vec::new();
+    let mut t = 0u64;
+    while t < 3_000_000 {
+        t += 1000;
+        let mut frames = Vec::new();
+        robot.advance_to(t, &mut |f| frames.push(f));
+        for frame in frames {
+            p.on_frame(&Stamped { t_us: t, frame }, &mut |_, tc| {
+                if tc.flags & flags::NO_SAMPLE == 0 {
+                    latencies.push(tc.latency_us)
+                }
+            });
+        }
+    }
+    assert!(latencies.len() > 5, "{} classified steps", latencies.len());
+    assert!(
+        latencies.iter().all(|&l| l == 0),
+        "latencies (µs): {latencies:?}"
+    );
+}

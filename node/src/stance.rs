@@ -117,6 +117,10 @@ struct Foot {
     /// A line of this stance's frames was filled.
     repaired: bool,
     health: LineHealth,
+    /// Timestamp of this foot's last image and the frame period it implies (µs), so the
+    /// single-frame rule can decide on the nearest frame without waiting for the next one.
+    last_image_us: Option<u32>,
+    period_us: Option<u32>,
 }
 
 impl Foot {
@@ -136,6 +140,8 @@ impl Foot {
             used: 0,
             repaired: false,
             health: LineHealth::new(rows, cols),
+            last_image_us: None,
+            period_us: None,
         }
     }
 }
@@ -280,6 +286,12 @@ impl StancePipeline {
         let [w0, w1] = [self.cfg.window_ms[0] * 1000, self.cfg.window_ms[1] * 1000];
         let multi = self.cfg.multi_frame;
         let f = &mut self.feet[foot as usize];
+        if let Some(last) = f.last_image_us {
+            let p = ts.wrapping_sub(last);
+            // A plausible tactile frame period (the PreSRS runs at 100 Hz: 10 ms).
+            f.period_us = (1_000..=50_000).contains(&p).then_some(p).or(f.period_us);
+        }
+        f.last_image_us = Some(ts);
         if !f.state || f.decided {
             return;
         }
@@ -322,8 +334,11 @@ impl StancePipeline {
             f.best.copy_from_slice(img.pixels());
             f.best_rx_us = rx_us;
         }
-        // The next frame can only be further from the sample time: decide now.
-        if dt >= sample_us {
+        // Decide as soon as the next frame can only be further from the sample time: at or past
+        // it, or (with a known frame period) less than half a period before it. Waiting for the
+        // next frame would add a whole period to every decision's latency.
+        let next_further = f.period_us.is_some_and(|p| dt + p / 2 >= sample_us);
+        if dt >= sample_us || next_further {
             self.decide(foot, out);
         }
     }

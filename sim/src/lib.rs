@@ -7,3 +7,7 @@ pub mod hopper;
 pub mod runner;
 pub mod skin;
 pub mod terrain;
+
+/// Changes whenever the simulator's output for a given seed changes (hopper parameters, terrain
+/// textures, skin), so that models trained and cached from simulated data can tell they are stale.
+pub const SIM_VERSION: u32 = 2;

@@ -183,9 +183,10 @@ impl Terrain {
                 (f, 2e3)
             }
             Terrain::Carpet => {
-                // Loop pile: tufts on a square gauge of about 2.5-3.2 mm, each a soft bump.
+                // Loop pile: tufts on a square gauge of about 3.2-4 mm. The loops are far stiffer than
+                // the skin's felt, so each presses through as a bump the sensor can see.
                 let mut f = Field::zeros(rows, cols, cell_mm);
-                let gauge = rng.random_range(2.5..3.2);
+                let gauge = rng.random_range(3.2..4.0);
                 let (oy, ox) = (rng.random_range(0.0..gauge), rng.random_range(0.0..gauge));
                 let angle: f64 = rng.random_range(-0.2..0.2);
                 let (s, c) = angle.sin_cos();
@@ -201,7 +202,7 @@ impl Terrain {
                         f.v[r * cols + col] = (tuft + jitter.sample(rng)) as f32;
                     }
                 }
-                (f, 25.0)
+                (f, 1000.0)
             }
             Terrain::Clay => {
                 // Semi-moist clay dirt: a soft, mostly conforming bed with clods and a few

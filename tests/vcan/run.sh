@@ -46,6 +46,7 @@ can_here() {
 if [ "${PRESRS_VCAN_FORCE_VM:-0}" != 1 ] && can_here; then
   where="on this kernel"
   bash -c "$setup"
+  export PRESRS_BENCH_LABEL="vcan on this kernel"
   set +e; "$bin" --test-threads=1 --nocapture 2>&1 | tee "$log"; rc=${PIPESTATUS[0]}; set -e
 else
   where="inside a virtme-ng VM (this kernel has no CAN: AF_CAN unavailable)"
@@ -59,6 +60,7 @@ else
     --exec "$setup
 export PATH='$PATH' HOME='$HOME' PRESRS_BIN='$PRESRS_BIN' PRESRS_MODEL='$PRESRS_MODEL'
 export PRESRS_SYSTEM_SPEED='${PRESRS_SYSTEM_SPEED:-0.35}'
+export PRESRS_BENCH_LABEL='emulated: vcan inside a TCG VM, 2 vCPUs'
 cd '$root' && '$bin' --test-threads=1 --nocapture; echo VCAN_EXIT=\$?" 2>&1 | tee "$log"
   set -e
   rc=$(grep -a -o 'VCAN_EXIT=[0-9]*' "$log" | tail -1 | cut -d= -f2)
