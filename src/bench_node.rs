@@ -28,6 +28,7 @@ use protocol::ids::MessageKind;
 use protocol::messages::{self, FootContact, Message, flags};
 use protocol::tactile::{ImageRef, Segmenter, Variant};
 
+use crate::cli::percentile;
 use crate::runtime::{BusSource, Signals};
 
 const FRAME_US: u64 = 10_000;
@@ -501,14 +502,6 @@ fn memory(pid: &str) -> (Option<f64>, Option<f64>) {
             .map(|kb| kb / 1024.0)
     };
     (field("VmRSS:"), field("VmHWM:"))
-}
-
-fn percentile(sorted: &[f64], q: f64) -> Option<f64> {
-    if sorted.is_empty() {
-        return None;
-    }
-    let i = ((sorted.len() - 1) as f64 * q).round() as usize;
-    sorted.get(i).copied()
 }
 
 fn report(

@@ -57,12 +57,10 @@ pub fn train(data: &Path, out: &Path, opts: &TrainOptions, skip_bad: bool) -> Re
     Ok(ExitCode::SUCCESS)
 }
 
-fn percentile(v: &mut [f64], q: f64) -> f64 {
-    if v.is_empty() {
-        return 0.0;
-    }
-    v.sort_by(f64::total_cmp);
-    v[((v.len() - 1) as f64 * q).round() as usize]
+/// The `q` quantile (nearest rank) of an ascending slice; `None` when it is empty.
+pub(crate) fn percentile(sorted: &[f64], q: f64) -> Option<f64> {
+    let i = ((sorted.len().checked_sub(1)?) as f64 * q).round() as usize;
+    sorted.get(i).copied()
 }
 
 pub fn eval(
@@ -133,8 +131,9 @@ pub fn eval(
             }
         })
         .collect();
-    let med = percentile(&mut times.clone(), 0.5);
-    let p99 = percentile(&mut times, 0.99);
+    times.sort_by(f64::total_cmp);
+    let med = percentile(&times, 0.5).unwrap_or(0.0);
+    let p99 = percentile(&times, 0.99).unwrap_or(0.0);
     if json {
         let per: serde_json::Map<String, serde_json::Value> = names
             .iter()

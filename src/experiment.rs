@@ -16,6 +16,7 @@ use node::classifier::image::{Crop, PressureImage};
 use node::classifier::pwe::Classifier;
 use node::classifier::repair;
 use node::classifier::train::{TrainOptions, train};
+use plotters::coord::{CoordTranslate, Shift};
 use plotters::prelude::*;
 use presrs::simdata::TrainingSet;
 use rand::SeedableRng;
@@ -348,13 +349,7 @@ fn resolution(ctx: &Ctx) -> Result<String> {
             .label(label)
             .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 15, y + 5)], color.filled()));
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::LowerRight)
-        .background_style(WHITE.mix(0.9))
-        .border_style(BLACK)
-        .draw()
-        .map_err(pe)?;
+    legend(&mut chart, SeriesLabelPosition::LowerRight)?;
     root.present().map_err(pe)?;
     let _ = writeln!(md, "\n![Resolution](figures/resolution.png)\n");
     Ok(md)
@@ -396,44 +391,12 @@ fn dynamic_features(ctx: &Ctx) -> Result<String> {
             ("sans-serif", 24),
         )
         .map_err(pe)?;
-    let panels = root.split_evenly((2, 2));
-    let colors = [BLUE, RED, GREEN];
-    for (t, panel) in panels.iter().enumerate() {
-        let name = &per_gait[0].1[t].0;
-        let mut chart = ChartBuilder::on(panel)
-            .caption(name, ("sans-serif", 18))
-            .margin(8)
-            .x_label_area_size(35)
-            .y_label_area_size(60)
-            .build_cartesian_2d(0f64..1025f64, (1f64..1e5f64).log_scale())
-            .map_err(pe)?;
-        chart
-            .configure_mesh()
-            .x_desc("Frequency bin")
-            .y_desc("Magnitude (counts)")
-            .draw()
-            .map_err(pe)?;
-        for (gi, (gname, series)) in per_gait.iter().enumerate() {
-            let color = colors[gi % colors.len()];
-            chart
-                .draw_series(LineSeries::new(
-                    series[t]
-                        .1
-                        .iter()
-                        .enumerate()
-                        .map(|(i, v)| (i as f64, (*v as f64).max(1.0))),
-                    color.stroke_width(1),
-                ))
-                .map_err(pe)?
-                .label(gname.clone())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
-        }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.9))
-            .border_style(BLACK)
-            .draw()
-            .map_err(pe)?;
+    for (t, panel) in root.split_evenly((2, 2)).iter().enumerate() {
+        let gaits_of_terrain: Vec<(String, Vec<f32>)> = per_gait
+            .iter()
+            .map(|(gait, series)| (gait.clone(), series[t].1.clone()))
+            .collect();
+        draw_features(panel, &per_gait[0].1[t].0, 18, 1e5, &gaits_of_terrain)?;
     }
     root.present().map_err(pe)?;
     let mut md = String::from("## Figure 13: dynamic feature vectors per gait\n\n");
@@ -628,12 +591,7 @@ fn damage(ctx: &Ctx) -> Result<(String, Curves)> {
         .map_err(pe)?
         .label("90% (acceptable)")
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.stroke_width(3)));
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.9))
-        .border_style(BLACK)
-        .draw()
-        .map_err(pe)?;
+    legend(&mut chart, SeriesLabelPosition::UpperRight)?;
     root.present().map_err(pe)?;
     let mut md = String::from("## Figure 16: accuracy against sensor damage\n\n");
     let _ = writeln!(
@@ -785,11 +743,7 @@ fn adaptation(ctx: &Ctx) -> Result<String> {
         .map_err(pe)?
         .label("classified (one per step)")
         .legend(|(x, y)| Circle::new((x + 10, y), 3, RED.filled()));
-        c.configure_series_labels()
-            .background_style(WHITE.mix(0.9))
-            .border_style(BLACK)
-            .draw()
-            .map_err(pe)?;
+        legend(&mut c, SeriesLabelPosition::UpperRight)?;
     }
     {
         let mut c = ChartBuilder::on(&panels[1])
@@ -812,11 +766,7 @@ fn adaptation(ctx: &Ctx) -> Result<String> {
         .map_err(pe)?
         .label("gait in effect")
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE));
-        c.configure_series_labels()
-            .background_style(WHITE.mix(0.9))
-            .border_style(BLACK)
-            .draw()
-            .map_err(pe)?;
+        legend(&mut c, SeriesLabelPosition::UpperRight)?;
     }
     {
         let vmax = rows.iter().map(|r| r.speed_m_s).fold(0.5, f64::max) * 1.1;
@@ -838,11 +788,7 @@ fn adaptation(ctx: &Ctx) -> Result<String> {
         .map_err(pe)?
         .label("forward speed")
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], GREEN));
-        c.configure_series_labels()
-            .background_style(WHITE.mix(0.9))
-            .border_style(BLACK)
-            .draw()
-            .map_err(pe)?;
+        legend(&mut c, SeriesLabelPosition::UpperRight)?;
     }
     root.present().map_err(pe)?;
     let correct = rows.iter().filter(|r| r.truth == r.classified).count();
@@ -860,45 +806,69 @@ fn adaptation(ctx: &Ctx) -> Result<String> {
     Ok(md)
 }
 
-/// Feature vectors on a log axis, one line per series.
+/// A figure of feature vectors, one line per series.
 fn feature_plot(path: &Path, title: &str, series: &[(String, Vec<f32>)]) -> Result<()> {
     let root = BitMapBackend::new(path, (1000, 560)).into_drawing_area();
     root.fill(&WHITE).map_err(pe)?;
+    draw_features(&root, title, 22, 1e6, series)?;
+    root.present().map_err(pe)
+}
+
+/// Feature vectors (bins 0-1024 of the 2048-point FFT) on a log axis up to `y_max`, one line
+/// per series, with a legend.
+fn draw_features<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    caption: &str,
+    caption_px: u32,
+    y_max: f64,
+    series: &[(String, Vec<f32>)],
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
     let colors = [BLUE, RED, GREEN, MAGENTA, CYAN, BLACK];
-    {
-        let mut chart = ChartBuilder::on(&root)
-            .caption(title, ("sans-serif", 22))
-            .margin(15)
-            .x_label_area_size(45)
-            .y_label_area_size(70)
-            .build_cartesian_2d(0f64..1025f64, (1f64..1e6f64).log_scale())
-            .map_err(pe)?;
+    let mut chart = ChartBuilder::on(area)
+        .caption(caption, ("sans-serif", caption_px))
+        .margin(10)
+        .x_label_area_size(40)
+        .y_label_area_size(70)
+        .build_cartesian_2d(0f64..1025f64, (1f64..y_max).log_scale())
+        .map_err(pe)?;
+    chart
+        .configure_mesh()
+        .x_desc("Frequency bin (of 2048)")
+        .y_desc("Magnitude (counts)")
+        .draw()
+        .map_err(pe)?;
+    for (i, (name, v)) in series.iter().enumerate() {
+        let color = colors[i % colors.len()];
         chart
-            .configure_mesh()
-            .x_desc("Frequency bin (of 2048)")
-            .y_desc("Magnitude (counts)")
-            .draw()
-            .map_err(pe)?;
-        for (i, (name, v)) in series.iter().enumerate() {
-            let color = colors[i % colors.len()];
-            chart
-                .draw_series(LineSeries::new(
-                    v.iter()
-                        .enumerate()
-                        .map(|(k, x)| (k as f64, (*x as f64).max(1.0))),
-                    color.stroke_width(1),
-                ))
-                .map_err(pe)?
-                .label(name.clone())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
-        }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.9))
-            .border_style(BLACK)
-            .draw()
-            .map_err(pe)?;
+            .draw_series(LineSeries::new(
+                v.iter()
+                    .enumerate()
+                    .map(|(k, x)| (k as f64, (*x as f64).max(1.0))),
+                color.stroke_width(1),
+            ))
+            .map_err(pe)?
+            .label(name.clone())
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
     }
-    root.present().map_err(pe)?;
-    Ok(())
+    legend(&mut chart, SeriesLabelPosition::UpperRight)
+}
+
+/// The legend every figure uses: boxed, on a nearly opaque white background.
+fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    position: SeriesLabelPosition,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    chart
+        .configure_series_labels()
+        .position(position)
+        .background_style(WHITE.mix(0.9))
+        .border_style(BLACK)
+        .draw()
+        .map_err(pe)
 }

@@ -1,5 +1,7 @@
 //! The README's run command: the closed loop on the in-process bus.
 
+mod common;
+
 use std::process::Command;
 
 #[test]
@@ -7,16 +9,11 @@ fn demo_runs_the_loop_and_reports_json() {
     let dir = std::env::temp_dir().join(format!("presrs-demo-test-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let csv = dir.join("steps.csv");
-    let out = Command::new(env!("CARGO_BIN_EXE_presrs"))
-        .args(["demo", "--steps", "60", "--json", "--csv"])
-        .arg(&csv)
-        .env("XDG_CACHE_HOME", &dir)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = common::output_ok(
+        Command::new(env!("CARGO_BIN_EXE_presrs"))
+            .args(["demo", "--steps", "60", "--json", "--csv"])
+            .arg(&csv)
+            .env("XDG_CACHE_HOME", &dir),
     );
     let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(j["steps"], 60);

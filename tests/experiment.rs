@@ -1,21 +1,18 @@
 //! `presrs experiment all --quick`: every table and figure is written and is what it says.
 
+mod common;
+
 use std::process::Command;
 
 #[test]
 fn experiment_all_quick_writes_every_table_and_figure() {
     let dir = std::env::temp_dir().join(format!("presrs-exp-test-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
-    let out = Command::new(env!("CARGO_BIN_EXE_presrs"))
-        .args(["experiment", "all", "--quick", "--out"])
-        .arg(&dir)
-        .env("XDG_CACHE_HOME", dir.join("cache"))
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    common::output_ok(
+        Command::new(env!("CARGO_BIN_EXE_presrs"))
+            .args(["experiment", "all", "--quick", "--out"])
+            .arg(&dir)
+            .env("XDG_CACHE_HOME", dir.join("cache")),
     );
     let md = std::fs::read_to_string(dir.join("results.md")).unwrap();
     for heading in [

@@ -2,6 +2,8 @@
 //! The log comes from the simulated robot; the expected stream is the library pipeline run on the
 //! same records in-process, so the command must neither lose, add nor reorder a decision.
 
+mod common;
+
 use std::process::Command;
 
 use node::classifier::Crop;
@@ -70,15 +72,10 @@ fn replay_prints_the_pipelines_decisions_with_the_logs_timestamps() {
     }
     assert!(want.len() > 5, "only {} decisions in 6 s", want.len());
 
-    let out = Command::new(env!("CARGO_BIN_EXE_presrs"))
-        .args(["node", "--replay", log.to_str().unwrap()])
-        .args(["--model", model_path.to_str().unwrap(), "--json"])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = common::output_ok(
+        Command::new(env!("CARGO_BIN_EXE_presrs"))
+            .args(["node", "--replay", log.to_str().unwrap()])
+            .args(["--model", model_path.to_str().unwrap(), "--json"]),
     );
     let got: Vec<serde_json::Value> = String::from_utf8_lossy(&out.stdout)
         .lines()

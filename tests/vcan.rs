@@ -509,25 +509,20 @@ fn node_bench_on_vcan_reports_latency_cpu_and_memory_for_six_feet() {
     let iface = fd_iface();
     let label = std::env::var("PRESRS_BENCH_LABEL").unwrap_or_else(|_| "vcan".into());
     let model = system_model();
-    let out = std::process::Command::new(presrs())
-        .args([
-            "bench-node",
-            "--iface",
-            &iface,
-            "--feet",
-            "6",
-            "--seconds",
-            "5",
-        ])
-        .args(["--json", "--label", &label, "--model"])
-        .arg(&model)
-        .env("RUST_LOG", "warn")
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = common::output_ok(
+        std::process::Command::new(presrs())
+            .args([
+                "bench-node",
+                "--iface",
+                &iface,
+                "--feet",
+                "6",
+                "--seconds",
+                "5",
+            ])
+            .args(["--json", "--label", &label, "--model"])
+            .arg(&model)
+            .env("RUST_LOG", "warn"),
     );
     let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     eprintln!("presrs bench-node on {iface}: {j}");

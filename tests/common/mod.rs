@@ -186,3 +186,17 @@ pub fn python(args: &[&str]) -> String {
     );
     stdout
 }
+
+/// Runs `cmd` to the end; unless it succeeded, panics with its status and stderr.
+pub fn output_ok(cmd: &mut std::process::Command) -> std::process::Output {
+    let out = cmd
+        .output()
+        .unwrap_or_else(|e| panic!("starting {cmd:?}: {e}"));
+    assert!(
+        out.status.success(),
+        "{cmd:?}: {}\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
