@@ -99,5 +99,11 @@ fn bench(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, bench);
+criterion_group! {
+    name = benches;
+    // No plots: criterion's plotters backend needs system fonts, which a fresh machine may lack
+    // (it panicked with FontUnavailable here); the figures are in the text report.
+    config = Criterion::default().without_plots();
+    targets = bench
+}
 criterion_main!(benches);

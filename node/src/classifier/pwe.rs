@@ -43,8 +43,13 @@ pub struct Classifier {
     feat: Vec<f32>,
     /// U mean, so that projecting needs no centred copy of the feature vector.
     projected_mean: Vec<f32>,
+    /// The projection, padded with zeros to `stride` lanes.
     q: Vec<f32>,
-    d2: Vec<f64>,
+    /// The stored samples, each padded with zeros to `stride` (h rounded up to 8) so that the
+    /// distances run in whole 8-lane vectors.
+    samples: Vec<f32>,
+    /// Per stored sample: -|q - x_i|^2 / (2 s^2), the log of its kernel up to a constant.
+    log_kernel: Vec<f64>,
     dead_rows: Vec<bool>,
     dead_cols: Vec<bool>,
     inv_two_s2: f64,
@@ -73,6 +78,16 @@ impl Classifier {
         if model.pca_matrix.len() == model.h * model.pca_mean.len() {
             project(&model.pca_matrix, &model.pca_mean, &mut projected_mean);
         }
+        let stride = model.h.div_ceil(8) * 8;
+        let mut samples = vec![0.0; stride * model.n_samples()];
+        if model.h > 0 {
+            for (dst, src) in samples
+                .chunks_exact_mut(stride)
+                .zip(model.samples.chunks_exact(model.h))
+            {
+                dst[..model.h].copy_from_slice(src);
+            }
+        }
         Self {
             fx,
             work: vec![0; work_rows * work_cols],
@@ -80,8 +95,9 @@ impl Classifier {
             work_cols,
             feat: vec![0.0; n],
             projected_mean,
-            q: vec![0.0; model.h],
-            d2: vec![0.0; model.n_samples()],
+            q: vec![0.0; stride],
+            samples,
+            log_kernel: vec![0.0; model.n_samples()],
             dead_rows: vec![false; work_rows],
             dead_cols: vec![false; work_cols],
             inv_two_s2: 1.0 / (2.0 * s * s),
@@ -180,26 +196,25 @@ impl Classifier {
         };
         self.fx.extract(&self.work, scale, &mut self.feat);
         // U (F - mean) = U F - U mean, with U mean computed once in `new`.
-        project(&m.pca_matrix, &self.feat, &mut self.q);
+        let h = m.h;
+        project(&m.pca_matrix, &self.feat, &mut self.q[..h]);
         for (q, b) in self.q.iter_mut().zip(&self.projected_mean) {
             *q -= b;
         }
-        let h = m.h;
-        for (i, d) in self.d2.iter_mut().enumerate() {
-            *d = sq_dist(&m.samples[i * h..(i + 1) * h], &self.q) as f64;
-        }
+        sq_dists(&self.samples, &self.q, &mut self.log_kernel);
         let n_classes = m.classes.len();
         let mut log_dens = [f64::NEG_INFINITY; MAX_CLASSES];
         let mut max_e = [f64::NEG_INFINITY; MAX_CLASSES];
-        for (d, &k) in self.d2.iter().zip(&m.sample_classes) {
-            let e = -d * self.inv_two_s2;
-            if e > max_e[k] {
-                max_e[k] = e;
+        for (e, &k) in self.log_kernel.iter_mut().zip(&m.sample_classes) {
+            *e *= -self.inv_two_s2;
+            let mk = &mut max_e[k];
+            if *e > *mk {
+                *mk = *e;
             }
         }
         let mut sums = [0.0f64; MAX_CLASSES];
-        for (d, &k) in self.d2.iter().zip(&m.sample_classes) {
-            let x = -d * self.inv_two_s2 - max_e[k];
+        for (e, &k) in self.log_kernel.iter().zip(&m.sample_classes) {
+            let x = e - max_e[k];
             // Each class's sum holds its largest term, exp(0) = 1; a term below e^-40 (4e-18)
             // cannot change it in f64, and skipping it avoids libm's slow underflow path.
             if x > -40.0 {
@@ -350,25 +365,41 @@ fn dot(a: &[f32], b: &[f32]) -> f32 {
     s
 }
 
+/// `out[i] = |x_i - q|^2` for the stored samples `x_i`, each `q.len()` long (a multiple of 8,
+/// zero-padded past h, so the padding adds nothing).
+fn sq_dists(samples: &[f32], q: &[f32], out: &mut [f64]) {
+    #[cfg(target_arch = "x86_64")]
+    if super::has_avx2_fma() {
+        // SAFETY: the CPU supports the features the function was compiled for.
+        unsafe { sq_dists_avx2(samples, q, out) };
+        return;
+    }
+    sq_dists_portable(samples, q, out);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn sq_dists_avx2(samples: &[f32], q: &[f32], out: &mut [f64]) {
+    sq_dists_portable(samples, q, out);
+}
+
 #[inline(always)]
-fn sq_dist(a: &[f32], b: &[f32]) -> f32 {
-    // Independent accumulators, as in `dot`: one serial sum would leave the loop scalar.
-    let mut acc = [0.0f32; 8];
-    let ca = a.chunks_exact(8);
-    let cb = b.chunks_exact(8);
-    let (ra, rb) = (ca.remainder(), cb.remainder());
-    for (x, y) in ca.zip(cb) {
-        for i in 0..8 {
-            let t = x[i] - y[i];
-            acc[i] += t * t;
+fn sq_dists_portable(samples: &[f32], q: &[f32], out: &mut [f64]) {
+    if q.is_empty() {
+        out.fill(0.0);
+        return;
+    }
+    for (o, x) in out.iter_mut().zip(samples.chunks_exact(q.len())) {
+        // Eight lanes per chunk: the compiler keeps `acc` in one vector register.
+        let mut acc = [0.0f32; 8];
+        for (xc, qc) in x.chunks_exact(8).zip(q.chunks_exact(8)) {
+            for i in 0..8 {
+                let t = xc[i] - qc[i];
+                acc[i] += t * t;
+            }
         }
+        *o = acc.iter().sum::<f32>() as f64;
     }
-    let mut s: f32 = acc.iter().sum();
-    for (x, y) in ra.iter().zip(rb) {
-        let t = x - y;
-        s += t * t;
-    }
-    s
 }
 
 #[cfg(test)]
@@ -377,10 +408,19 @@ mod tests {
 
     #[test]
     fn distances_are_exact_sums_of_squares() {
+        // Two samples of h = 52 padded to 56; the padding must add nothing.
+        let pad = |v: Vec<f32>| -> Vec<f32> { v.into_iter().chain([0.0; 4]).collect() };
         let a: Vec<f32> = (0..52).map(|i| i as f32 * 0.5).collect();
         let b: Vec<f32> = (0..52).map(|i| (i % 7) as f32).collect();
         let want: f32 = a.iter().zip(&b).map(|(x, y)| (x - y) * (x - y)).sum();
-        assert!((sq_dist(&a, &b) - want).abs() <= 1e-3 * want);
+        let samples: Vec<f32> = pad(a.clone()).into_iter().chain(pad(b.clone())).collect();
+        let mut d = [0.0f64; 2];
+        sq_dists(&samples, &pad(b), &mut d);
+        assert!(
+            (d[0] - want as f64).abs() <= 1e-3 * want as f64,
+            "{d:?} vs {want}"
+        );
+        assert_eq!(d[1], 0.0);
         // Six rows of 1025: the four-row SIMD block, two single rows and a ragged tail.
         let n = 1025;
         let w: Vec<f32> = (0..6 * n)

@@ -42,14 +42,29 @@ pub fn find_zero_lines(
             dead_cols[i % cols] = true;
         }
     }
-    // Then: any load inside the sensor makes its row and column live.
-    for (i, _) in pixels[..rows * cols]
-        .iter()
-        .enumerate()
-        .filter(|&(i, &p)| p != 0 && inside(i))
-    {
-        dead_rows[i / cols] = false;
-        dead_cols[i % cols] = false;
+    // Then: any load inside the sensor makes its row and column live. Row by row, with no
+    // division per pixel (that made this scan cost as much as the FFT).
+    for (r, row) in pixels[..rows * cols].chunks_exact(cols.max(1)).enumerate() {
+        let mut row_live = false;
+        match outside {
+            None => {
+                for (d, &p) in dead_cols.iter_mut().zip(row) {
+                    *d &= p == 0;
+                    row_live |= p != 0;
+                }
+            }
+            Some(m) => {
+                let mrow = &m[r * cols..(r + 1) * cols];
+                for ((d, &p), &out) in dead_cols.iter_mut().zip(row).zip(mrow) {
+                    let live = p != 0 && !out;
+                    *d &= !live;
+                    row_live |= live;
+                }
+            }
+        }
+        if row_live {
+            dead_rows[r] = false;
+        }
     }
     dead_rows
         .iter()
