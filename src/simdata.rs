@@ -1,6 +1,7 @@
 //! Simulator samples as a labelled training set for the classifier (the glue between the `sim`
 //! and `node` crates, which do not depend on each other).
 
+use node::classifier::dataset::Dataset;
 use node::classifier::train::Labelled;
 use node::classifier::{ClassInfo, PressureImage};
 use sim::dataset::Sample;
@@ -31,6 +32,26 @@ impl TrainingSet {
                 Some((PressureImage::new(s.rows, s.cols, 8, s.pixels), k))
             })
             .unzip();
+        Self {
+            classes,
+            images,
+            labels,
+        }
+    }
+
+    /// A user's dataset (`DIR/<class>/<images>`), with terrain ids as `presrs train` gives
+    /// them: the protocol's id for a known terrain name, 100 + the class index otherwise.
+    pub fn from_dataset(ds: Dataset) -> Self {
+        let classes = ds
+            .classes
+            .iter()
+            .enumerate()
+            .map(|(i, n)| ClassInfo {
+                name: n.clone(),
+                terrain_id: protocol::messages::terrain_id(n).unwrap_or(100 + i as u8),
+            })
+            .collect();
+        let (images, labels) = ds.samples.into_iter().map(|s| (s.image, s.class)).unzip();
         Self {
             classes,
             images,

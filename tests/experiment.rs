@@ -55,5 +55,86 @@ fn experiment_all_quick_writes_every_table_and_figure() {
         .and_then(|s| s.parse::<f64>().ok())
         .unwrap();
     assert!(overall > 90.0, "static accuracy {overall}");
+    // Figure 16 has all three arms; at 20% damage both repairs recover most of what the
+    // damage took.
+    let row = damage_row(&md, "20%");
+    assert!(
+        row[1] > row[0] + 20.0,
+        "paper's filter at 20% damage: {row:?}"
+    );
+    assert!(
+        row[2] > row[0] + 20.0,
+        "history repair at 20% damage: {row:?}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The three accuracies (%) of Figure 16's table at one damage level.
+fn damage_row(md: &str, level: &str) -> Vec<f64> {
+    let line = md
+        .lines()
+        .find(|l| l.starts_with(&format!("| {level} |")))
+        .unwrap_or_else(|| panic!("no {level} row in Figure 16's table"));
+    let v: Vec<f64> = line
+        .split('|')
+        .skip(2)
+        .filter_map(|c| c.trim().trim_end_matches('%').parse().ok())
+        .collect();
+    assert_eq!(v.len(), 3, "{line}");
+    v
+}
+
+#[test]
+fn experiment_runs_on_a_user_dataset_given_with_data() {
+    let dir = std::env::temp_dir().join(format!("presrs-exp-data-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let data = dir.join("data");
+    let bin = env!("CARGO_BIN_EXE_presrs");
+    // Any directory of class sub-directories; here, 25 static presses per terrain as PGM.
+    common::output_ok(
+        Command::new(bin)
+            .args(["dataset", "static", "--n", "25", "--out"])
+            .arg(&data),
+    );
+    let out = dir.join("out");
+    common::output_ok(
+        Command::new(bin)
+            .args([
+                "experiment",
+                "damage",
+                "--quick",
+                "--crop",
+                "2,2,2,2",
+                "--data",
+            ])
+            .arg(&data)
+            .arg("--out")
+            .arg(&out),
+    );
+    let md = std::fs::read_to_string(out.join("damage.md")).unwrap();
+    assert!(md.contains(&data.display().to_string()), "{md}");
+    assert!(
+        md.contains("40x40 crop"),
+        "the crop given was not used: {md}"
+    );
+    assert!(md.contains("--data"), "the command line lacks --data: {md}");
+    let row = damage_row(&md, "0%");
+    assert!(
+        row.iter().all(|&a| a > 90.0),
+        "undamaged static presses: {row:?}"
+    );
+    assert!(out.join("figures/fig16-damage.png").is_file());
+
+    // A directory that is not a dataset: an error naming it, no panic.
+    let bad = Command::new(bin)
+        .args(["experiment", "static", "--data"])
+        .arg(dir.join("nope"))
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(!bad.status.success());
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(err.contains("nope") && err.contains("--data"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }

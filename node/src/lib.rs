@@ -7,6 +7,7 @@
 
 pub mod classifier;
 pub mod config;
+pub mod health;
 pub mod stance;
 
 pub use config::{NodeConfig, RepairMode};

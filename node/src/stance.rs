@@ -10,9 +10,9 @@ use protocol::messages::{self, FootContact, Message, TerrainClass, flags};
 use protocol::tactile::{Reassembler, ReassemblyStats};
 use protocol::{CanFrame, IdConfig, Stamped};
 
-use crate::classifier::repair;
 use crate::classifier::{Classifier, Model, model::MAX_CLASSES};
 use crate::config::{NodeConfig, RepairMode};
+use crate::health::LineHealth;
 
 /// Counters per stage, for NodeStatus and the logs.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -23,78 +23,6 @@ pub struct Counters {
     pub steps: u64,
     pub no_sample: u64,
     pub classified: u64,
-}
-
-/// Learns dead lines of the working image from the stance history.
-#[derive(Clone, Debug)]
-struct LineHealth {
-    rows: usize,
-    cols: usize,
-    row_runs: Vec<u32>,
-    col_runs: Vec<u32>,
-    dead_rows: Vec<bool>,
-    dead_cols: Vec<bool>,
-    /// Line sums of the image being observed (sized once, reused).
-    row_sums: Vec<u32>,
-    col_sums: Vec<u32>,
-}
-
-impl LineHealth {
-    fn new(rows: usize, cols: usize) -> Self {
-        Self {
-            rows,
-            cols,
-            row_runs: vec![0; rows],
-            col_runs: vec![0; cols],
-            dead_rows: vec![false; rows],
-            dead_cols: vec![false; cols],
-            row_sums: vec![0; rows],
-            col_sums: vec![0; cols],
-        }
-    }
-
-    /// One stance's image: a line is a suspect when it is all zero while a neighbour carries
-    /// load; `k` suspect stances in a row make it dead; any reading brings it back.
-    fn observe(&mut self, img: &[u16], k: u32) {
-        self.row_sums.fill(0);
-        self.col_sums.fill(0);
-        for (r, row) in img.chunks_exact(self.cols).enumerate() {
-            for (c, &v) in row.iter().enumerate() {
-                self.row_sums[r] += v as u32;
-                self.col_sums[c] += v as u32;
-            }
-        }
-        observe_lines(&self.row_sums, &mut self.row_runs, &mut self.dead_rows, k);
-        observe_lines(&self.col_sums, &mut self.col_runs, &mut self.dead_cols, k);
-    }
-
-    fn any_dead(&self) -> bool {
-        self.dead_rows.iter().chain(&self.dead_cols).any(|&d| d)
-    }
-
-    fn damage_pct(&self) -> f64 {
-        let dr = self.dead_rows.iter().filter(|&&d| d).count();
-        let dc = self.dead_cols.iter().filter(|&&d| d).count();
-        repair::damage_percent(dr, dc, self.rows, self.cols)
-    }
-}
-
-/// Updates the runs and dead flags of one direction's lines from their sums.
-fn observe_lines(sums: &[u32], runs: &mut [u32], dead: &mut [bool], k: u32) {
-    for i in 0..sums.len() {
-        if sums[i] > 0 {
-            runs[i] = 0;
-            dead[i] = false;
-            continue;
-        }
-        let neighbour = (i > 0 && sums[i - 1] > 0) || sums.get(i + 1).is_some_and(|&s| s > 0);
-        if neighbour {
-            runs[i] = runs[i].saturating_add(1);
-            if runs[i] >= k {
-                dead[i] = true;
-            }
-        }
-    }
 }
 
 /// One foot's stance state.
@@ -188,7 +116,7 @@ impl StancePipeline {
                 f.best = vec![0; input];
                 f.best_err = None;
             }
-            if (f.health.rows, f.health.cols) != (rows, cols) {
+            if f.health.size() != (rows, cols) {
                 f.health = LineHealth::new(rows, cols);
             }
         }
@@ -420,7 +348,6 @@ fn classify(
     cfg: &NodeConfig,
 ) -> Option<(crate::classifier::Decision, bool)> {
     cls.prepare(pixels, rows, cols).ok()?;
-    let (wr, wc) = cls.work_size();
     let repaired = match cfg.repair {
         RepairMode::None => false,
         RepairMode::PerImage => cls.repair_work() > 0,
@@ -428,18 +355,7 @@ fn classify(
             if observe {
                 health.observe(cls.work_mut(), cfg.dead_after_stances);
             }
-            let any = health.any_dead();
-            if any {
-                repair::repair_lines(
-                    cls.work_mut(),
-                    wr,
-                    wc,
-                    &health.dead_rows,
-                    &health.dead_cols,
-                    None,
-                );
-            }
-            any
+            health.repair(cls.work_mut()) > 0
         }
     };
     Some((cls.decide(), repaired))
