@@ -9,9 +9,11 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use controller::{Controller, ControllerConfig};
+use protocol::bus::CanBus;
+use protocol::ids::MessageKind;
 use protocol::messages::{self, Message};
 
-use crate::runtime::{Backoff, Signals, after_bus_error, open_with_retry};
+use crate::runtime::{Backoff, BusSource, Signals, after_bus_error, open_source_with_retry};
 
 #[derive(clap::Args)]
 pub struct ControllerArgs {
@@ -45,35 +47,68 @@ pub fn run(a: ControllerArgs) -> Result<ExitCode> {
         a.time_scale
     );
     let cfg = load_config(a.config.as_deref())?;
+    let signals = Signals::install()?;
+    run_on(
+        cfg,
+        BusSource::Iface(a.iface.clone()),
+        a.time_scale,
+        &signals,
+    )?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The controller on any bus until `signals` stop it; returns the number of gait switches.
+pub fn run_on(
+    cfg: ControllerConfig,
+    source: BusSource,
+    time_scale: f64,
+    signals: &Signals,
+) -> Result<u64> {
     let ids = cfg.ids.clone();
     let foot = cfg.foot;
-    let signals = Signals::install()?;
     let mut ctrl = Controller::new(cfg);
     let start = Instant::now();
-    let scale = a.time_scale;
-    let now_us = || (start.elapsed().as_secs_f64() * scale * 1e6) as u64;
+    let now_us = || (start.elapsed().as_secs_f64() * time_scale * 1e6) as u64;
     let mut out: Vec<Message> = Vec::with_capacity(8);
     let mut backoff = Backoff::default();
     let mut switches_logged = 0;
     'open: while !signals.stopping() {
-        let Some(mut bus) = open_with_retry(&a.iface, &signals.stop, "controller", &mut || {})
+        let Some(mut bus) =
+            open_source_with_retry(&source, &signals.stop, "controller", &mut || {})
         else {
             break;
         };
+        // Only what the controller reads: in the kernel, so that the tactile stream (about 2,600
+        // frames/s per foot) never reaches this process. Without the filter a controller that
+        // fell behind the tactile stream heard touchdowns late, and the hopper fell every step.
+        if let Err(e) = bus.set_filters(&ids.filters(&[
+            MessageKind::FootContact,
+            MessageKind::LegState,
+            MessageKind::TerrainClass,
+            MessageKind::NodeStatus,
+        ])) {
+            after_bus_error("controller filters", &e, &mut backoff, &signals.stop);
+            continue 'open;
+        }
         backoff.reset();
-        tracing::info!(iface = %a.iface, foot, gait = ctrl.gait().id, "presrs controller running");
+        tracing::info!(iface = %source.label(), foot, gait = ctrl.gait().id, "presrs controller running");
         while !signals.stopping() {
-            match bus.recv(Duration::from_millis(1)) {
-                Ok(Some(st)) => {
-                    // Undecodable frames (other traffic, garbage) are not ours: ignored.
-                    if let Ok(Some((f, m))) = messages::decode(&st.frame, &ids) {
-                        ctrl.on_message(f, &m, now_us(), &mut |o| out.push(o));
+            // Everything queued, then the laws: a burst never waits one loop per frame.
+            let mut wait = Duration::from_millis(1);
+            loop {
+                match bus.recv(wait) {
+                    Ok(Some(st)) => {
+                        // Undecodable frames (other traffic, garbage) are not ours: ignored.
+                        if let Ok(Some((f, m))) = messages::decode(&st.frame, &ids) {
+                            ctrl.on_message(f, &m, now_us(), &mut |o| out.push(o));
+                        }
+                        wait = Duration::ZERO;
                     }
-                }
-                Ok(None) => {}
-                Err(e) => {
-                    after_bus_error("controller receive", &e, &mut backoff, &signals.stop);
-                    continue 'open;
+                    Ok(None) => break,
+                    Err(e) => {
+                        after_bus_error("controller receive", &e, &mut backoff, &signals.stop);
+                        continue 'open;
+                    }
                 }
             }
             ctrl.tick(now_us(), &mut |o| out.push(o));
@@ -95,5 +130,5 @@ pub fn run(a: ControllerArgs) -> Result<ExitCode> {
         }
     }
     tracing::info!(switches = ctrl.switches, "presrs controller stopped");
-    Ok(ExitCode::SUCCESS)
+    Ok(ctrl.switches)
 }

@@ -46,9 +46,12 @@ pub fn sim_model(seed: u64) -> Result<Model> {
         samples.extend(sim::dataset::generate(&opts));
     }
     let set = TrainingSet::from_samples(samples, &Terrain::DYNAMIC);
+    // Load-normalised (the paper's intensity scaling): a gait switch or a terrain change
+    // changes the load at 70 ms for a few steps, and the texture should decide, not the load.
     let opts = TrainOptions {
         per_class: 45,
         train: 30,
+        normalize_load: true,
         crop: Crop {
             top: 0,
             bottom: 3,
@@ -115,14 +118,153 @@ pub struct DemoArgs {
     pub csv: PathBuf,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Run the simulator, the node and the controller as three concurrent tasks on the wall
+    /// clock (the node with its own receive/pipeline/send threads), as they run as processes
+    /// on CAN, instead of in lock-step simulated time.
+    #[arg(long)]
+    pub realtime: bool,
+    /// No controller: the hopper holds this gait (G1, G2 or G3) on every terrain, as in the
+    /// paper's data collection; the node still classifies every step.
+    #[arg(long, value_name = "GAIT", conflicts_with = "realtime")]
+    pub fixed_gait: Option<String>,
+    /// The node's configuration (as `presrs node --config`); default: the node's defaults.
+    #[arg(long, value_name = "FILE")]
+    pub node_config: Option<PathBuf>,
+    /// Sensor damage from the start, percent of sensels on dead rows and columns (eq. 6).
+    #[arg(long, default_value_t = 0.0, value_name = "PCT")]
+    pub damage: f64,
 }
 
 pub fn run(a: DemoArgs) -> Result<ExitCode> {
+    anyhow::ensure!(
+        (0.0..=100.0).contains(&a.damage),
+        "--damage {}: expected a percentage in 0..=100",
+        a.damage
+    );
     let track = crate::sim_cmd::load_track(a.track.as_deref())?;
     let model = load_or_train(a.model.as_deref())?;
     let ctrl_cfg = ControllerConfig::default();
-    let rows = closed_loop(&track, model, &ctrl_cfg, a.steps, a.seed, !a.json)?;
-    summarize(&rows, &track, &ctrl_cfg, &a)
+    let node_cfg = crate::node_cmd::load_config(a.node_config.as_deref())?;
+    let fixed = match &a.fixed_gait {
+        Some(g) => Some(
+            controller::Gait::by_name(g)
+                .with_context(|| format!("--fixed-gait {g}: expected G1, G2 or G3"))?
+                .id,
+        ),
+        None => None,
+    };
+    let (rows, falls) = if a.realtime {
+        closed_loop_realtime(&track, model, node_cfg, &ctrl_cfg, &a)?
+    } else {
+        let ctrl = if fixed.is_some() {
+            None
+        } else {
+            Some(&ctrl_cfg)
+        };
+        let lp = LoopParams {
+            node: node_cfg,
+            controller: ctrl,
+            fixed_gait: fixed,
+            damage_pct: a.damage,
+            steps: a.steps,
+            seed: a.seed,
+            show: !a.json,
+        };
+        closed_loop_with_falls(&track, model, &lp)?
+    };
+    summarize(&rows, falls, &track, &ctrl_cfg, &a)
+}
+
+/// The closed loop on the wall clock: `presrs sim`, `presrs node` and `presrs controller`'s own
+/// loops on one in-process bus, each on its own thread. Returns the step rows and the falls.
+fn closed_loop_realtime(
+    track: &Track,
+    model: Model,
+    node_cfg: NodeConfig,
+    ctrl_cfg: &ControllerConfig,
+    a: &DemoArgs,
+) -> Result<(Vec<StepRow>, u64)> {
+    use crate::runtime::{BusSource, Signals};
+    let (steps, seed, show) = (a.steps, a.seed, !a.json);
+    let bus = protocol::bus::InProcBus::new();
+    let signals = Signals::manual();
+    let node = {
+        let (src, sig) = (BusSource::InProc(bus.clone()), signals.clone());
+        std::thread::Builder::new()
+            .name("node".into())
+            .spawn(move || {
+                crate::node_cmd::live(node_cfg, model, Path::new("(demo model)"), src, sig)
+            })?
+    };
+    let controller = {
+        let (cfg, src, sig) = (
+            ctrl_cfg.clone(),
+            BusSource::InProc(bus.clone()),
+            signals.clone(),
+        );
+        std::thread::Builder::new()
+            .name("controller".into())
+            .spawn(move || crate::controller_cmd::run_on(cfg, src, 1.0, &sig))?
+    };
+    // About 0.35 s per step: run long enough for `steps` TerrainClass.
+    let sim_args = crate::sim_cmd::SimArgs {
+        iface: String::new(),
+        track: None,
+        feet: 1,
+        speed: 1.0,
+        gait: "G2".into(),
+        damage: a.damage,
+        duration: Some(steps as f64 * 0.4 + 1.0),
+        report: None,
+        seed,
+    };
+    if show {
+        eprintln!(
+            "running simulator, node and controller in real time for {:.0} s...",
+            sim_args.duration.unwrap_or(0.0)
+        );
+    }
+    let report = crate::sim_cmd::run_on(&sim_args, track.clone(), BusSource::InProc(bus), &signals);
+    signals
+        .stop
+        .store(true, std::sync::atomic::Ordering::Relaxed);
+    let switches = controller
+        .join()
+        .map_err(|_| anyhow::anyhow!("the controller thread panicked"))??;
+    node.join()
+        .map_err(|_| anyhow::anyhow!("the node thread panicked"))??;
+    let report = report?;
+    let rows: Vec<StepRow> = report
+        .steps
+        .into_iter()
+        .take(steps)
+        .map(|r| StepRow {
+            t_s: r.t_s,
+            step: r.step,
+            truth: r.truth,
+            classified: r.classified,
+            confidence_pct: r.confidence_pct,
+            gait: r.gait,
+            speed_m_s: r.speed_m_s,
+        })
+        .collect();
+    if show {
+        for row in &rows {
+            print_row(row);
+        }
+        println!(
+            "(controller: {switches} gait switches; {} falls)",
+            report.falls
+        );
+    }
+    Ok((rows, report.falls))
+}
+
+fn print_row(row: &StepRow) {
+    println!(
+        "t {:7.2} s  step {:4}  true {:<8} classified {:<8} {:5.1}%  gait G{}  {:.2} m/s",
+        row.t_s, row.step, row.truth, row.classified, row.confidence_pct, row.gait, row.speed_m_s
+    );
 }
 
 /// Simulator, node and controller on one in-process bus, 1 ms at a time, for `steps` steps:
@@ -135,17 +277,53 @@ pub(crate) fn closed_loop(
     seed: u64,
     show: bool,
 ) -> Result<Vec<StepRow>> {
+    let lp = LoopParams {
+        node: NodeConfig::default(),
+        controller: Some(ctrl_cfg),
+        fixed_gait: None,
+        damage_pct: 0.0,
+        steps,
+        seed,
+        show,
+    };
+    Ok(closed_loop_with_falls(track, model, &lp)?.0)
+}
+
+/// What runs in the lock-step loop besides the simulator.
+struct LoopParams<'a> {
+    node: NodeConfig,
+    /// `None`: no controller, the hopper holds `fixed_gait` (default G2).
+    controller: Option<&'a ControllerConfig>,
+    fixed_gait: Option<u8>,
+    damage_pct: f64,
+    steps: usize,
+    seed: u64,
+    show: bool,
+}
+
+/// [`closed_loop`] with any node config and optionally no controller; also returns how often
+/// the hopper fell.
+fn closed_loop_with_falls(
+    track: &Track,
+    model: Model,
+    p: &LoopParams,
+) -> Result<(Vec<StepRow>, u64)> {
+    let (steps, seed, show) = (p.steps, p.seed, p.show);
     let clock = ManualClock::new(0);
     let bus = InProcBus::with_clock(Arc::new(clock.clone()), 1 << 16);
     let (mut sim_ep, mut node_ep, mut ctrl_ep) = (bus.endpoint(), bus.endpoint(), bus.endpoint());
-    let sim_cfg = SimConfig {
+    let mut sim_cfg = SimConfig {
         track: track.clone(),
         ..Default::default()
     };
+    if let Some(g) = p.fixed_gait {
+        sim_cfg.gait = g;
+    }
+    sim_cfg.faults.initial_damage_pct = p.damage_pct;
     let ids = sim_cfg.ids.clone();
     let mut robot = SimRobot::new(sim_cfg, seed);
-    let mut pipeline = StancePipeline::new(NodeConfig::default(), Some(model));
-    let mut ctrl = Controller::new(ctrl_cfg.clone());
+    let mut pipeline = StancePipeline::new(p.node.clone(), Some(model));
+    let mut ctrl = p.controller.map(|c| Controller::new(c.clone()));
     let mut rows: Vec<StepRow> = Vec::new();
     let mut t_us = 0u64;
     let mut next_status = 0u64;
@@ -183,20 +361,11 @@ pub(crate) fn closed_loop(
                         .unwrap_or("?")
                         .to_string(),
                     confidence_pct: tc.confidence_pct,
-                    gait: ctrl.gait().id,
+                    gait: robot.gait_in_effect(foot).unwrap_or(0),
                     speed_m_s: speed,
                 };
                 if show {
-                    println!(
-                        "t {:7.2} s  step {:4}  true {:<8} classified {:<8} {:5.1}%  gait G{}  {:.2} m/s",
-                        row.t_s,
-                        row.step,
-                        row.truth,
-                        row.classified,
-                        row.confidence_pct,
-                        row.gait,
-                        row.speed_m_s
-                    );
+                    print_row(&row);
                 }
                 rows.push(row);
             }
@@ -216,11 +385,15 @@ pub(crate) fn closed_loop(
         }
         // The controller.
         while let Some(st) = ctrl_ep.recv(zero).context("controller receive")? {
-            if let Ok(Some((foot, m))) = messages::decode(&st.frame, &ids) {
+            if let (Some(ctrl), Ok(Some((foot, m)))) =
+                (ctrl.as_mut(), messages::decode(&st.frame, &ids))
+            {
                 ctrl.on_message(foot, &m, t_us, &mut |o| out.push(o));
             }
         }
-        ctrl.tick(t_us, &mut |o| out.push(o));
+        if let Some(ctrl) = ctrl.as_mut() {
+            ctrl.tick(t_us, &mut |o| out.push(o));
+        }
         for m in out.drain(..) {
             if let Some(f) = m.to_frame(&ids, 0) {
                 ctrl_ep.send(&f).context("controller send")?;
@@ -231,11 +404,12 @@ pub(crate) fn closed_loop(
             robot.on_frame(&st.frame);
         }
     }
-    Ok(rows)
+    Ok((rows, robot.falls.len() as u64))
 }
 
 fn summarize(
     rows: &[StepRow],
+    falls: u64,
     track: &Track,
     cfg: &ControllerConfig,
     a: &DemoArgs,
@@ -298,6 +472,8 @@ fn summarize(
             "switches": switches,
             "steps_to_switch": delays,
             "steps_to_switch_max": max_delay,
+            "falls": falls,
+            "realtime": a.realtime,
             "speed_per_terrain_and_gait": table,
             "track_m": track.length(),
             "csv": a.csv.display().to_string(),
@@ -309,6 +485,7 @@ fn summarize(
             accuracy * 100.0
         );
         println!("steps from a terrain change to its gait: {delays:?} (max {max_delay})");
+        println!("falls: {falls}");
         println!("mean speed (m/s) per terrain and gait:");
         for ((t, g), (s, k)) in &speeds {
             println!("  {t:<8} G{g}: {:.2} ({k} steps)", s / *k as f64);

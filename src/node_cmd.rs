@@ -46,7 +46,7 @@ pub struct NodeArgs {
     pub json: bool,
 }
 
-fn load_config(path: Option<&Path>) -> Result<NodeConfig> {
+pub fn load_config(path: Option<&Path>) -> Result<NodeConfig> {
     let Some(p) = path else {
         return Ok(NodeConfig::default());
     };

@@ -90,7 +90,7 @@ impl Backoff {
 
 /// After a bus error on an open interface: logs it with the delay, waits (growing the backoff so
 /// that a flapping interface is not hammered), and returns false when asked to stop. The caller
-/// then reopens with [`open_with_retry`].
+/// then reopens with [`open_source_with_retry`].
 pub fn after_bus_error(
     role: &str,
     e: &protocol::BusError,
@@ -125,18 +125,8 @@ impl BusSource {
     }
 }
 
-/// Opens `iface`, retrying with backoff until it opens or `stop` is set. Each failure is logged
-/// once per attempt with the fix the error names; `on_fail` sees it (for a status flag).
-pub fn open_with_retry(
-    iface: &str,
-    stop: &AtomicBool,
-    role: &str,
-    on_fail: &mut dyn FnMut(),
-) -> Option<Box<dyn CanBus>> {
-    open_source_with_retry(&BusSource::Iface(iface.to_string()), stop, role, on_fail)
-}
-
-/// [`open_with_retry`] for any [`BusSource`].
+/// Opens `source`, retrying with backoff until it opens or `stop` is set. Each failure is
+/// logged once per attempt with the fix the error names; `on_fail` sees it (for a status flag).
 pub fn open_source_with_retry(
     source: &BusSource,
     stop: &AtomicBool,

@@ -13,11 +13,12 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use protocol::bus::CanBus;
+use protocol::ids::MessageKind;
 use protocol::messages::{self, Message};
 use sim::faults::FaultParams;
 use sim::runner::{SimConfig, SimRobot, Track};
 
-use crate::runtime::{Backoff, Signals, after_bus_error, open_with_retry};
+use crate::runtime::{Backoff, BusSource, Signals, after_bus_error, open_source_with_retry};
 
 #[derive(clap::Args)]
 pub struct SimArgs {
@@ -50,19 +51,19 @@ pub struct SimArgs {
     pub seed: u64,
 }
 
-#[derive(serde::Serialize)]
-struct StepRecord {
-    t_s: f64,
-    foot: u8,
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct StepRecord {
+    pub t_s: f64,
+    pub foot: u8,
     /// The node's step counter from its TerrainClass.
-    step: u16,
-    truth: String,
-    classified: String,
-    confidence_pct: f64,
-    damage_pct: f64,
+    pub step: u16,
+    pub truth: String,
+    pub classified: String,
+    pub confidence_pct: f64,
+    pub damage_pct: f64,
     /// The gait the leg ran when the TerrainClass arrived.
-    gait: u8,
-    speed_m_s: f64,
+    pub gait: u8,
+    pub speed_m_s: f64,
 }
 
 /// The `--track` file, or the default track (wood, grass, clay, carpet quarters).
@@ -77,7 +78,53 @@ pub fn load_track(path: Option<&std::path::Path>) -> Result<Track> {
     }
 }
 
+/// What one run of the simulator saw: the `--report` file's content.
+#[derive(Debug, serde::Serialize)]
+pub struct SimReport {
+    pub simulated_s: f64,
+    pub wall_s: f64,
+    pub touchdowns: usize,
+    /// Times a simulated hopper fell (and was set back on its feet).
+    pub falls: u64,
+    /// When, robot time (s).
+    pub fall_times_s: Vec<f64>,
+    pub send_errors: u64,
+    pub steps: Vec<StepRecord>,
+}
+
 pub fn run(a: SimArgs) -> Result<ExitCode> {
+    let signals = Signals::install()?;
+    let track = load_track(a.track.as_deref())?;
+    let r = run_on(&a, track, BusSource::Iface(a.iface.clone()), &signals)?;
+    let n = r.steps.len();
+    let correct = r.steps.iter().filter(|s| s.truth == s.classified).count();
+    eprintln!(
+        "presrs sim: {:.1} s simulated in {:.1} s wall; {} touchdowns, {} falls; {n} TerrainClass heard, {correct} correct{}; {} send errors",
+        r.simulated_s,
+        r.wall_s,
+        r.touchdowns,
+        r.falls,
+        if n > 0 {
+            format!(" ({:.1}%)", 100.0 * correct as f64 / n as f64)
+        } else {
+            String::new()
+        },
+        r.send_errors
+    );
+    if let Some(p) = &a.report {
+        std::fs::write(p, serde_json::to_string_pretty(&r)?)
+            .with_context(|| format!("writing --report {}", p.display()))?;
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The simulator on any bus until `--duration` or `signals` stop it.
+pub fn run_on(
+    a: &SimArgs,
+    track: Track,
+    source: BusSource,
+    signals: &Signals,
+) -> Result<SimReport> {
     anyhow::ensure!(
         a.speed > 0.0 && a.speed.is_finite(),
         "--speed {}: expected a positive factor (1 = real time)",
@@ -90,7 +137,6 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     );
     let gait = controller::Gait::by_name(&a.gait)
         .with_context(|| format!("--gait {}: expected G1, G2 or G3", a.gait))?;
-    let track = load_track(a.track.as_deref())?;
     let cfg = SimConfig {
         track,
         gait: gait.id,
@@ -102,15 +148,24 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         ..Default::default()
     };
     let ids = cfg.ids.clone();
-    let signals = Signals::install()?;
     let mut robot = SimRobot::new(cfg, a.seed);
-    let Some(mut bus) = open_with_retry(&a.iface, &signals.stop, "sim", &mut || {}) else {
-        return Ok(ExitCode::SUCCESS);
-    };
-    tracing::info!(iface = %a.iface, feet = a.feet, speed = a.speed, gait = %a.gait, "presrs sim running");
     let start = Instant::now();
-    let end_us = a.duration.map(|d| (d * 1e6) as u64);
     let mut records: Vec<StepRecord> = Vec::new();
+    let report =
+        |robot: &SimRobot, records: Vec<StepRecord>, t_us: u64, send_errors: u64| SimReport {
+            simulated_s: t_us as f64 * 1e-6,
+            wall_s: start.elapsed().as_secs_f64(),
+            touchdowns: robot.steps.len(),
+            falls: robot.falls.len() as u64,
+            fall_times_s: robot.falls.iter().map(|&t| t as f64 * 1e-6).collect(),
+            send_errors,
+            steps: records,
+        };
+    let Some(mut bus) = open_sim_bus(&source, signals, &ids) else {
+        return Ok(report(&robot, records, 0, 0));
+    };
+    tracing::info!(iface = %source.label(), feet = a.feet, speed = a.speed, gait = %a.gait, "presrs sim running");
+    let end_us = a.duration.map(|d| (d * 1e6) as u64);
     let mut out = Vec::with_capacity(128);
     let mut backoff = Backoff::default();
     let mut send_errors = 0u64;
@@ -138,7 +193,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
                 }
                 if matches!(e, protocol::BusError::Down { .. }) {
                     after_bus_error("sim", &e, &mut backoff, &signals.stop);
-                    if let Some(b) = open_with_retry(&a.iface, &signals.stop, "sim", &mut || {}) {
+                    if let Some(b) = open_sim_bus(&source, signals, &ids) {
                         bus = b;
                     }
                     break;
@@ -166,29 +221,21 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
             }
         }
     }
-    let n = records.len();
-    let correct = records.iter().filter(|r| r.truth == r.classified).count();
-    let wall = start.elapsed().as_secs_f64();
-    eprintln!(
-        "presrs sim: {:.1} s simulated in {wall:.1} s wall; {} touchdowns; {n} TerrainClass heard, {correct} correct{}; {send_errors} send errors",
-        t_us as f64 * 1e-6,
-        robot.steps.len(),
-        if n > 0 {
-            format!(" ({:.1}%)", 100.0 * correct as f64 / n as f64)
-        } else {
-            String::new()
-        }
-    );
-    if let Some(p) = &a.report {
-        let j = serde_json::json!({
-            "simulated_s": t_us as f64 * 1e-6,
-            "wall_s": wall,
-            "touchdowns": robot.steps.len(),
-            "send_errors": send_errors,
-            "steps": records,
-        });
-        std::fs::write(p, serde_json::to_string_pretty(&j)?)
-            .with_context(|| format!("writing --report {}", p.display()))?;
+    Ok(report(&robot, records, t_us, send_errors))
+}
+
+/// Opens the simulator's bus, passing it only what the simulator reads: the controller's
+/// LegCommand and the node's TerrainClass (to score it).
+fn open_sim_bus(
+    source: &BusSource,
+    signals: &Signals,
+    ids: &protocol::IdConfig,
+) -> Option<Box<dyn CanBus>> {
+    let mut bus = open_source_with_retry(source, &signals.stop, "sim", &mut || {})?;
+    let kinds = [MessageKind::LegCommand, MessageKind::TerrainClass];
+    if let Err(e) = bus.set_filters(&ids.filters(&kinds)) {
+        // Unfiltered still works; it only costs the simulator time.
+        tracing::warn!("sim: receive filters not set ({e}); reading every frame");
     }
-    Ok(ExitCode::SUCCESS)
+    Some(bus)
 }

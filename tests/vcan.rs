@@ -374,16 +374,12 @@ fn sim_node_and_controller_as_processes_classify_steps_and_survive_a_node_restar
         .unwrap_or(1.0);
     let wall = |robot_s: f64| Duration::from_secs_f64(robot_s / speed);
     let mut node = spawn(&["node", "--iface", &iface, "--model", model_s]);
-    // The controller watches the node's heartbeat; it runs a foot the simulator does not have
-    // (foot 1), so the hopper holds its fixed G2 and the node is scored on a steady gait.
-    let ctrl_cfg = std::env::temp_dir().join(format!("presrs-ctrl-{}.toml", std::process::id()));
-    std::fs::write(&ctrl_cfg, "foot = 1\n").unwrap();
+    // The controller runs the simulator's leg (foot 0): it sends the stance law and the
+    // touchdown angle, and switches gait per the node's terrain.
     let _controller = spawn(&[
         "controller",
         "--iface",
         &iface,
-        "--config",
-        ctrl_cfg.to_str().unwrap(),
         "--time-scale",
         &speed.to_string(),
     ]);
@@ -458,9 +454,14 @@ fn sim_node_and_controller_as_processes_classify_steps_and_survive_a_node_restar
     let accuracy = correct as f64 / steps.len().max(1) as f64;
     // Steps from each terrain change to that terrain's gait (the controller's default table).
     let table = controller::ControllerConfig::default().terrain_gaits;
+    // Terrain changes while the node was up (robot time; the node is down from 24 s until its
+    // first TerrainClass after the restart at 27 s, plus the 2 steps a switch needs).
+    let node_down = |t: f64| (23.0..30.0).contains(&t);
     let mut delays = Vec::new();
     for i in 1..steps.len() {
-        if steps[i]["truth"] != steps[i - 1]["truth"] {
+        if steps[i]["truth"] != steps[i - 1]["truth"]
+            && !node_down(steps[i]["t_s"].as_f64().unwrap())
+        {
             let truth = steps[i]["truth"].as_str().unwrap();
             let want = table.get(truth).copied().map(u64::from);
             if let Some(j) = (i..steps.len())
@@ -468,11 +469,35 @@ fn sim_node_and_controller_as_processes_classify_steps_and_survive_a_node_restar
                 .find(|&j| steps[j]["gait"].as_u64() == want)
             {
                 delays.push(j - i);
+            } else {
+                delays.push(usize::MAX);
             }
         }
     }
+    let falls = r["falls"].as_u64().unwrap();
+    let timeline: Vec<String> = steps
+        .iter()
+        .map(|s| {
+            format!(
+                "{:.1}:{}{}g{}",
+                s["t_s"].as_f64().unwrap_or(0.0),
+                &s["truth"].as_str().unwrap_or("?")[..2],
+                if s["truth"] == s["classified"] {
+                    ""
+                } else {
+                    "!"
+                },
+                s["gait"]
+            )
+        })
+        .collect();
     eprintln!(
-        "closed loop over vcan, 3 processes, robot time at {speed} x wall: {:.1} s simulated in {:.1} s wall; {touchdowns} touchdowns, \
+        "steps (robot time s: truth, ! if misclassified, gait): {}\nfalls at {:?} s",
+        timeline.join(" "),
+        r["fall_times_s"]
+    );
+    eprintln!(
+        "closed loop over vcan, 3 processes, robot time at {speed} x wall: {:.1} s simulated in {:.1} s wall; {touchdowns} touchdowns, {falls} falls, \
          {} TerrainClass, per-step accuracy {:.1}% ({correct}/{}); steps from a terrain change to its gait {delays:?}; \
          node killed: controller reported NodeLost after {node_lost_after:?}; restarted node's first TerrainClass after {first_class_after_restart:?}",
         r["simulated_s"].as_f64().unwrap(),
@@ -498,8 +523,27 @@ fn sim_node_and_controller_as_processes_classify_steps_and_survive_a_node_restar
         back <= Duration::from_secs(4),
         "first TerrainClass {back:?} after restart"
     );
-    // A regression floor well above chance (25%), not the issue's target: see the printed figure.
-    assert!(accuracy >= 0.5, "per-step accuracy {accuracy}");
+    // Issue 6: the controller keeps the hopper on its feet and adopts each terrain's gait
+    // within 3 steps of the change, before the kill and again after the restart.
+    assert_eq!(
+        falls, 0,
+        "the hopper fell {falls} times under the controller"
+    );
+    assert!(
+        delays.len() >= 4,
+        "terrain changes seen while the node was up: {delays:?}"
+    );
+    assert!(
+        delays.iter().all(|&d| d <= 3),
+        "steps from a terrain change to its gait: {delays:?}"
+    );
+    assert!(
+        steps
+            .iter()
+            .any(|s| s["t_s"].as_f64().unwrap() > 30.0 && s["truth"] != steps[0]["truth"]),
+        "no step on another terrain after the restart"
+    );
+    assert!(accuracy >= 0.9, "per-step accuracy {accuracy}");
 }
 
 /// Issue 5's speed figures on a real SocketCAN interface: `presrs bench-node` plays 6 feet at
@@ -697,10 +741,12 @@ fn node_classifies_every_gait_with_a_g2_model_survives_damage_and_ignores_a_floo
         "flood {flood_acc} vs quiet {quiet_acc}"
     );
 
-    // Regression floors far below the issue's targets (95% per gait, 90% at 50% damage),
-    // which are not met yet: the note to issue 5 gives the measured gap.
+    // Floors below issue 5's targets (95% per gait, 90% at 50% damage). On the host, 200
+    // steps per gait of the same loop measure 96-97.5% (a 46-step run allows 2 errors for
+    // 95%, so the target itself would be a coin toss here) and 73.5% at 50% damage: the note
+    // to issue 5 has the figures. A regression below these floors is a real one.
     for (gait, acc) in per_gait {
-        assert!(acc >= 0.6, "{gait}: accuracy {acc}");
+        assert!(acc >= 0.9, "{gait}: accuracy {acc}");
     }
-    assert!(damaged_acc >= 0.35, "50% damage: accuracy {damaged_acc}");
+    assert!(damaged_acc >= 0.6, "50% damage: accuracy {damaged_acc}");
 }

@@ -2,6 +2,13 @@
 //! eq. (5) at liftoff, and the gait chosen per terrain, switched only in flight.
 //!
 //! Time is passed in (`now_us`), so tests and the demo drive it with a simulated clock.
+//!
+//! Stance timing runs on the *foot's* clock: the touchdown is the FootContact edge's own
+//! timestamp, bounce is judged between edge timestamps, and "now" in stance is the latest foot
+//! timestamp (FootContact, LegState) plus our time since it arrived. Frames from the leg can
+//! arrive late and in bursts (a loaded computer, a slow simulator); judged by arrival time, a
+//! burst holding a touchdown and the liftoff looks like one bounce, and the stance law runs
+//! late by the delay.
 
 use std::collections::BTreeMap;
 
@@ -143,6 +150,9 @@ impl ControllerConfig {
     }
 }
 
+/// How far the foot's clock is extrapolated past its latest timestamp, µs (two frame periods).
+pub const FOOT_CLOCK_HOLDOVER_US: u64 = 20_000;
+
 /// The controller.
 pub struct Controller {
     cfg: ControllerConfig,
@@ -151,8 +161,12 @@ pub struct Controller {
     terrain: u8,
     pending: Option<(Gait, GaitReason, u8)>,
     stance: bool,
+    /// Foot time of the last accepted switch edge.
     last_edge_us: Option<u64>,
+    /// Foot time of the touchdown.
     touchdown_us: u64,
+    /// The foot's clock: its latest timestamp (unwrapped to 64 bits) and our time when it came.
+    foot_clock: Option<(u64, u64)>,
     leg_angle: f64,
     beta_td: f64,
     next_beta_td: f64,
@@ -181,6 +195,7 @@ impl Controller {
             stance: false,
             last_edge_us: None,
             touchdown_us: 0,
+            foot_clock: None,
             leg_angle: 0.0,
             beta_td: b,
             next_beta_td: b,
@@ -200,6 +215,30 @@ impl Controller {
 
     pub fn reason(&self) -> GaitReason {
         self.reason
+    }
+
+    /// Takes a foot timestamp (32-bit µs, wrapping every 71 min) and returns it unwrapped.
+    fn foot_time(&mut self, ts: u32, now_us: u64) -> u64 {
+        let t = match self.foot_clock {
+            // Relative to the last one: a step of up to +-35 min either way.
+            Some((last, _)) => last.wrapping_add(ts.wrapping_sub(last as u32) as i32 as i64 as u64),
+            None => ts as u64,
+        };
+        if self.foot_clock.is_none_or(|(last, _)| t >= last) {
+            self.foot_clock = Some((t, now_us));
+        }
+        t
+    }
+
+    /// Now on the foot's clock: its latest timestamp plus our time since, for at most
+    /// [`FOOT_CLOCK_HOLDOVER_US`]. The leg reports every 10 ms; when its reports stop (a
+    /// stalled simulator, a loaded bus) the stance law waits for the leg instead of running
+    /// ahead of it.
+    fn foot_now(&self, now_us: u64) -> u64 {
+        match self.foot_clock {
+            Some((foot, ours)) => foot + now_us.saturating_sub(ours).min(FOOT_CLOCK_HOLDOVER_US),
+            None => now_us,
+        }
     }
 
     fn gait_by_id(&self, id: u8) -> Option<Gait> {
@@ -234,21 +273,25 @@ impl Controller {
     ) {
         match *msg {
             Message::NodeStatus(_) => self.last_heartbeat_us = Some(now_us),
-            Message::LegState(ls) if foot == self.cfg.foot => self.leg_angle = ls.leg_angle_rad,
+            Message::LegState(ls) if foot == self.cfg.foot => {
+                self.foot_time(ls.timestamp_us, now_us);
+                self.leg_angle = ls.leg_angle_rad;
+            }
             Message::FootContact(fc) if foot == self.cfg.foot => {
+                let t = self.foot_time(fc.timestamp_us, now_us);
                 if fc.stance == self.stance {
                     return;
                 }
                 if self
                     .last_edge_us
-                    .is_some_and(|t| now_us.saturating_sub(t) < self.cfg.lockout_us)
+                    .is_some_and(|last| t.saturating_sub(last) < self.cfg.lockout_us)
                 {
                     return; // bounce
                 }
-                self.last_edge_us = Some(now_us);
+                self.last_edge_us = Some(t);
                 self.stance = fc.stance;
                 if fc.stance {
-                    self.touchdown_us = now_us;
+                    self.touchdown_us = t;
                     self.beta_td = self.leg_angle;
                 } else {
                     let beta_lo = laws::liftoff_angle_from_signed(self.leg_angle);
@@ -333,7 +376,7 @@ impl Controller {
             self.next_cmd_us = now_us + (1e6 / self.cfg.command_hz) as u64;
             let g = &self.gait;
             let (phase, len) = if self.stance {
-                let t = now_us.saturating_sub(self.touchdown_us) as f64 * 1e-6;
+                let t = self.foot_now(now_us).saturating_sub(self.touchdown_us) as f64 * 1e-6;
                 (
                     Phase::Stance,
                     laws::aer_leg_length(t, g.zeta0, g.zeta_dev, g.omega, g.phi),
@@ -373,11 +416,12 @@ mod tests {
         })
     }
 
-    fn contact(stance: bool) -> Message {
+    /// A switch edge stamped `foot_us` by the foot.
+    fn contact(stance: bool, foot_us: u64) -> Message {
         Message::FootContact(FootContact {
             stance,
             seq: 0,
-            timestamp_us: 0,
+            timestamp_us: foot_us as u32,
         })
     }
 
@@ -392,11 +436,13 @@ mod tests {
             t += 100_000;
             let before = c.gait().id;
             c.on_message(0, &hb, t, &mut |m| out.push(m));
-            c.on_message(0, &contact(true), t, &mut |m| out.push(m));
+            c.on_message(0, &contact(true, t), t, &mut |m| out.push(m));
             c.on_message(0, &tc(wood, 90.0), t + 70_000, &mut |m| out.push(m));
             // in stance: no switch yet, whatever the count
             assert_eq!(c.gait().id, before, "step {step}: switched in stance");
-            c.on_message(0, &contact(false), t + 140_000, &mut |m| out.push(m));
+            c.on_message(0, &contact(false, t + 140_000), t + 140_000, &mut |m| {
+                out.push(m)
+            });
             t += 140_000;
             let expect = if step >= 1 { 3 } else { 2 };
             assert_eq!(c.gait().id, expect, "after step {step}");
@@ -437,8 +483,19 @@ mod tests {
     fn stance_commands_follow_eq4_and_bounce_is_ignored() {
         let mut c = Controller::new(ControllerConfig::default());
         let mut out = Vec::new();
-        c.on_message(0, &contact(true), 1_000_000, &mut |m| out.push(m));
-        c.on_message(0, &contact(false), 1_000_400, &mut |m| out.push(m)); // bounce
+        c.on_message(0, &contact(true, 1_000_000), 1_000_000, &mut |m| {
+            out.push(m)
+        });
+        c.on_message(0, &contact(false, 1_000_400), 1_000_400, &mut |m| {
+            out.push(m)
+        }); // bounce
+        // The leg's 100 Hz report keeps the foot's clock fresh.
+        let ls = Message::LegState(protocol::messages::LegState {
+            leg_angle_rad: 0.4,
+            leg_length_m: 0.14,
+            timestamp_us: 1_060_000,
+        });
+        c.on_message(0, &ls, 1_060_000, &mut |m| out.push(m));
         out.clear();
         c.tick(1_070_000, &mut |m| out.push(m));
         let g = c.gait().clone();
@@ -450,6 +507,61 @@ mod tests {
         let cmd = cmd.unwrap_or_default();
         assert_eq!(cmd.phase, Phase::Stance);
         assert!((cmd.leg_length_m - want).abs() < 1e-9);
+    }
+
+    #[test]
+    fn late_edges_in_a_burst_are_judged_by_the_foots_clock() {
+        let mut c = Controller::new(ControllerConfig::default());
+        let mut out = Vec::new();
+        // A touchdown at foot time 5.000 s and its liftoff at 5.150 s, both arriving 2 ms
+        // apart at our 9.000 s (the leg's frames were held up): not a bounce.
+        c.on_message(0, &contact(true, 5_000_000), 9_000_000, &mut |m| {
+            out.push(m)
+        });
+        c.on_message(0, &contact(false, 5_150_000), 9_002_000, &mut |m| {
+            out.push(m)
+        });
+        assert!(!c.stance, "the liftoff was taken for bounce");
+        // The next touchdown at foot time 5.400 s arrives at our 9.001 s (the clocks differ);
+        // 70 ms later on our clock the stance law is at 70 ms of the foot's stance.
+        c.on_message(0, &contact(true, 5_400_000), 9_001_000, &mut |m| {
+            out.push(m)
+        });
+        // The leg reports at foot time 5.460 s, arriving at our 9.061 s; at our 9.071 s the
+        // stance law is at 70 ms of the foot's stance.
+        let ls = |foot_us: u32| {
+            Message::LegState(protocol::messages::LegState {
+                leg_angle_rad: 0.4,
+                leg_length_m: 0.14,
+                timestamp_us: foot_us,
+            })
+        };
+        c.on_message(0, &ls(5_460_000), 9_061_000, &mut |m| out.push(m));
+        let stance_len = |c: &mut Controller, now: u64| {
+            let mut out = Vec::new();
+            c.next_cmd_us = 0;
+            c.tick(now, &mut |m| out.push(m));
+            out.iter()
+                .find_map(|m| match m {
+                    Message::LegCommand(lc) if lc.phase == Phase::Stance => Some(lc.leg_length_m),
+                    _ => None,
+                })
+                .unwrap_or(f64::NAN)
+        };
+        let g = c.gait().clone();
+        let law = |t: f64| laws::aer_leg_length(t, g.zeta0, g.zeta_dev, g.omega, g.phi);
+        assert!((stance_len(&mut c, 9_071_000) - law(0.07)).abs() < 1e-9);
+        // The leg's reports stop: the stance law holds 20 ms past the last one (80 ms), not
+        // 200 ms on.
+        assert!((stance_len(&mut c, 9_261_000) - law(0.08)).abs() < 1e-9);
+        // The foot's 32-bit clock wraps: an edge just after the wrap is still 100 ms later.
+        let mut c = Controller::new(ControllerConfig::default());
+        let before = u32::MAX as u64 - 50_000;
+        c.on_message(0, &contact(true, before), 0, &mut |m| out.push(m));
+        c.on_message(0, &contact(false, before + 100_000), 100_000, &mut |m| {
+            out.push(m)
+        });
+        assert!(!c.stance, "an edge after the wrap was taken for bounce");
     }
 
     #[test]

@@ -84,19 +84,23 @@ pub struct Options {
 /// Generates a dataset, terrain by terrain.
 pub fn generate(opts: &Options) -> Vec<Sample> {
     let mut out = Vec::new();
+    // One sensor for every terrain, as in the paper: its sensel gain pattern and its damage are
+    // the same under every surface. (A sensor per terrain would let the classifier learn the
+    // sensor instead of the terrain.)
+    let mut sensor_rng = ChaCha8Rng::seed_from_u64(opts.seed ^ 0x5e_5011);
+    let faults = FaultParams {
+        initial_damage_pct: opts.damage_pct,
+        ..Default::default()
+    };
+    let params = SkinParams::default();
+    let f = Faults::new(faults, params.rows, params.cols, &mut sensor_rng);
+    let mut skin = Skin::new(params, f, &mut sensor_rng);
     for (ti, &terrain) in opts.kind.terrains().iter().enumerate() {
         // One stream per terrain, so a class's samples do not depend on the others' counts.
         let mut rng = ChaCha8Rng::seed_from_u64(opts.seed ^ ((ti as u64 + 1) << 32));
         let n = opts
             .n
             .unwrap_or_else(|| opts.kind.default_count(terrain, opts.gait.id));
-        let faults = FaultParams {
-            initial_damage_pct: opts.damage_pct,
-            ..Default::default()
-        };
-        let params = SkinParams::default();
-        let f = Faults::new(faults, params.rows, params.cols, &mut rng);
-        let mut skin = Skin::new(params, f, &mut rng);
         match opts.kind {
             Kind::Static | Kind::Sandpaper => {
                 for _ in 0..n {

@@ -10,4 +10,4 @@ pub mod terrain;
 
 /// Changes whenever the simulator's output for a given seed changes (hopper parameters, terrain
 /// textures, skin), so that models trained and cached from simulated data can tell they are stale.
-pub const SIM_VERSION: u32 = 2;
+pub const SIM_VERSION: u32 = 3;

@@ -192,6 +192,8 @@ pub struct SimRobot {
     next_frame_us: u64,
     /// Every touchdown so far (ground truth).
     pub steps: Vec<StepTruth>,
+    /// Falls so far (each leg is set back on its feet where it fell): robot time, µs.
+    pub falls: Vec<u64>,
     last_td: Vec<Option<(f64, f64)>>,
 }
 
@@ -236,6 +238,7 @@ impl SimRobot {
             now_us: 0,
             next_frame_us: FRAME_US,
             steps: Vec::new(),
+            falls: Vec::new(),
             last_td: vec![None; n],
             cfg,
         }
@@ -341,6 +344,11 @@ impl SimRobot {
                     leg.hopper = Hopper::launch(HopperParams::default(), &leg.cmd.fixed.gait);
                     leg.hopper.x = x;
                     leg.hopper.t = t_end;
+                    // Picked up: the foot switch opens (it may already be open). Without this
+                    // edge a controller that saw the touchdown stays in stance through the
+                    // relaunch and its stance law runs on from a stale touchdown.
+                    leg.edges.push((t_us, false));
+                    self.falls.push(t_us);
                     tracing::warn!(foot, "simulated hopper fell; restarted");
                 }
                 None => {}

@@ -15,6 +15,11 @@ use crate::faults::Faults;
 use crate::field::{Field, normal};
 use crate::terrain::{Surface, Terrain};
 
+/// Weight of the rigid-punch rim concentration on the softest ground (see `Skin::contact`).
+const RIM_GAIN: f64 = 0.5;
+/// The punch profile is capped short of the rim, where it diverges: at 4x the centre.
+const RIM_RHO2_MAX: f64 = 1.0 - 1.0 / 16.0;
+
 /// Frame period of the acquisition (100 Hz), µs.
 pub const FRAME_PERIOD_US: u64 = 10_000;
 
@@ -91,6 +96,28 @@ impl Footprint {
     };
     pub const DIE: Footprint = Footprint::Die { margin: 2 };
 
+    /// Squared normalised distance from the footprint's centre: 0 at the centre, 1 on its edge
+    /// (the ellipse's radius; for the square die, the larger of the two axes).
+    fn rho2(&self, y_sensel: f64, x_sensel: f64, rows: usize, cols: usize) -> f64 {
+        match *self {
+            Footprint::Die { margin } => {
+                let (hy, hx) = (
+                    (rows - 2 * margin) as f64 / 2.0,
+                    (cols - 2 * margin) as f64 / 2.0,
+                );
+                let dy = (y_sensel - rows as f64 / 2.0) / hy;
+                let dx = (x_sensel - cols as f64 / 2.0) / hx;
+                (dy * dy).max(dx * dx)
+            }
+            Footprint::Ellipse { r0, c0, h, w } => {
+                let (cy, cx) = (r0 as f64 + h as f64 / 2.0, c0 as f64 + w as f64 / 2.0);
+                let dy = (y_sensel - cy) / (h as f64 / 2.0);
+                let dx = (x_sensel - cx) / (w as f64 / 2.0);
+                dy * dy + dx * dx
+            }
+        }
+    }
+
     fn contains(&self, y_sensel: f64, x_sensel: f64, rows: usize, cols: usize) -> bool {
         match *self {
             Footprint::Die { margin } => {
@@ -118,6 +145,9 @@ pub struct Contact {
     lo: Vec<f32>,
     hi: Vec<f32>,
     mask: Vec<bool>,
+    /// Pressure weight per fine cell (mean 1 over the footprint): the rim concentration of a
+    /// stiff foot on soft ground.
+    rim: Vec<f32>,
     k_lo: f64,
     k_hi: f64,
 }
@@ -189,16 +219,40 @@ impl Skin {
             None => vec![0.0; lo.v.len()],
         };
         let os = p.oversample as f64;
-        let mask = (0..lo.rows * lo.cols)
+        let mask: Vec<bool> = (0..lo.rows * lo.cols)
             .map(|i| {
                 let (r, c) = (i / lo.cols, i % lo.cols);
                 footprint.contains((r as f64 + 0.5) / os, (c as f64 + 0.5) / os, p.rows, p.cols)
             })
             .collect();
+        // A rigid base pressed into an elastic ground carries more load at its rim than at its
+        // centre (the rigid punch: p ~ 1/sqrt(1 - rho^2)); pressed through soft felt onto rigid
+        // ground it carries it evenly. Between the two, by how much softer the ground is than
+        // the felt. This is what makes clay, grass and sand look soft to the sensor at any load.
+        let soft = RIM_GAIN * p.felt_kpa_mm / (p.felt_kpa_mm + surface.stiffness_kpa_mm);
+        let mut rim: Vec<f32> = (0..lo.rows * lo.cols)
+            .map(|i| {
+                let (r, c) = (i / lo.cols, i % lo.cols);
+                let rho2 =
+                    footprint.rho2((r as f64 + 0.5) / os, (c as f64 + 0.5) / os, p.rows, p.cols);
+                let punch = 1.0 / (1.0 - rho2.min(RIM_RHO2_MAX)).sqrt();
+                ((1.0 - soft) + soft * punch) as f32
+            })
+            .collect();
+        let (sum, n) = rim
+            .iter()
+            .zip(&mask)
+            .filter(|(_, m)| **m)
+            .fold((0.0f64, 0usize), |(s, n), (w, _)| (s + *w as f64, n + 1));
+        if n > 0 && sum > 0.0 {
+            let k = (n as f64 / sum) as f32;
+            rim.iter_mut().for_each(|w| *w *= k);
+        }
         Contact {
             lo: lo.v,
             hi,
             mask,
+            rim,
             k_lo: series(p.felt_kpa_mm, surface.stiffness_kpa_mm),
             k_hi: series(p.silicone_kpa_mm, surface.stiffness_kpa_mm),
         }
@@ -214,6 +268,7 @@ impl Skin {
             }
             (contact.k_lo * (contact.lo[i] as f64 - z) + contact.k_hi * contact.hi[i] as f64)
                 .max(0.0)
+                * contact.rim[i] as f64
         };
         let force = |z: f64| -> f64 {
             (0..contact.lo.len())

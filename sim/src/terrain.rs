@@ -186,7 +186,7 @@ impl Terrain {
                 // Loop pile: tufts on a square gauge of about 3.2-4 mm. The loops are far stiffer than
                 // the skin's felt, so each presses through as a bump the sensor can see.
                 let mut f = Field::zeros(rows, cols, cell_mm);
-                let gauge = rng.random_range(3.2..4.0);
+                let gauge = rng.random_range(3.5..3.7);
                 let (oy, ox) = (rng.random_range(0.0..gauge), rng.random_range(0.0..gauge));
                 let angle: f64 = rng.random_range(-0.2..0.2);
                 let (s, c) = angle.sin_cos();

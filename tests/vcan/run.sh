@@ -21,13 +21,16 @@ for l in sys.stdin:
 # time (also under TCG), and the node needs a model trained on simulated G2 stances.
 echo "vcan suite: building presrs (release) and training the system tests' G2 model"
 cargo build --release --quiet
-export PRESRS_BIN="$root/target/release/presrs"
-work="$root/target/vcan-system"
+# Wherever cargo puts its output (CARGO_TARGET_DIR or ./target): a stale binary must not run.
+target_dir=$(cargo metadata --no-deps --format-version 1 |
+  python3 -c 'import json, sys; print(json.load(sys.stdin)["target_directory"])')
+export PRESRS_BIN="$target_dir/release/presrs"
+work="$target_dir/vcan-system"
 if [ ! -s "$work/g2-model.json" ] || [ "$PRESRS_BIN" -nt "$work/g2-model.json" ]; then
   rm -rf "$work" && mkdir -p "$work"
-  "$PRESRS_BIN" dataset dynamic --gait G2 --n 45 --seed 21 --out "$work/g2" >/dev/null
+  "$PRESRS_BIN" dataset dynamic --gait G2 --n 60 --seed 21 --out "$work/g2" >/dev/null
   "$PRESRS_BIN" train --data "$work/g2" --out "$work/g2-model.json" --crop 0,3,6,0 \
-    --per-class 30 --train 20 --seed 21
+    --per-class 45 --train 30 --normalize-load --seed 21
 fi
 export PRESRS_MODEL="$work/g2-model.json"
 
@@ -35,6 +38,7 @@ setup='modprobe vcan 2>/dev/null || true
 ip link add dev vcan0 type vcan 2>/dev/null || true; ip link set vcan0 mtu 72 up
 ip link add dev vcan1 type vcan 2>/dev/null || true; ip link set vcan1 mtu 16 up'
 
+# PRESRS_VCAN_FILTER: a test-name filter for the vcan binary (while developing; CI runs all).
 log=$(mktemp)
 can_here() {
   [ "$(id -u)" -eq 0 ] || return 1
@@ -47,7 +51,7 @@ if [ "${PRESRS_VCAN_FORCE_VM:-0}" != 1 ] && can_here; then
   where="on this kernel"
   bash -c "$setup"
   export PRESRS_BENCH_LABEL="vcan on this kernel"
-  set +e; "$bin" --test-threads=1 --nocapture 2>&1 | tee "$log"; rc=${PIPESTATUS[0]}; set -e
+  set +e; "$bin" --test-threads=1 --nocapture ${PRESRS_VCAN_FILTER:-} 2>&1 | tee "$log"; rc=${PIPESTATUS[0]}; set -e
 else
   where="inside a virtme-ng VM (this kernel has no CAN: AF_CAN unavailable)"
   # TCG emulation runs the simulator at about half real time, so the system tests run the
@@ -61,7 +65,7 @@ else
 export PATH='$PATH' HOME='$HOME' PRESRS_BIN='$PRESRS_BIN' PRESRS_MODEL='$PRESRS_MODEL'
 export PRESRS_SYSTEM_SPEED='${PRESRS_SYSTEM_SPEED:-0.35}'
 export PRESRS_BENCH_LABEL='emulated: vcan inside a TCG VM, 2 vCPUs'
-cd '$root' && '$bin' --test-threads=1 --nocapture; echo VCAN_EXIT=\$?" 2>&1 | tee "$log"
+cd '$root' && '$bin' --test-threads=1 --nocapture ${PRESRS_VCAN_FILTER:-}; echo VCAN_EXIT=\$?" 2>&1 | tee "$log"
   set -e
   rc=$(grep -a -o 'VCAN_EXIT=[0-9]*' "$log" | tail -1 | cut -d= -f2)
   rc=${rc:-1}

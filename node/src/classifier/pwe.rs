@@ -185,7 +185,8 @@ impl Classifier {
         let m = &self.model;
         let scale = match m.normalize_load {
             Some(target) => {
-                let total: f64 = self.work.iter().map(|&p| p as f64).sum();
+                // An integer sum: exact, and it vectorises (an f64 running sum is one long dependency chain).
+                let total = self.work.iter().map(|&p| p as u64).sum::<u64>() as f64;
                 if total > 0.0 {
                     (target / total) as f32
                 } else {
