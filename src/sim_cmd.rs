@@ -78,6 +78,9 @@ pub fn load_track(path: Option<&std::path::Path>) -> Result<Track> {
     }
 }
 
+/// The most robot time one pass of the simulator covers, µs: commands are read between passes.
+const MAX_LAG_US: u64 = 2_000;
+
 /// What one run of the simulator saw: the `--report` file's content.
 #[derive(Debug, serde::Serialize)]
 pub struct SimReport {
@@ -166,6 +169,8 @@ pub fn run_on(
     };
     tracing::info!(iface = %source.label(), feet = a.feet, speed = a.speed, gait = %a.gait, "presrs sim running");
     let end_us = a.duration.map(|d| (d * 1e6) as u64);
+    // Robot time given up because the machine could not keep up (see below).
+    let mut stretched_us = 0u64;
     let mut out = Vec::with_capacity(128);
     let mut backoff = Backoff::default();
     let mut send_errors = 0u64;
@@ -175,14 +180,20 @@ pub fn run_on(
             break;
         }
         // Simulated time follows the wall clock; 1 ms steps, sleeping when ahead.
-        let target = (start.elapsed().as_secs_f64() * a.speed * 1e6) as u64;
+        let target =
+            ((start.elapsed().as_secs_f64() * a.speed * 1e6) as u64).saturating_sub(stretched_us);
         if target < t_us + 1000 {
             std::thread::sleep(Duration::from_micros(300));
             continue;
         }
-        // When far behind (a slow machine), catch up at most 20 ms per pass so that the bus
-        // is still read in between.
-        t_us = target.min(t_us + 20_000);
+        // A machine too slow for `--speed` (a debug build, emulation, a loaded CI runner):
+        // robot time slows down rather than jumping ahead to catch up. A jump would run the
+        // leg for tens of ms on one stale command and deliver the foot's frames in bursts; a
+        // real leg never pauses, and neither does its controller's view of it.
+        if target > t_us + MAX_LAG_US {
+            stretched_us += target - (t_us + MAX_LAG_US);
+        }
+        t_us = target.min(t_us + MAX_LAG_US);
         robot.advance_to(t_us, &mut |f| out.push(f));
         for f in out.drain(..) {
             if let Err(e) = bus.send(&f) {

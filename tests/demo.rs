@@ -37,16 +37,16 @@ fn demo_runs_the_loop_and_reports_json() {
         .filter(|e| e.file_name().to_string_lossy().starts_with("demo-model-v"))
         .count();
     assert_eq!(cached, 1, "one cached demo model");
+
+    // Then, on the cached model (one test, so that nothing else loads the machine while the
+    // real-time loop runs): `--realtime` and `--fixed-gait`.
+    realtime_and_fixed_gait(&dir);
     let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// `--realtime`: the three loops as concurrent tasks on the wall clock (as they run as processes
-/// on CAN), and `--fixed-gait`: no controller. Both reuse the cached model of the test above
-/// only if it exists; each trains its own otherwise.
-#[test]
-fn demo_realtime_and_fixed_gait() {
-    let dir = std::env::temp_dir().join(format!("presrs-demo-rt-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+/// on CAN); `--fixed-gait`: no controller.
+fn realtime_and_fixed_gait(dir: &std::path::Path) {
     let run = |args: &[&str]| -> serde_json::Value {
         let out = common::output_ok(
             Command::new(env!("CARGO_BIN_EXE_presrs"))
@@ -54,7 +54,7 @@ fn demo_realtime_and_fixed_gait() {
                 .args(args)
                 .args(["--json", "--csv"])
                 .arg(dir.join("steps.csv"))
-                .env("XDG_CACHE_HOME", &dir),
+                .env("XDG_CACHE_HOME", dir),
         );
         serde_json::from_slice(&out.stdout).unwrap()
     };
@@ -73,5 +73,4 @@ fn demo_realtime_and_fixed_gait() {
         .map(|r| r["gait"].as_u64().unwrap())
         .collect();
     assert!(gaits.iter().all(|&g| g == 3), "{gaits:?}");
-    let _ = std::fs::remove_dir_all(&dir);
 }

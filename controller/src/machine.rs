@@ -152,6 +152,11 @@ impl ControllerConfig {
 
 /// How far the foot's clock is extrapolated past its latest timestamp, µs (two frame periods).
 pub const FOOT_CLOCK_HOLDOVER_US: u64 = 20_000;
+/// A stance outside these bounds (µs) was not a step of the gait (the paper's: ~140 ms).
+pub const MIN_STANCE_US: u64 = 40_000;
+pub const MAX_STANCE_US: u64 = 600_000;
+/// Touchdown and liftoff angles stay within this of the gait's beta_des, rad.
+pub const MAX_ANGLE_FROM_DESIRED: f64 = 0.35;
 
 /// The controller.
 pub struct Controller {
@@ -176,6 +181,8 @@ pub struct Controller {
     next_status_us: u64,
     seq: u8,
     pub switches: u64,
+    /// Liftoffs after which eq. (5) was restarted from beta_des (an implausible step).
+    pub gait_resets: u64,
 }
 
 impl Controller {
@@ -205,6 +212,7 @@ impl Controller {
             next_status_us: 0,
             seq: 0,
             switches: 0,
+            gait_resets: 0,
             cfg,
         }
     }
@@ -296,9 +304,22 @@ impl Controller {
                 } else {
                     let beta_lo = laws::liftoff_angle_from_signed(self.leg_angle);
                     let g = &self.gait;
-                    self.next_beta_td =
-                        laws::next_touchdown_angle(beta_lo, self.beta_td, g.c, g.beta_des)
-                            .clamp(0.0, 1.0);
+                    let stance_us = t.saturating_sub(self.touchdown_us);
+                    // Eq. (5) assumes the step was a step. After a stumble or a fall (a stance
+                    // far too short or long, the leg swept far from the gait's angle) it would
+                    // carry the bad angle into the next touchdown and the next fall: start the
+                    // gait afresh instead.
+                    let plausible = (MIN_STANCE_US..=MAX_STANCE_US).contains(&stance_us)
+                        && (beta_lo - g.beta_des).abs() <= MAX_ANGLE_FROM_DESIRED;
+                    self.next_beta_td = if plausible {
+                        laws::next_touchdown_angle(beta_lo, self.beta_td, g.c, g.beta_des).clamp(
+                            g.beta_des - MAX_ANGLE_FROM_DESIRED,
+                            g.beta_des + MAX_ANGLE_FROM_DESIRED,
+                        )
+                    } else {
+                        self.gait_resets += 1;
+                        g.beta_des
+                    };
                     self.apply_pending(out);
                 }
             }
@@ -368,9 +389,10 @@ impl Controller {
             if self.pending.is_none() {
                 self.reason = GaitReason::NodeLost;
             }
-            if !self.stance {
-                self.apply_pending(out);
-            }
+            // At once, in stance too: terrain switches wait for flight so that a stance runs
+            // one law, but the safe gait is for when nothing can be trusted, and waiting for
+            // the liftoff would add up to a stance (~200 ms) to the 500 ms timeout.
+            self.apply_pending(out);
         }
         if now_us >= self.next_cmd_us {
             self.next_cmd_us = now_us + (1e6 / self.cfg.command_hz) as u64;
@@ -511,7 +533,12 @@ mod tests {
 
     #[test]
     fn late_edges_in_a_burst_are_judged_by_the_foots_clock() {
-        let mut c = Controller::new(ControllerConfig::default());
+        // No node on this bus: a long heartbeat timeout keeps the gait.
+        let cfg = ControllerConfig {
+            heartbeat_timeout_ms: 60_000,
+            ..Default::default()
+        };
+        let mut c = Controller::new(cfg);
         let mut out = Vec::new();
         // A touchdown at foot time 5.000 s and its liftoff at 5.150 s, both arriving 2 ms
         // apart at our 9.000 s (the leg's frames were held up): not a bounce.
@@ -562,6 +589,54 @@ mod tests {
             out.push(m)
         });
         assert!(!c.stance, "an edge after the wrap was taken for bounce");
+    }
+
+    #[test]
+    fn a_fall_restarts_the_touchdown_law_from_beta_des() {
+        let mut c = Controller::new(ControllerConfig::default());
+        let mut out = Vec::new();
+        let ls = |angle: f64, foot_us: u32| {
+            Message::LegState(protocol::messages::LegState {
+                leg_angle_rad: angle,
+                leg_length_m: 0.14,
+                timestamp_us: foot_us,
+            })
+        };
+        let b = c.gait().beta_des;
+        // A normal step: liftoff 0.05 rad past beta_des, eq. (5) applies.
+        c.on_message(0, &ls(b, 1_000_000), 1_000_000, &mut |m| out.push(m));
+        c.on_message(0, &contact(true, 1_000_000), 1_000_000, &mut |m| {
+            out.push(m)
+        });
+        c.on_message(0, &ls(-(b + 0.05), 1_150_000), 1_150_000, &mut |m| {
+            out.push(m)
+        });
+        c.on_message(0, &contact(false, 1_150_000), 1_150_000, &mut |m| {
+            out.push(m)
+        });
+        let g = c.gait().clone();
+        let law = laws::next_touchdown_angle(b + 0.05, b, g.c, g.beta_des);
+        assert!((c.next_beta_td - law).abs() < 1e-12);
+        assert_eq!(c.gait_resets, 0);
+        // A fall: the leg swept to 1.3 rad before the foot left the ground.
+        c.on_message(0, &ls(b, 1_400_000), 1_400_000, &mut |m| out.push(m));
+        c.on_message(0, &contact(true, 1_400_000), 1_400_000, &mut |m| {
+            out.push(m)
+        });
+        c.on_message(0, &ls(-1.3, 1_520_000), 1_520_000, &mut |m| out.push(m));
+        c.on_message(0, &contact(false, 1_520_000), 1_520_000, &mut |m| {
+            out.push(m)
+        });
+        assert_eq!((c.next_beta_td, c.gait_resets), (b, 1));
+        // A stance of 10 ms (a stumble) is no step either.
+        c.on_message(0, &contact(true, 1_800_000), 1_800_000, &mut |m| {
+            out.push(m)
+        });
+        c.on_message(0, &ls(-b, 1_810_000), 1_810_000, &mut |m| out.push(m));
+        c.on_message(0, &contact(false, 1_830_000), 1_830_000, &mut |m| {
+            out.push(m)
+        });
+        assert_eq!(c.gait_resets, 2);
     }
 
     #[test]

@@ -349,7 +349,11 @@ impl SimRobot {
                     // relaunch and its stance law runs on from a stale touchdown.
                     leg.edges.push((t_us, false));
                     self.falls.push(t_us);
-                    tracing::warn!(foot, "simulated hopper fell; restarted");
+                    tracing::warn!(
+                        foot,
+                        t_s = t_us as f64 * 1e-6,
+                        "simulated hopper fell; restarted"
+                    );
                 }
                 None => {}
             }

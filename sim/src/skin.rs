@@ -3,6 +3,8 @@
 //! The skin (section 3 of the paper) is hard silicone over felt over the array. Under load the
 //! surface meets the silicone; height differences finer than about a millimetre are resisted by
 //! the stiff silicone, coarser ones by the soft felt (two scales of a Winkler foundation). The
+//! foot's base is stiff: on ground softer than the felt it carries more load at its rim than at
+//! its centre (a rigid punch), which is how soft ground shows at any load. The
 //! felt then spreads the contact pressure before it reaches the sensels (a Gaussian blur), each
 //! sensel averages the pressure over its 1.27 mm cell, and the electronics turn 0-138 kPa into
 //! 8-bit counts with sensel-to-sensel gain spread, noise, a noise threshold and saturation.

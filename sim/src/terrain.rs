@@ -2,7 +2,8 @@
 //! fine grid), the terrain's local stiffness, and its bulk stiffness under the hopper.
 //!
 //! Every sample is a fresh random patch (stones, needles and particles placed anew), so no two
-//! samples are alike. The physical reasoning per surface is in `docs/sim.md`.
+//! samples are alike. The physical reasoning per surface is in the comments of
+//! [`Terrain::surface`]; how the skin turns a surface into pressure is in `skin.rs`.
 
 use std::f64::consts::PI;
 use std::fmt;
@@ -183,8 +184,11 @@ impl Terrain {
                 (f, 2e3)
             }
             Terrain::Carpet => {
-                // Loop pile: tufts on a square gauge of about 3.2-4 mm. The loops are far stiffer than
-                // the skin's felt, so each presses through as a bump the sensor can see.
+                // Loop pile: tufts on a square gauge of 3.6 mm. One carpet: the gauge varies only
+                // by manufacturing tolerance, the orientation and offset by where the foot lands
+                // (a gauge drawn anew per stance made every step a different carpet). The loops
+                // are far stiffer than the skin's felt, so each presses through as a bump the
+                // sensor can see.
                 let mut f = Field::zeros(rows, cols, cell_mm);
                 let gauge = rng.random_range(3.5..3.7);
                 let (oy, ox) = (rng.random_range(0.0..gauge), rng.random_range(0.0..gauge));
