@@ -6,8 +6,8 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use node::classifier::dataset::{load_dataset, read_image, read_images, write_pgm};
-use node::classifier::train::{Labelled, TrainOptions, train as train_model};
-use node::classifier::{ClassInfo, Classifier, Crop, Model, repair as repair_mod};
+use node::classifier::train::{TrainOptions, train as train_model};
+use node::classifier::{Classifier, Crop, Model, repair as repair_mod};
 use rand::SeedableRng;
 
 pub fn train(data: &Path, out: &Path, opts: &TrainOptions, skip_bad: bool) -> Result<ExitCode> {
@@ -19,28 +19,14 @@ pub fn train(data: &Path, out: &Path, opts: &TrainOptions, skip_bad: bool) -> Re
             ds.bad[0]
         );
     }
-    let classes: Vec<ClassInfo> = ds
-        .classes
-        .iter()
-        .enumerate()
-        .map(|(i, n)| ClassInfo {
-            name: n.clone(),
-            terrain_id: protocol::messages::terrain_id(n).unwrap_or(100 + i as u8),
-        })
-        .collect();
-    let labelled: Vec<Labelled> = ds
-        .samples
-        .iter()
-        .map(|s| Labelled {
-            image: &s.image,
-            class: s.class,
-        })
-        .collect();
+    let set = presrs::simdata::TrainingSet::from_dataset(ds);
+    let classes = &set.classes;
+    let labelled = set.labelled();
     if labelled.is_empty() {
         bail!("{}: no images found", data.display());
     }
     let t0 = Instant::now();
-    let (model, split) = train_model(&labelled, &classes, opts)?;
+    let (model, split) = train_model(&labelled, classes, opts)?;
     let took = t0.elapsed();
     model.save(out)?;
     println!(

@@ -1,5 +1,5 @@
-//! Simulator samples as a labelled training set for the classifier (the glue between the `sim`
-//! and `node` crates, which do not depend on each other).
+//! Labelled training sets for the classifier: from simulator samples (the glue between the `sim`
+//! and `node` crates, which do not depend on each other) or from a dataset directory.
 
 use node::classifier::dataset::Dataset;
 use node::classifier::train::Labelled;
