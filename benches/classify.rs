@@ -17,6 +17,7 @@ fn static_set(n: usize, seed: u64) -> TrainingSet {
         n: Some(n),
         gait: controller::gait::Gait::g2(),
         damage_pct: 0.0,
+        sensor: sim::DEFAULT_SENSOR,
         seed,
     });
     TrainingSet::from_samples(samples, Kind::Static.terrains())

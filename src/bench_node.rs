@@ -227,6 +227,7 @@ fn image_pool() -> Result<Vec<(u8, Vec<u16>)>> {
         n: Some(8),
         gait: controller::Gait::g2(),
         damage_pct: 0.0,
+        sensor: sim::DEFAULT_SENSOR,
         seed: 99,
     });
     anyhow::ensure!(!samples.is_empty(), "the simulator gave no images");

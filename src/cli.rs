@@ -241,6 +241,7 @@ pub fn dataset(
     n: Option<usize>,
     gait: &str,
     damage: f64,
+    sensor: u64,
     seed: u64,
 ) -> Result<ExitCode> {
     use sim::dataset::{Kind, Options, generate};
@@ -260,6 +261,7 @@ pub fn dataset(
         n,
         gait,
         damage_pct: damage,
+        sensor,
         seed,
     });
     let mut counts = std::collections::BTreeMap::new();

@@ -41,6 +41,8 @@ pub fn sim_model(seed: u64) -> Result<Model> {
             n: Some(30),
             gait: g,
             damage_pct: 0.0,
+            // The sensor the demo's foot wears (SimConfig's default).
+            sensor: sim::DEFAULT_SENSOR,
             seed: seed + i as u64,
         };
         samples.extend(sim::dataset::generate(&opts));
@@ -214,6 +216,7 @@ fn closed_loop_realtime(
         speed: 1.0,
         gait: "G2".into(),
         damage: a.damage,
+        sensor: sim::DEFAULT_SENSOR,
         duration: Some(steps as f64 * 0.4 + 1.0),
         report: None,
         seed,
@@ -322,7 +325,10 @@ fn closed_loop_with_falls(
     sim_cfg.faults.initial_damage_pct = p.damage_pct;
     let ids = sim_cfg.ids.clone();
     let mut robot = SimRobot::new(sim_cfg, seed);
-    let mut pipeline = StancePipeline::new(p.node.clone(), Some(model));
+    let mut node_cfg = p.node.clone();
+    // Lock-step simulated time: a refit lands at the step that asked for it, as in a replay.
+    node_cfg.refit = node_cfg.refit.reproducible();
+    let mut pipeline = StancePipeline::new(node_cfg, Some(model));
     let mut ctrl = p.controller.map(|c| Controller::new(c.clone()));
     let mut rows: Vec<StepRow> = Vec::new();
     let mut t_us = 0u64;

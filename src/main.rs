@@ -130,6 +130,10 @@ enum Cmd {
         /// Sensor damage, percent of sensels on dead rows and columns (eq. 6).
         #[arg(long, default_value_t = 0.0)]
         damage: f64,
+        /// Serial number of the simulated sensor that records the images: its gain pattern and
+        /// faults. Train on the sensor the robot wears (`presrs sim --sensor`, the same default).
+        #[arg(long, default_value_t = sim::DEFAULT_SENSOR)]
+        sensor: u64,
         #[arg(long, default_value_t = 1)]
         seed: u64,
     },
@@ -210,8 +214,9 @@ fn run(cli: Cli) -> Result<ExitCode> {
             n,
             gait,
             damage,
+            sensor,
             seed,
-        } => cli::dataset(kind, &out, n, &gait, damage, seed),
+        } => cli::dataset(kind, &out, n, &gait, damage, sensor, seed),
         Cmd::Experiment(args) => experiment::run(args),
     }
 }

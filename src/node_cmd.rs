@@ -75,7 +75,9 @@ pub fn run(a: NodeArgs) -> Result<ExitCode> {
     }
 }
 
-fn replay(cfg: NodeConfig, model: Model, log: &Path, json: bool) -> Result<ExitCode> {
+fn replay(mut cfg: NodeConfig, model: Model, log: &Path, json: bool) -> Result<ExitCode> {
+    // The same decisions on every replay: a refit lands at the step that asked for it.
+    cfg.refit = cfg.refit.reproducible();
     let file = std::fs::File::open(log).with_context(|| format!("opening {}", log.display()))?;
     let records = protocol::candump::read_log(std::io::BufReader::new(file))
         .with_context(|| format!("reading {}", log.display()))?;

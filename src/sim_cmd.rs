@@ -41,6 +41,10 @@ pub struct SimArgs {
     /// Sensor damage from the start, percent of sensels on dead lines (eq. 6).
     #[arg(long, default_value_t = 0.0)]
     pub damage: f64,
+    /// Serial number of foot 0's sensor (foot i wears serial + i): the same default as
+    /// `presrs dataset --sensor`, so a model trained on that data fits this foot.
+    #[arg(long, default_value_t = sim::DEFAULT_SENSOR)]
+    pub sensor: u64,
     /// Stop after this much simulated time, s (default: run until SIGINT/SIGTERM).
     #[arg(long)]
     pub duration: Option<f64>,
@@ -148,6 +152,7 @@ pub fn run_on(
             initial_damage_pct: a.damage,
             ..Default::default()
         },
+        sensor: a.sensor,
         ..Default::default()
     };
     let ids = cfg.ids.clone();

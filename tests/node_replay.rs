@@ -20,6 +20,7 @@ fn small_model(dir: &std::path::Path) -> std::path::PathBuf {
         n: Some(20),
         gait: controller::Gait::g2(),
         damage_pct: 0.0,
+        sensor: sim::DEFAULT_SENSOR,
         seed: 4,
     });
     let set = TrainingSet::from_samples(samples, &Terrain::DYNAMIC);

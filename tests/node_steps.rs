@@ -1,6 +1,6 @@
 //! The node's stance pipeline on the simulated robot's traffic: one TerrainClass per step.
 
-use node::{NodeConfig, StancePipeline};
+use node::{NodeConfig, RefitMode, StancePipeline};
 use protocol::Stamped;
 use protocol::messages::flags;
 use sim::runner::{SimConfig, SimRobot};
@@ -52,6 +52,7 @@ fn the_decision_comes_with_the_sampled_frame_not_a_frame_later() {
         n: Some(20),
         gait: controller::Gait::g2(),
         damage_pct: 0.0,
+        sensor: sim::DEFAULT_SENSOR,
         seed: 3,
     });
     let set = presrs::simdata::TrainingSet::from_samples(samples, &sim::terrain::Terrain::DYNAMIC);
@@ -84,5 +85,104 @@ fn the_decision_comes_with_the_sampled_frame_not_a_frame_later() {
     assert!(
         latencies.iter().all(|&l| l == 0),
         "latencies (µs): {latencies:?}"
+    );
+}
+
+/// A G2 model for the dynamic terrains, trained on the default sensor (the one `SimRobot`'s
+/// foot 0 wears).
+fn g2_model(seed: u64) -> node::classifier::Model {
+    let samples = sim::dataset::generate(&sim::dataset::Options {
+        kind: sim::dataset::Kind::Dynamic,
+        n: Some(30),
+        gait: controller::Gait::g2(),
+        damage_pct: 0.0,
+        sensor: sim::DEFAULT_SENSOR,
+        seed,
+    });
+    let set = presrs::simdata::TrainingSet::from_samples(samples, &sim::terrain::Terrain::DYNAMIC);
+    let opts = node::classifier::train::TrainOptions {
+        per_class: 30,
+        train: 20,
+        crop: "0,3,6,0".parse().unwrap(),
+        normalize_load: true,
+        seed,
+        ..Default::default()
+    };
+    match node::classifier::train::train(&set.labelled(), &set.classes, &opts) {
+        Ok((m, _)) => m,
+        Err(e) => panic!("training: {e}"),
+    }
+}
+
+/// Per-step accuracy of the pipeline on `seconds` of the simulated robot (foot 0, G2) with
+/// `damage` percent of its sensels on dead lines; also returns the pipeline's counters.
+fn damaged_run(
+    model: node::classifier::Model,
+    cfg: NodeConfig,
+    damage: f64,
+    seconds: u64,
+) -> (usize, usize, node::stance::Counters) {
+    let mut sim_cfg = SimConfig::default();
+    sim_cfg.faults.initial_damage_pct = damage;
+    let mut robot = SimRobot::new(sim_cfg, 11);
+    let mut p = StancePipeline::new(cfg, Some(model));
+    let mut decided = Vec::new();
+    let mut t = 0u64;
+    while t < seconds * 1_000_000 {
+        t += 1000;
+        let mut frames = Vec::new();
+        robot.advance_to(t, &mut |f| frames.push(f));
+        for frame in frames {
+            p.on_frame(&Stamped { t_us: t, frame }, &mut |_, tc| decided.push(tc));
+        }
+    }
+    let correct = decided
+        .iter()
+        .filter(|tc| {
+            let truth = robot
+                .steps
+                .get(tc.step as usize - 1)
+                .map(|s| s.terrain.name());
+            truth.and_then(protocol::messages::terrain_id) == Some(tc.terrain)
+        })
+        .count();
+    (correct, decided.len(), p.counters)
+}
+
+/// Section 8's damage, learned from the stance history: once the dead lines are known, the
+/// node refits its model to them (the stored training images get the same dead lines and
+/// repair), which must beat classifying the repaired images with the model as trained.
+#[test]
+fn refitting_to_the_learned_dead_lines_beats_the_model_as_trained_at_50_percent_damage() {
+    let model = g2_model(21);
+    assert!(model.images.is_some(), "train stores the working images");
+    let cfg = |refit| NodeConfig {
+        refit,
+        ..NodeConfig::default()
+    };
+    let (c_refit, n_refit, k) = damaged_run(model.clone(), cfg(RefitMode::Inline), 50.0, 25);
+    let (c_off, n_off, k_off) = damaged_run(model.clone(), cfg(RefitMode::Off), 50.0, 25);
+    let (a_refit, a_off) = (c_refit as f64 / n_refit as f64, c_off as f64 / n_off as f64);
+    eprintln!(
+        "50% damage: refit {c_refit}/{n_refit} ({a_refit:.3}), as trained {c_off}/{n_off} ({a_off:.3})"
+    );
+    assert!(n_refit >= 60 && n_off >= 60, "{n_refit} / {n_off} steps");
+    assert!(k.refits >= 1 && k_off.refits == 0, "{k:?} {k_off:?}");
+    assert!(a_refit >= 0.85, "with the refit: {a_refit}");
+    assert!(
+        a_refit >= a_off + 0.1,
+        "refit {a_refit} vs as trained {a_off}"
+    );
+
+    // A model file without its images (an older presrs) cannot be refitted: the node goes on
+    // with the model as trained, and decides every step.
+    let mut old = model;
+    old.images = None;
+    let (c_old, n_old, k_old) = damaged_run(old, cfg(RefitMode::Inline), 50.0, 25);
+    assert_eq!(k_old.refits, 0);
+    assert_eq!(
+        (c_old, n_old),
+        (c_off, n_off),
+        "the same decisions as refit = off"
     );
 }

@@ -654,7 +654,7 @@ fn accuracy(r: &serde_json::Value) -> (usize, usize) {
 #[test]
 fn node_classifies_every_gait_with_a_g2_model_survives_damage_and_ignores_a_flood() {
     let iface = fd_iface();
-    let sim_s = 15.0;
+    let sim_s = 20.0;
     let mut per_gait = Vec::new();
     let mut g2 = None;
     for gait in ["G1", "G2", "G3"] {
@@ -665,13 +665,15 @@ fn node_classifies_every_gait_with_a_g2_model_survives_damage_and_ignores_a_floo
             100.0 * c as f64 / n.max(1) as f64,
             r["touchdowns"]
         );
-        assert!(n >= 40, "{gait}: {n} TerrainClass in {sim_s} s");
+        assert!(n >= 50, "{gait}: {n} TerrainClass in {sim_s} s");
         per_gait.push((gait, c as f64 / n as f64));
         if gait == "G2" {
             g2 = Some(r);
         }
     }
-    let damaged = sim_run(&iface, "G2", 50.0, 5, sim_s);
+    // Long enough that the first stances, before the node has learned the dead lines (5
+    // stances) and refitted its model to them, do not decide the figure alone.
+    let damaged = sim_run(&iface, "G2", 50.0, 5, 40.0);
     let (c, n) = accuracy(&damaged);
     let dmg: Vec<f64> = damaged["steps"]
         .as_array()
@@ -685,6 +687,20 @@ fn node_classifies_every_gait_with_a_g2_model_survives_damage_and_ignores_a_floo
         dmg.last()
     );
     let damaged_acc = c as f64 / n.max(1) as f64;
+    let learned: Vec<&serde_json::Value> = damaged["steps"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .skip_while(|s| s["damage_pct"].as_f64().unwrap_or(0.0) == 0.0)
+        .collect();
+    eprintln!(
+        "G2 with 50% damage, from the first step that reported learned damage: {}/{} correct",
+        learned
+            .iter()
+            .filter(|s| s["truth"] == s["classified"])
+            .count(),
+        learned.len()
+    );
 
     // The flood: other traffic as fast as cangen sends it, and short (undecodable) frames on
     // FootContact's and TerrainClass's identifiers.
@@ -757,12 +773,12 @@ fn node_classifies_every_gait_with_a_g2_model_survives_damage_and_ignores_a_floo
         "flood {flood_acc} vs quiet {quiet_acc}"
     );
 
-    // Floors below issue 5's targets (95% per gait, 90% at 50% damage). On the host, 200
-    // steps per gait of the same loop measure 96-97.5% (a 46-step run allows 2 errors for
-    // 95%, so the target itself would be a coin toss here) and 73.5% at 50% damage: the note
-    // to issue 5 has the figures. A regression below these floors is a real one.
+    // Issue 5's targets: 95% per gait (the paper's Table 5: 98.6-99.3%), 90% at 50% damage,
+    // the learning stances included. The node's model comes from the sensor the simulated foot
+    // wears (`presrs dataset` and `presrs sim` default to the same sensor serial), as a robot's
+    // model comes from its own foot.
     for (gait, acc) in per_gait {
-        assert!(acc >= 0.9, "{gait}: accuracy {acc}");
+        assert!(acc >= 0.95, "{gait}: accuracy {acc}");
     }
-    assert!(damaged_acc >= 0.6, "50% damage: accuracy {damaged_acc}");
+    assert!(damaged_acc >= 0.9, "50% damage: accuracy {damaged_acc}");
 }

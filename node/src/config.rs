@@ -16,6 +16,29 @@ pub enum RepairMode {
     History,
 }
 
+/// Whether and how the model is refitted to a foot's dead lines (history repair only).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RefitMode {
+    /// Classify damaged images with the model as trained (after the repair).
+    Off,
+    /// Refit on the classification thread when the dead lines change: that step's decision
+    /// waits for it (about 0.1 s). Reproducible; the replay and the lock-step demo use it.
+    Inline,
+    /// Refit on a background thread; until it is done, the model as trained decides.
+    Background,
+}
+
+impl RefitMode {
+    /// The mode whose decisions do not depend on the wall clock: background becomes inline.
+    pub fn reproducible(self) -> Self {
+        match self {
+            RefitMode::Background => RefitMode::Inline,
+            m => m,
+        }
+    }
+}
+
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct NodeConfig {
@@ -28,6 +51,9 @@ pub struct NodeConfig {
     pub repair: RepairMode,
     /// Stances in a row a line must stay dead before the history repair fills it.
     pub dead_after_stances: u32,
+    /// Refit the model to each foot's learned dead lines (needs a model file that holds its
+    /// training images, as `presrs train` writes them).
+    pub refit: RefitMode,
     /// Classify every frame in `window_ms` and sum log-posteriors.
     pub multi_frame: bool,
     pub window_ms: [u32; 2],
@@ -48,6 +74,7 @@ impl Default for NodeConfig {
             sample_ms: 70,
             repair: RepairMode::History,
             dead_after_stances: 5,
+            refit: RefitMode::Background,
             multi_frame: false,
             window_ms: [40, 100],
             low_confidence: 0.6,

@@ -10,5 +10,5 @@ pub mod config;
 pub mod health;
 pub mod stance;
 
-pub use config::{NodeConfig, RepairMode};
+pub use config::{NodeConfig, RefitMode, RepairMode};
 pub use stance::StancePipeline;

@@ -10,8 +10,13 @@ use protocol::messages::{self, FootContact, Message, TerrainClass, flags};
 use protocol::tactile::{Reassembler, ReassemblyStats};
 use protocol::{CanFrame, IdConfig, Stamped};
 
+use std::sync::Arc;
+
+use crossbeam_channel::{Receiver, Sender};
+
+use crate::classifier::train::{RefitError, refit};
 use crate::classifier::{Classifier, Model, model::MAX_CLASSES};
-use crate::config::{NodeConfig, RepairMode};
+use crate::config::{NodeConfig, RefitMode, RepairMode};
 use crate::health::LineHealth;
 
 /// Counters per stage, for NodeStatus and the logs.
@@ -23,10 +28,57 @@ pub struct Counters {
     pub steps: u64,
     pub no_sample: u64,
     pub classified: u64,
+    /// Models refitted to a foot's dead lines.
+    pub refits: u64,
+}
+
+/// A model refitted to one foot's dead lines, and the lines it was fitted for.
+struct Adapted {
+    cls: Classifier,
+    dead_rows: Vec<bool>,
+    dead_cols: Vec<bool>,
+}
+
+impl Adapted {
+    fn fits(&self, h: &LineHealth) -> bool {
+        self.dead_rows == h.dead_rows() && self.dead_cols == h.dead_cols()
+    }
+}
+
+/// A refit asked of the background thread, and its answer. `generation` tells answers for a
+/// model that has since been replaced (SIGHUP) from current ones.
+struct RefitJob {
+    foot: u8,
+    generation: u64,
+    model: Arc<Model>,
+    dead_rows: Vec<bool>,
+    dead_cols: Vec<bool>,
+}
+
+struct RefitDone {
+    foot: u8,
+    generation: u64,
+    result: Result<Adapted, RefitError>,
+}
+
+fn run_refit(job: RefitJob) -> RefitDone {
+    let result = refit(&job.model, &job.dead_rows, &job.dead_cols).map(|mut m| {
+        // The adapted model classifies; it never refits again, so it need not hold the images.
+        m.images = None;
+        Adapted {
+            cls: Classifier::new(m),
+            dead_rows: job.dead_rows,
+            dead_cols: job.dead_cols,
+        }
+    });
+    RefitDone {
+        foot: job.foot,
+        generation: job.generation,
+        result,
+    }
 }
 
 /// One foot's stance state.
-#[derive(Clone, Debug)]
 struct Foot {
     raw: bool,
     raw_since: u32,
@@ -45,6 +97,10 @@ struct Foot {
     /// A line of this stance's frames was filled.
     repaired: bool,
     health: LineHealth,
+    /// The model refitted to this foot's dead lines, used while they are still the dead lines.
+    adapted: Option<Adapted>,
+    /// The dead lines a refit was last asked for (pending, done or failed): asked once per set.
+    asked: Option<(Vec<bool>, Vec<bool>)>,
     /// Timestamp of this foot's last image and the frame period it implies (µs), so the
     /// single-frame rule can decide on the nearest frame without waiting for the next one.
     last_image_us: Option<u32>,
@@ -68,8 +124,126 @@ impl Foot {
             used: 0,
             repaired: false,
             health: LineHealth::new(rows, cols),
+            adapted: None,
+            asked: None,
             last_image_us: None,
             period_us: None,
+        }
+    }
+}
+
+/// Refits of the model to the feet's dead lines (see [`crate::classifier::train::refit`]).
+#[derive(Default)]
+struct Refitter {
+    /// The installed model, shared with refit jobs.
+    model: Option<Arc<Model>>,
+    generation: u64,
+    /// The background thread's queues (RefitMode::Background), started on first use.
+    tx: Option<Sender<RefitJob>>,
+    rx: Option<Receiver<RefitDone>>,
+    /// The installed model cannot be refitted (it holds no images): said once per model.
+    unavailable: bool,
+}
+
+impl Refitter {
+    /// Takes in finished background refits (a channel poll: nothing allocated, nothing blocks).
+    fn collect(&mut self, feet: &mut [Foot], counters: &mut Counters) {
+        while let Some(done) = self.rx.as_ref().and_then(|rx| rx.try_recv().ok()) {
+            if done.generation == self.generation
+                && let Some(f) = feet.get_mut(done.foot as usize)
+            {
+                self.install(done.foot, f, done.result, counters);
+            }
+        }
+    }
+
+    fn install(
+        &mut self,
+        foot: u8,
+        f: &mut Foot,
+        result: Result<Adapted, RefitError>,
+        counters: &mut Counters,
+    ) {
+        match result {
+            Ok(a) => {
+                counters.refits += 1;
+                let dead = a
+                    .dead_rows
+                    .iter()
+                    .chain(&a.dead_cols)
+                    .filter(|&&d| d)
+                    .count();
+                tracing::info!(
+                    foot,
+                    dead_lines = dead,
+                    h = a.cls.model().h,
+                    "model refitted to the foot's dead sensor lines"
+                );
+                f.adapted = Some(a);
+            }
+            Err(RefitError::NoImages) => {
+                if !self.unavailable {
+                    tracing::warn!("{}", RefitError::NoImages);
+                }
+                self.unavailable = true;
+            }
+            Err(e) => tracing::warn!(foot, "refit to the dead sensor lines failed: {e}"),
+        }
+    }
+
+    /// Asks for a refit when the foot's dead lines are not those of its adapted model and not
+    /// already asked for.
+    fn request(&mut self, mode: RefitMode, foot: u8, f: &mut Foot, counters: &mut Counters) {
+        if mode == RefitMode::Off || self.unavailable || !f.health.any_dead() {
+            return;
+        }
+        let h = &f.health;
+        if f.adapted.as_ref().is_some_and(|a| a.fits(h))
+            || f.asked
+                .as_ref()
+                .is_some_and(|(r, c)| r == h.dead_rows() && c == h.dead_cols())
+        {
+            return;
+        }
+        let Some(model) = self.model.clone() else {
+            return;
+        };
+        let job = RefitJob {
+            foot,
+            generation: self.generation,
+            model,
+            dead_rows: h.dead_rows().to_vec(),
+            dead_cols: h.dead_cols().to_vec(),
+        };
+        f.asked = Some((job.dead_rows.clone(), job.dead_cols.clone()));
+        if mode == RefitMode::Inline {
+            let done = run_refit(job);
+            self.install(foot, f, done.result, counters);
+            return;
+        }
+        if self.tx.is_none() {
+            let (job_tx, job_rx) = crossbeam_channel::unbounded::<RefitJob>();
+            let (done_tx, done_rx) = crossbeam_channel::unbounded();
+            let spawned = std::thread::Builder::new()
+                .name("refit".into())
+                .spawn(move || {
+                    for job in job_rx {
+                        if done_tx.send(run_refit(job)).is_err() {
+                            break;
+                        }
+                    }
+                });
+            if let Err(e) = spawned {
+                tracing::warn!("cannot start the refit thread: {e}; refitting inline");
+                let done = run_refit(job);
+                self.install(foot, f, done.result, counters);
+                return;
+            }
+            self.tx = Some(job_tx);
+            self.rx = Some(done_rx);
+        }
+        if let Some(tx) = &self.tx {
+            let _ = tx.send(job);
         }
     }
 }
@@ -78,6 +252,7 @@ impl Foot {
 pub struct StancePipeline {
     cfg: NodeConfig,
     classifier: Option<Classifier>,
+    refitter: Refitter,
     reassembler: Reassembler,
     feet: Vec<Foot>,
     /// Receive time of the frame being processed: a decision's latency ends here.
@@ -90,6 +265,7 @@ impl StancePipeline {
         let mut p = Self {
             reassembler: Reassembler::new(cfg.reassembly_timeout_us),
             classifier: None,
+            refitter: Refitter::default(),
             feet: Vec::new(),
             now_rx_us: 0,
             counters: Counters::default(),
@@ -108,7 +284,16 @@ impl StancePipeline {
     pub fn set_model(&mut self, model: Option<Model>) {
         let (rows, cols) = model.as_ref().and_then(|m| m.work_size()).unwrap_or((1, 1));
         let input = model.as_ref().map_or(1, |m| m.input_rows * m.input_cols);
-        self.classifier = model.map(Classifier::new);
+        let model = model.map(Arc::new);
+        self.classifier = model.as_ref().map(|m| {
+            // The images are for refits (the shared copy has them); the classifier needs none.
+            let mut own = Model::clone(m);
+            own.images = None;
+            Classifier::new(own)
+        });
+        self.refitter.generation += 1;
+        self.refitter.unavailable = false;
+        self.refitter.model = model;
         self.feet
             .resize_with(self.cfg.feet as usize, || Foot::new(input, rows, cols));
         for f in &mut self.feet {
@@ -119,11 +304,13 @@ impl StancePipeline {
             if f.health.size() != (rows, cols) {
                 f.health = LineHealth::new(rows, cols);
             }
+            f.adapted = None;
+            f.asked = None;
         }
     }
 
     pub fn model(&self) -> Option<&Model> {
-        self.classifier.as_ref().map(|c| c.model())
+        self.refitter.model.as_deref()
     }
 
     pub fn ids(&self) -> &IdConfig {
@@ -209,6 +396,7 @@ impl StancePipeline {
         let ts = self.reassembler.last_image().timestamp_us;
         // The image's own timestamp also settles a pending switch edge.
         self.settle(foot, ts, out);
+        self.refitter.collect(&mut self.feet, &mut self.counters);
         let img = self.reassembler.last_image();
         let sample_us = self.cfg.sample_ms * 1000;
         let [w0, w1] = [self.cfg.window_ms[0] * 1000, self.cfg.window_ms[1] * 1000];
@@ -241,9 +429,17 @@ impl StancePipeline {
                 f.best_rx_us = rx_us;
                 // The stance history learns from one frame per stance, not every frame.
                 let observe = f.used == 0;
-                if let Some((d, repaired)) =
-                    classify(cls, &f.best, rows, cols, &mut f.health, observe, &self.cfg)
-                {
+                if let Some((d, repaired)) = classify(
+                    cls,
+                    foot,
+                    f,
+                    rows,
+                    cols,
+                    observe,
+                    &self.cfg,
+                    &mut self.refitter,
+                    &mut self.counters,
+                ) {
                     f.repaired |= repaired;
                     for k in 0..d.n_classes {
                         f.sum_lp[k] += d.log_posteriors[k];
@@ -297,9 +493,17 @@ impl StancePipeline {
             Some(cls) if !cfg.multi_frame && f.best_err.is_some() => {
                 let m = cls.model();
                 let (rows, cols) = (m.input_rows, m.input_cols);
-                if let Some((d, repaired)) =
-                    classify(cls, &f.best, rows, cols, &mut f.health, true, cfg)
-                {
+                if let Some((d, repaired)) = classify(
+                    cls,
+                    foot,
+                    f,
+                    rows,
+                    cols,
+                    true,
+                    cfg,
+                    &mut self.refitter,
+                    &mut self.counters,
+                ) {
                     f.repaired = repaired;
                     tc.terrain = d.terrain_id;
                     tc.confidence_pct = d.confidence * 100.0;
@@ -336,26 +540,36 @@ impl StancePipeline {
     }
 }
 
-/// Crop, repair and decision for one frame. Returns the decision and whether any line was
-/// filled; `observe` feeds the frame to the stance history (once per stance).
+/// Crop, repair and decision for one frame (the foot's `best`). Returns the decision and
+/// whether any line was filled; `observe` feeds the frame to the stance history (once per
+/// stance). With history repair, a model refitted to the foot's current dead lines decides.
+#[allow(clippy::too_many_arguments)]
 fn classify(
     cls: &mut Classifier,
-    pixels: &[u16],
+    foot: u8,
+    f: &mut Foot,
     rows: usize,
     cols: usize,
-    health: &mut LineHealth,
     observe: bool,
     cfg: &NodeConfig,
+    refitter: &mut Refitter,
+    counters: &mut Counters,
 ) -> Option<(crate::classifier::Decision, bool)> {
-    cls.prepare(pixels, rows, cols).ok()?;
+    cls.prepare(&f.best, rows, cols).ok()?;
     let repaired = match cfg.repair {
         RepairMode::None => false,
         RepairMode::PerImage => cls.repair_work() > 0,
         RepairMode::History => {
             if observe {
-                health.observe(cls.work_mut(), cfg.dead_after_stances);
+                f.health.observe(cls.work_mut(), cfg.dead_after_stances);
+                refitter.request(cfg.refit, foot, f, counters);
             }
-            health.repair(cls.work_mut()) > 0
+            if let Some(a) = f.adapted.as_mut().filter(|a| a.fits(&f.health)) {
+                a.cls.work_mut().copy_from_slice(cls.work_mut());
+                let repaired = f.health.repair(a.cls.work_mut()) > 0;
+                return Some((a.cls.decide(), repaired));
+            }
+            f.health.repair(cls.work_mut()) > 0
         }
     };
     Some((cls.decide(), repaired))

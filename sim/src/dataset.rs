@@ -5,7 +5,7 @@ use controller::Gait;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::faults::{FaultParams, Faults};
+use crate::faults::FaultParams;
 use crate::fixed_gait::FixedGait;
 use crate::hopper::{Event, Hopper, HopperParams};
 use crate::skin::{Footprint, Skin, SkinParams};
@@ -78,6 +78,8 @@ pub struct Options {
     pub n: Option<usize>,
     pub gait: Gait,
     pub damage_pct: f64,
+    /// Serial of the sensor that records the images (see [`Skin::of_sensor`]).
+    pub sensor: u64,
     pub seed: u64,
 }
 
@@ -87,14 +89,11 @@ pub fn generate(opts: &Options) -> Vec<Sample> {
     // One sensor for every terrain, as in the paper: its sensel gain pattern and its damage are
     // the same under every surface. (A sensor per terrain would let the classifier learn the
     // sensor instead of the terrain.)
-    let mut sensor_rng = ChaCha8Rng::seed_from_u64(opts.seed ^ 0x5e_5011);
     let faults = FaultParams {
         initial_damage_pct: opts.damage_pct,
         ..Default::default()
     };
-    let params = SkinParams::default();
-    let f = Faults::new(faults, params.rows, params.cols, &mut sensor_rng);
-    let mut skin = Skin::new(params, f, &mut sensor_rng);
+    let mut skin = Skin::of_sensor(opts.sensor, SkinParams::default(), faults);
     for (ti, &terrain) in opts.kind.terrains().iter().enumerate() {
         // One stream per terrain, so a class's samples do not depend on the others' counts.
         let mut rng = ChaCha8Rng::seed_from_u64(opts.seed ^ ((ti as u64 + 1) << 32));

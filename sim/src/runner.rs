@@ -14,7 +14,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::faults::{FaultParams, Faults};
+use crate::faults::FaultParams;
 use crate::fixed_gait::FixedGait;
 use crate::hopper::{Event, Hopper, HopperParams, LegCommands};
 use crate::skin::{Contact, FRAME_PERIOD_US, Footprint, Skin, SkinParams};
@@ -109,6 +109,8 @@ pub struct SimConfig {
     pub gait: u8,
     pub feet: u8,
     pub faults: FaultParams,
+    /// Serial of foot 0's sensor; foot `i` wears `sensor + i` (see `Skin::of_sensor`).
+    pub sensor: u64,
     /// Commands older than this are ignored and the fixed gait takes over, ms.
     pub command_timeout_ms: u64,
     pub ids: IdConfig,
@@ -121,6 +123,7 @@ impl Default for SimConfig {
             gait: 2,
             feet: 1,
             faults: FaultParams::default(),
+            sensor: crate::DEFAULT_SENSOR,
             command_timeout_ms: 100,
             ids: IdConfig::default(),
         }
@@ -201,13 +204,13 @@ const FRAME_US: u64 = FRAME_PERIOD_US;
 
 impl SimRobot {
     pub fn new(cfg: SimConfig, seed: u64) -> Self {
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let rng = ChaCha8Rng::seed_from_u64(seed);
         let gait = Gait::by_name(&cfg.gait.to_string()).unwrap_or_else(Gait::g2);
         let params = SkinParams::default();
         let legs = (0..cfg.feet.max(1))
             .map(|i| {
-                let faults = Faults::new(cfg.faults.clone(), params.rows, params.cols, &mut rng);
-                let skin = Skin::new(params.clone(), faults, &mut rng);
+                let skin =
+                    Skin::of_sensor(cfg.sensor + i as u64, params.clone(), cfg.faults.clone());
                 let mut hopper = Hopper::launch(HopperParams::default(), &gait);
                 // Stagger the legs so their steps do not coincide.
                 hopper.y += 0.005 * i as f64;
@@ -273,7 +276,7 @@ impl SimRobot {
     }
 
     /// Runs the robot up to `t_us`, emitting every frame it sends, in time order.
-    pub fn advance_to(&mut self, t_us: u64, emit: &mut impl FnMut(CanFrame)) {
+    pub fn advance_to(&mut self, t_us: u64, emit: &mut dyn FnMut(CanFrame)) {
         while self.now_us < t_us {
             let next = (self.now_us + 1000)
                 .min(t_us)
@@ -291,7 +294,7 @@ impl SimRobot {
         }
     }
 
-    fn advance_leg(&mut self, foot: usize, t_us: u64, emit: &mut impl FnMut(CanFrame)) {
+    fn advance_leg(&mut self, foot: usize, t_us: u64, emit: &mut dyn FnMut(CanFrame)) {
         let ids = &self.cfg.ids;
         let t_end = t_us as f64 * 1e-6;
         loop {
@@ -378,7 +381,7 @@ impl SimRobot {
         }
     }
 
-    fn send_frame(&mut self, foot: usize, emit: &mut impl FnMut(CanFrame)) {
+    fn send_frame(&mut self, foot: usize, emit: &mut dyn FnMut(CanFrame)) {
         let leg = &mut self.legs[foot];
         leg.skin.faults.on_time(FRAME_US as f64 * 1e-6);
         let load = leg.hopper.foot_load();
@@ -423,7 +426,7 @@ fn send_leg_state(
     angle: f64,
     len: f64,
     t_us: u64,
-    emit: &mut impl FnMut(CanFrame),
+    emit: &mut dyn FnMut(CanFrame),
 ) {
     let m = Message::LegState(LegState {
         leg_angle_rad: angle,

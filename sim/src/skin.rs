@@ -187,6 +187,19 @@ impl Skin {
         }
     }
 
+    /// The sensor with serial number `serial`: its sensel gain pattern and its faults follow from
+    /// the serial alone, so a dataset recorded with a sensor and a run of the robot wearing it
+    /// see the same skin (a robot's model is trained on images from its own foot, as in the
+    /// paper). Gains and faults come from separate streams: the damage asked for does not change
+    /// the gain pattern.
+    pub fn of_sensor(serial: u64, params: SkinParams, faults: crate::faults::FaultParams) -> Self {
+        use rand::SeedableRng;
+        let mut gain_rng = rand_chacha::ChaCha8Rng::seed_from_u64(serial ^ 0x6a17_0000_0000);
+        let mut fault_rng = rand_chacha::ChaCha8Rng::seed_from_u64(serial ^ 0xfa17_0000_0000);
+        let f = Faults::new(faults, params.rows, params.cols, &mut fault_rng);
+        Self::new(params, f, &mut gain_rng)
+    }
+
     /// The fine grid a surface for this sensor must have: (rows, cols, cell_mm).
     pub fn grid(&self) -> (usize, usize, f64) {
         let p = &self.params;

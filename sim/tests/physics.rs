@@ -10,6 +10,7 @@ fn opts(kind: Kind, n: usize, gait: Gait, seed: u64) -> Options {
         n: Some(n),
         gait,
         damage_pct: 0.0,
+        sensor: presrs_sim::DEFAULT_SENSOR,
         seed,
     }
 }

@@ -50,6 +50,21 @@ pub struct Model {
     pub unknown_threshold: f64,
     pub train_hashes: Vec<String>,
     pub val_hashes: Vec<String>,
+    /// The stored samples' images after crop and downsampling, so that the node can refit the
+    /// model to its sensor's dead lines (see `train::refit`). Absent in older model files.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub images: Option<StoredImages>,
+}
+
+/// The working images of the stored samples, in the order of `Model::samples`: the training
+/// set T first, then the validation set V.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StoredImages {
+    /// How many of them are T (the rest are V).
+    pub n_train: usize,
+    /// One row-major working image per stored sample.
+    pub pixels: Vec<Vec<u16>>,
 }
 
 /// A model file that cannot be used.
@@ -152,6 +167,25 @@ impl Model {
             .all(|v| v.is_finite());
         if !finite {
             return Err("non-finite numbers in the PCA or samples".into());
+        }
+        if let Some(im) = &self.images {
+            if im.pixels.len() != self.n_samples()
+                || im.n_train == 0
+                || im.n_train >= im.pixels.len()
+            {
+                return Err(format!(
+                    "images holds {} images ({} for training) for {} stored samples",
+                    im.pixels.len(),
+                    im.n_train,
+                    self.n_samples()
+                ));
+            }
+            if let Some(i) = im.pixels.iter().position(|p| p.len() != r * c) {
+                return Err(format!(
+                    "stored image {i} has {} pixels, expected {r}x{c}",
+                    im.pixels[i].len()
+                ));
+            }
         }
         Ok(())
     }
