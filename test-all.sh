@@ -1,12 +1,16 @@
 #!/usr/bin/env bash
-# Every test: format, lints, unit/property/interop tests, and the vcan suite on real SocketCAN
-# (inside a VM when this kernel has no CAN). Installs what it needs first.
+# Every test: format, lints, unit/property/interop tests, the arm64 build with its Debian
+# packages, and the vcan suite on real SocketCAN (inside a VM when this kernel has no CAN).
+# Installs what it needs first. Each part prints its wall time.
 set -euo pipefail
 cd "$(dirname "$0")"
-scripts/install-deps.sh
-echo "== cargo fmt --check"; cargo fmt --all --check
-echo "== cargo clippy"; cargo clippy --workspace --all-targets --features vcan,interop -- -D warnings
-echo "== cargo test (unit, property, cantools/python-can interop)"
+t0=$SECONDS
+part() { echo "== $1 (at $((SECONDS - t0)) s)"; }
+part "install dependencies"; scripts/install-deps.sh
+part "cargo fmt --check"; cargo fmt --all --check
+part "cargo clippy"; cargo clippy --workspace --all-targets --features vcan,interop -- -D warnings
+part "cargo test (unit, property, cantools/python-can interop)"
 cargo test --workspace --features interop
-echo "== vcan suite"; tests/vcan/run.sh
-echo "== all tests passed"
+part "arm64: cross-build, tests under qemu-aarch64, Debian packages"; scripts/test-arm64.sh
+part "vcan suite"; tests/vcan/run.sh
+part "all tests passed"

@@ -3,8 +3,13 @@
 //! (target: median <= 10 us); and training on those 80 samples (target: < 50 ms).
 //!
 //! `cargo bench --bench classify`. The same figures, per image, come from `presrs eval --json`.
+//!
+//! Each classify bench runs twice, with the native kernels (AVX2/FMA/F16C on such an x86-64
+//! CPU) and with the portable ones (the target's baseline SIMD: SSE2 here, NEON on an ARM
+//! computer), in one run, so that their ratio is measured on one machine at one time.
 
 use criterion::{Criterion, criterion_group, criterion_main};
+use node::classifier::Kernels;
 use node::classifier::image::{Crop, PressureImage};
 use node::classifier::pwe::Classifier;
 use node::classifier::train::{Labelled, TrainOptions, train};
@@ -48,31 +53,43 @@ fn bench(c: &mut Criterion) {
     assert_eq!(model.n_samples(), 80);
     assert_eq!(model.h, 52);
     let test: Vec<&PressureImage> = split.test.iter().map(|&i| &images[i]).collect();
+    for kernels in [Kernels::Native, Kernels::Portable] {
+        let mut classifier = Classifier::with_kernels(model.clone(), kernels);
+        let mut i = 0;
+        let name = format!(
+            "classify 44x44 -> 40x40, PCA 52, 80 samples [{}]",
+            kernels.describe()
+        );
+        c.bench_function(&name, |b| {
+            b.iter(|| {
+                let img = test[i % test.len()];
+                i += 1;
+                classifier
+                    .classify(&img.pixels, img.rows, img.cols, false)
+                    .map(|d| d.best)
+            })
+        });
+    }
     let mut classifier = Classifier::new(model);
-
-    let mut i = 0;
-    c.bench_function("classify 44x44 -> 40x40, PCA 52, 80 samples", |b| {
-        b.iter(|| {
-            let img = test[i % test.len()];
-            i += 1;
-            classifier
-                .classify(&img.pixels, img.rows, img.cols, false)
-                .map(|d| d.best)
-        })
-    });
     // The stages on their own, to see where the time goes.
-    let mut fx = node::classifier::features::FeatureExtractor::new(40 * 40);
     let work: Vec<u16> = match test[0].crop(&options().crop) {
         Some(w) => w.pixels,
         None => panic!("crop"),
     };
-    let mut feat = vec![0.0f32; fx.feature_len()];
-    c.bench_function("stage: feature vector (40x40, N = 2048)", |b| {
-        b.iter(|| {
-            fx.extract(&work, 1.0, &mut feat);
-            feat[1]
-        })
-    });
+    for kernels in [Kernels::Native, Kernels::Portable] {
+        let mut fx = node::classifier::features::FeatureExtractor::with_kernels(40 * 40, kernels);
+        let mut feat = vec![0.0f32; fx.feature_len()];
+        let name = format!(
+            "stage: feature vector (40x40, N = 2048) [{}]",
+            kernels.describe()
+        );
+        c.bench_function(&name, |b| {
+            b.iter(|| {
+                fx.extract(&work, 1.0, &mut feat);
+                feat[1]
+            })
+        });
+    }
     let mut i = 0;
     c.bench_function("classify with the per-image repair filter", |b| {
         b.iter(|| {

@@ -2,13 +2,36 @@
 # Installs what the tests need on a fresh Debian machine: Python cantools/python-can (the
 # independent CAN clients), can-utils, and for kernels without CAN the VM runner (qemu, a Debian
 # kernel with the vcan module, busybox, virtme-ng). Idempotent; quick when all is there.
+#   --vm           also the VM runner
+#   --cross arm64  also the arm64 cross toolchain (Debian's gcc-aarch64-linux-gnu, qemu-user to
+#                  run its binaries, the rustup target aarch64-unknown-linux-gnu)
+#   --package      also what tests the Debian package (debootstrap, for a throwaway root)
 set -euo pipefail
 here=$(cd "$(dirname "$0")/.." && pwd)
 sudo=""; [ "$(id -u)" -eq 0 ] || sudo="sudo"
 
+vm=0; cross=""; package=0
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --vm) vm=1; shift ;;
+    --cross) cross="${2:?--cross takes arm64}"; shift 2 ;;
+    --package) package=1; shift ;;
+    *) echo "install-deps: unknown argument \`$1\` (use --vm, --cross arm64, --package)" >&2; exit 2 ;;
+  esac
+done
 need_apt=()
 command -v candump >/dev/null || need_apt+=(can-utils)
-if [ "${1:-}" = "--vm" ]; then
+if [ "$cross" = arm64 ]; then
+  command -v aarch64-linux-gnu-gcc >/dev/null || need_apt+=(gcc-aarch64-linux-gnu libc6-dev-arm64-cross)
+  command -v qemu-aarch64 >/dev/null || need_apt+=(qemu-user)
+elif [ -n "$cross" ]; then
+  echo "install-deps: --cross knows arm64, not \`$cross\`" >&2; exit 2
+fi
+if [ "$package" = 1 ]; then
+  command -v debootstrap >/dev/null || need_apt+=(debootstrap)
+  command -v systemd-analyze >/dev/null || need_apt+=(systemd)
+fi
+if [ "$vm" = 1 ]; then
   command -v qemu-system-x86_64 >/dev/null || need_apt+=(qemu-system-x86)
   ls /boot/vmlinuz-*-amd64 >/dev/null 2>&1 || need_apt+=(linux-image-amd64)
   [ -x /bin/busybox ] && file -L /bin/busybox 2>/dev/null | grep -q static || need_apt+=(busybox-static)
@@ -24,7 +47,11 @@ if ! py_ok; then
   echo "install-deps: pip install -r tests/requirements.txt"
   python3 -m pip install -q -r "$here/tests/requirements.txt"
 fi
-if [ "${1:-}" = "--vm" ] && ! command -v vng >/dev/null; then
+if [ "$cross" = arm64 ] && ! rustup target list --installed | grep -qx aarch64-unknown-linux-gnu; then
+  echo "install-deps: rustup target add aarch64-unknown-linux-gnu"
+  rustup target add aarch64-unknown-linux-gnu
+fi
+if [ "$vm" = 1 ] && ! command -v vng >/dev/null; then
   echo "install-deps: pip install virtme-ng"
   python3 -m pip install -q virtme-ng
 fi

@@ -7,7 +7,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use node::classifier::dataset::{load_dataset, read_image, read_images, write_pgm};
 use node::classifier::train::{TrainOptions, train as train_model};
-use node::classifier::{Classifier, Crop, Model, repair as repair_mod};
+use node::classifier::{Classifier, Crop, Kernels, Model, repair as repair_mod};
 use rand::SeedableRng;
 
 pub fn train(data: &Path, out: &Path, opts: &TrainOptions, skip_bad: bool) -> Result<ExitCode> {
@@ -49,15 +49,36 @@ pub(crate) fn percentile(sorted: &[f64], q: f64) -> Option<f64> {
     sorted.get(i).copied()
 }
 
-pub fn eval(
-    model_path: &Path,
-    data: &Path,
-    damage: Option<f64>,
-    repair: bool,
-    seed: u64,
-    json: bool,
-    skip_bad: bool,
-) -> Result<ExitCode> {
+/// How `presrs eval` tests a model.
+#[derive(clap::Args)]
+pub struct EvalOptions {
+    /// Simulated sensor damage, percent (paper eq. 6).
+    #[arg(long)]
+    pub damage: Option<f64>,
+    /// Apply the paper's repair filter before classifying.
+    #[arg(long)]
+    pub repair: bool,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    #[arg(long)]
+    pub json: bool,
+    #[arg(long)]
+    pub skip_bad: bool,
+    /// `native` (the fastest this CPU has: AVX2/FMA/F16C on x86-64) or `portable` (the
+    /// target's baseline SIMD only, as on an ARM computer): to compare their speed.
+    #[arg(long, default_value = "native")]
+    pub kernels: Kernels,
+}
+
+pub fn eval(model_path: &Path, data: &Path, o: &EvalOptions) -> Result<ExitCode> {
+    let &EvalOptions {
+        damage,
+        repair,
+        seed,
+        json,
+        skip_bad,
+        kernels,
+    } = o;
     let model = Model::load(model_path)?;
     let ds = load_dataset(data, skip_bad)?;
     let names: Vec<String> = model.classes.iter().map(|c| c.name.clone()).collect();
@@ -73,7 +94,7 @@ pub fn eval(
     let mut skipped = 0;
     let mut times = Vec::new();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let mut c = Classifier::new(model);
+    let mut c = Classifier::with_kernels(model, kernels);
     for s in &ds.samples {
         let Some(actual) = names.iter().position(|n| *n == ds.classes[s.class]) else {
             bail!(
@@ -131,6 +152,7 @@ pub fn eval(
             "unknown": unknown, "n_tested": n_tested, "n_skipped": skipped,
             "damage_pct": damage, "repair": repair,
             "classify_us_median": med, "classify_us_p99": p99,
+            "kernels": kernels.describe(),
         });
         println!("{v}");
     } else {
@@ -171,8 +193,9 @@ pub fn eval(
             println!();
         }
         println!(
-            "overall accuracy {:.1}% ({correct}/{n_tested}); classify median {med:.1} us, p99 {p99:.1} us",
-            acc * 100.0
+            "overall accuracy {:.1}% ({correct}/{n_tested}); classify median {med:.1} us, p99 {p99:.1} us ({} kernels)",
+            acc * 100.0,
+            kernels.describe()
         );
     }
     Ok(ExitCode::SUCCESS)

@@ -81,18 +81,8 @@ enum Cmd {
         model: PathBuf,
         #[arg(long)]
         data: PathBuf,
-        /// Simulated sensor damage, percent (paper eq. 6).
-        #[arg(long)]
-        damage: Option<f64>,
-        /// Apply the paper's repair filter before classifying.
-        #[arg(long)]
-        repair: bool,
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        #[arg(long)]
-        json: bool,
-        #[arg(long)]
-        skip_bad: bool,
+        #[command(flatten)]
+        opts: cli::EvalOptions,
     },
     /// Classify image files: one line per image (file, terrain, confidence).
     Classify {
@@ -196,15 +186,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             };
             cli::train(&data, &out, &opts, skip_bad)
         }
-        Cmd::Eval {
-            model,
-            data,
-            damage,
-            repair,
-            seed,
-            json,
-            skip_bad,
-        } => cli::eval(&model, &data, damage, repair, seed, json, skip_bad),
+        Cmd::Eval { model, data, opts } => cli::eval(&model, &data, &opts),
         Cmd::Classify { model, files } => cli::classify(&model, &files),
         Cmd::Features { file, crop, json } => cli::features(&file, &crop, json),
         Cmd::Repair { file, out } => cli::repair(&file, &out),

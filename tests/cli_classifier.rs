@@ -6,11 +6,25 @@ use std::process::Command;
 
 use rand::{Rng, SeedableRng};
 
+/// `presrs` as a command. A cross-built test (scripts/test-arm64.sh) runs under qemu-user,
+/// which cannot start another aarch64 program by itself (no binfmt_misc here), so
+/// `PRESRS_TEST_RUNNER` ("qemu-aarch64 -L /usr/aarch64-linux-gnu") goes in front.
+fn presrs_command() -> Command {
+    let bin = env!("CARGO_BIN_EXE_presrs");
+    let runner = std::env::var("PRESRS_TEST_RUNNER").unwrap_or_default();
+    let mut words = runner.split_whitespace();
+    match words.next() {
+        Some(program) => {
+            let mut cmd = Command::new(program);
+            cmd.args(words).arg(bin);
+            cmd
+        }
+        None => Command::new(bin),
+    }
+}
+
 fn presrs(args: &[&str]) -> (bool, String, String) {
-    let o = Command::new(env!("CARGO_BIN_EXE_presrs"))
-        .args(args)
-        .output()
-        .unwrap();
+    let o = presrs_command().args(args).output().unwrap();
     (
         o.status.success(),
         String::from_utf8_lossy(&o.stdout).into(),

@@ -3,7 +3,7 @@
 
 use presrs_node::classifier::model::{MODEL_VERSION, ModelError};
 use presrs_node::classifier::train::{Labelled, TrainOptions, train};
-use presrs_node::classifier::{ClassInfo, Classifier, Crop, Model, PressureImage, repair};
+use presrs_node::classifier::{ClassInfo, Classifier, Crop, Kernels, Model, PressureImage, repair};
 use rand::{Rng, SeedableRng};
 
 /// 44x44 image of a texture: `period` sets the contact-patch spacing, `fill` the contact
@@ -85,6 +85,35 @@ fn trains_with_the_paper_split_and_classifies_held_out_images() {
     }
     let acc = correct as f64 / test.len() as f64;
     assert!(acc >= 0.95, "held-out accuracy {acc}");
+}
+
+#[test]
+fn portable_kernels_decide_as_the_native_ones() {
+    // What an ARM computer runs against what this CPU runs fastest (AVX2/FMA/F16C on most
+    // x86-64): the same class for every image, and densities that differ only by rounding.
+    let (model, imgs, ..) = trained();
+    let mut native = Classifier::new(model.clone());
+    let mut portable = Classifier::with_kernels(model, Kernels::Portable);
+    assert_eq!(portable.kernels(), Kernels::Portable);
+    eprintln!(
+        "native kernels: {}, portable: {}",
+        Kernels::Native.describe(),
+        Kernels::Portable.describe()
+    );
+    for (i, img) in imgs.iter().enumerate() {
+        for repair in [false, true] {
+            let a = native.classify(&img.pixels, 44, 44, repair).unwrap();
+            let b = portable.classify(&img.pixels, 44, 44, repair).unwrap();
+            assert_eq!((a.best, a.class), (b.best, b.class), "image {i}");
+            let tol = 1e-3 * a.log_density.abs().max(1.0);
+            assert!(
+                (a.log_density - b.log_density).abs() <= tol,
+                "image {i}: log density {} vs {}",
+                a.log_density,
+                b.log_density
+            );
+        }
+    }
 }
 
 #[test]

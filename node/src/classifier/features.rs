@@ -7,6 +7,8 @@ use std::sync::Arc;
 use rustfft::num_complex::Complex;
 use rustfft::{Fft, FftPlanner};
 
+use super::Kernels;
+
 /// N for an image of `n_pixels`: 2048 for 40x40 (1600) and 41x38 (1558), 128 for 10x10.
 pub fn fft_len(n_pixels: usize) -> usize {
     n_pixels.max(1).next_power_of_two()
@@ -33,14 +35,24 @@ pub struct FeatureExtractor {
     scratch: Vec<Complex<f32>>,
     /// e^{-2 pi i k / N} for k = 0..=N/2.
     twiddles: Vec<Complex<f32>>,
+    avx2_fma: bool,
 }
 
 impl FeatureExtractor {
+    /// An extractor for images of `n_pixels`, with the fastest kernels this CPU has.
     pub fn new(n_pixels: usize) -> Self {
+        Self::with_kernels(n_pixels, Kernels::Native)
+    }
+
+    /// An extractor with the given kernels ([`Kernels::Portable`]: what an ARM computer runs).
+    pub fn with_kernels(n_pixels: usize, kernels: Kernels) -> Self {
         // N >= 2 so that the half-length transform has at least one point.
         let n = fft_len(n_pixels).max(2);
         let half = n / 2;
-        let fft = FftPlanner::<f32>::new().plan_fft_forward(half);
+        let fft = match kernels {
+            Kernels::Native => FftPlanner::<f32>::new().plan_fft_forward(half),
+            Kernels::Portable => portable_fft(half),
+        };
         let scratch = vec![Complex::default(); fft.get_inplace_scratch_len()];
         let twiddles = (0..=half)
             .map(|k| {
@@ -55,6 +67,7 @@ impl FeatureExtractor {
             buf: vec![Complex::default(); half],
             scratch,
             twiddles,
+            avx2_fma: kernels.avx2_fma(),
         }
     }
 
@@ -104,7 +117,7 @@ impl FeatureExtractor {
         // k = 0 and k = N/2 pair Z[0] with itself: X[0] = Re + Im, X[N/2] = Re - Im.
         out[0] = (z0.re + z0.im).abs();
         out[half] = (z0.re - z0.im).abs();
-        split_spectrum(&self.buf, &self.twiddles, out);
+        split_spectrum(&self.buf, &self.twiddles, out, self.avx2_fma);
     }
 
     /// Convenience for tools: a fresh feature vector.
@@ -115,10 +128,26 @@ impl FeatureExtractor {
     }
 }
 
-/// X[k] for 0 < k < N/2 from the half-length transform Z, as magnitudes into `out[1..N/2]`.
-fn split_spectrum(z: &[Complex<f32>], twiddles: &[Complex<f32>], out: &mut [f32]) {
+/// rustfft's 128-bit planner: NEON on aarch64 (which `FftPlanner::new` picks there anyway),
+/// SSE4.1 on x86-64 as its nearest equivalent, scalar where neither exists.
+fn portable_fft(len: usize) -> Arc<dyn Fft<f32>> {
     #[cfg(target_arch = "x86_64")]
-    if super::has_avx2_fma() {
+    if let Ok(mut p) = rustfft::FftPlannerSse::<f32>::new() {
+        return p.plan_fft_forward(len);
+    }
+    #[cfg(target_arch = "aarch64")]
+    if let Ok(mut p) = rustfft::FftPlannerNeon::<f32>::new() {
+        return p.plan_fft_forward(len);
+    }
+    rustfft::FftPlannerScalar::<f32>::new().plan_fft_forward(len)
+}
+
+/// X[k] for 0 < k < N/2 from the half-length transform Z, as magnitudes into `out[1..N/2]`.
+fn split_spectrum(z: &[Complex<f32>], twiddles: &[Complex<f32>], out: &mut [f32], avx2_fma: bool) {
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = avx2_fma;
+    #[cfg(target_arch = "x86_64")]
+    if avx2_fma {
         // SAFETY: the CPU supports the features the function was compiled for.
         unsafe { split_spectrum_avx2(z, twiddles, out) };
         return;

@@ -2,6 +2,7 @@
 //! Parzen-window (Gaussian kernel density) decision. Every buffer is allocated when the
 //! classifier is built; classifying an image allocates nothing.
 
+use super::Kernels;
 use super::features::FeatureExtractor;
 use super::model::{MAX_CLASSES, Model};
 use super::repair;
@@ -57,14 +58,24 @@ pub struct Classifier {
     dead_cols: Vec<bool>,
     inv_two_s2: f64,
     log_norm: [f64; MAX_CLASSES],
+    kernels: Kernels,
+    avx2_fma: bool,
 }
 
 impl Classifier {
-    /// Builds the run-time buffers; the model must have passed `Model::validate` (as `Model::load` does).
+    /// Builds the run-time buffers, with the fastest kernels this CPU has; the model must have
+    /// passed `Model::validate` (as `Model::load` does).
     pub fn new(model: Model) -> Self {
+        Self::with_kernels(model, Kernels::Native)
+    }
+
+    /// [`Classifier::new`] with the given kernels ([`Kernels::Portable`]: what an ARM computer
+    /// runs, and the reference the native kernels are checked against).
+    pub fn with_kernels(model: Model, kernels: Kernels) -> Self {
         let (work_rows, work_cols) = model.work_size().unwrap_or((1, 1));
         let n = model.feature_len();
-        let fx = FeatureExtractor::new(work_rows * work_cols);
+        let fx = FeatureExtractor::with_kernels(work_rows * work_cols, kernels);
+        let avx2_fma = kernels.avx2_fma();
         let s = model.kernel_width;
         let h = model.h as f64;
         let mut log_norm = [0.0; MAX_CLASSES];
@@ -80,7 +91,9 @@ impl Classifier {
         let mut projected_mean = vec![0.0; model.h];
         let mut w16 = Vec::new();
         if model.pca_matrix.len() == model.h * model.pca_mean.len() {
-            w16 = half_matrix(&model.pca_matrix);
+            if avx2_fma {
+                w16 = half_matrix(&model.pca_matrix);
+            }
             // With the same weights as the images, so that U F - U mean = U (F - mean) holds
             // for the rounded U too (F and mean are large and close).
             project(
@@ -88,6 +101,7 @@ impl Classifier {
                 &w16,
                 &model.pca_mean,
                 &mut projected_mean,
+                avx2_fma,
             );
         }
         let stride = model.h.div_ceil(8) * 8;
@@ -115,12 +129,19 @@ impl Classifier {
             dead_cols: vec![false; work_cols],
             inv_two_s2: 1.0 / (2.0 * s * s),
             log_norm,
+            kernels,
+            avx2_fma,
             model,
         }
     }
 
     pub fn model(&self) -> &Model {
         &self.model
+    }
+
+    /// The kernels this classifier was built with.
+    pub fn kernels(&self) -> Kernels {
+        self.kernels
     }
 
     /// Size of the working image (after crop and downsampling).
@@ -211,11 +232,17 @@ impl Classifier {
         self.fx.extract(&self.work, scale, &mut self.feat);
         // U (F - mean) = U F - U mean, with U mean computed once in `new`.
         let h = m.h;
-        project(&m.pca_matrix, &self.w16, &self.feat, &mut self.q[..h]);
+        project(
+            &m.pca_matrix,
+            &self.w16,
+            &self.feat,
+            &mut self.q[..h],
+            self.avx2_fma,
+        );
         for (q, b) in self.q.iter_mut().zip(&self.projected_mean) {
             *q -= b;
         }
-        sq_dists(&self.samples, &self.q, &mut self.log_kernel);
+        sq_dists(&self.samples, &self.q, &mut self.log_kernel, self.avx2_fma);
         let n_classes = m.classes.len();
         let mut log_dens = [f64::NEG_INFINITY; MAX_CLASSES];
         let mut max_e = [f64::NEG_INFINITY; MAX_CLASSES];
@@ -294,9 +321,12 @@ impl Classifier {
 /// `W` in IEEE half precision when this CPU converts it in hardware (F16C), else nothing.
 /// A weight of W (a unit vector's component) keeps 11 significant bits: the projection of a
 /// feature vector moves by about 5e-4 of its length, far below the distances between samples.
+/// Called only when the AVX2/FMA kernels run.
 fn half_matrix(w: &[f32]) -> Vec<u16> {
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = w;
     #[cfg(target_arch = "x86_64")]
-    if super::has_avx2_fma() && std::is_x86_feature_detected!("f16c") {
+    if std::is_x86_feature_detected!("f16c") {
         let mut out = vec![0u16; w.len()];
         // SAFETY: the CPU supports the features the function was compiled for.
         unsafe { to_half_f16c(w, &mut out) };
@@ -329,16 +359,19 @@ fn to_half_f16c(w: &[f32], out: &mut [u16]) {
 }
 
 /// `q = W c` for the row-major PCA matrix `W` (h x n): the bulk of the per-image arithmetic
-/// (52 x 1025 multiply-adds for the paper's sizes). `w16` is `W` in half precision, or empty.
-fn project(w: &[f32], w16: &[u16], c: &[f32], q: &mut [f32]) {
+/// (52 x 1025 multiply-adds for the paper's sizes). `w16` is `W` in half precision, or empty;
+/// `avx2_fma` says the CPU has both ([`Kernels::avx2_fma`]).
+fn project(w: &[f32], w16: &[u16], c: &[f32], q: &mut [f32], avx2_fma: bool) {
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (w16, avx2_fma);
     #[cfg(target_arch = "x86_64")]
-    if !w16.is_empty() {
+    if avx2_fma && !w16.is_empty() {
         // SAFETY: `w16` is only filled when the CPU has AVX2, FMA and F16C.
         unsafe { project_f16c(w, w16, c, q) };
         return;
     }
     #[cfg(target_arch = "x86_64")]
-    if super::has_avx2_fma() {
+    if avx2_fma {
         // SAFETY: the CPU supports the features the function was compiled for.
         unsafe { project_avx2(w, c, q) };
         return;
@@ -442,12 +475,99 @@ fn project_f16c(w: &[f32], w16: &[u16], c: &[f32], q: &mut [f32]) {
     }
 }
 
-#[inline(always)]
+/// The projection with the target's baseline SIMD: the AVX2 kernel's shape (four rows of W per
+/// pass over `c`, so that each load of `c` serves four rows; two 4-lane accumulators per row)
+/// in SSE2 on x86-64 and NEON on aarch64, which every CPU of those targets has. Elsewhere,
+/// one dot product per row.
+///
+/// Plain Rust over `[f32; 8]` lanes was tried first: LLVM's SLP vectoriser then packed the four
+/// rows' lanes into one register (the reduction at the end is cheaper that way) and paid a
+/// shuffle per load, 3x slower than these loops (measured with `cargo bench --bench classify`).
 fn project_portable(w: &[f32], c: &[f32], q: &mut [f32]) {
     let n = c.len();
-    for (j, q) in q.iter_mut().enumerate() {
-        *q = dot(&w[j * n..(j + 1) * n], c);
+    let full = q.len() - q.len() % 4;
+    #[cfg(any(target_arch = "x86_64", target_arch = "aarch64"))]
+    for (j4, q4) in q[..full].chunks_exact_mut(4).enumerate() {
+        let j = 4 * j4;
+        let rows: [&[f32]; 4] = std::array::from_fn(|i| &w[(j + i) * n..(j + i + 1) * n]);
+        let sums = rows4(rows, c);
+        q4.copy_from_slice(&sums);
     }
+    #[cfg(not(any(target_arch = "x86_64", target_arch = "aarch64")))]
+    let full = 0;
+    for (jj, qj) in q.iter_mut().enumerate().skip(full) {
+        *qj = dot(&w[jj * n..(jj + 1) * n], c);
+    }
+}
+
+/// Four dot products `rows[i] . c` (each row as long as `c`) with SSE2.
+#[cfg(target_arch = "x86_64")]
+fn rows4(rows: [&[f32]; 4], c: &[f32]) -> [f32; 4] {
+    use std::arch::x86_64::*;
+    let n = c.len();
+    let n8 = n - n % 8;
+    let mut out = [0.0f32; 4];
+    // SAFETY: SSE2 is part of every x86-64 CPU; each 4-lane load reads k..k+8 <= n8 <= n
+    // elements of `c` or of a row, both n long.
+    unsafe {
+        let mut acc = [_mm_setzero_ps(); 8];
+        let mut k = 0;
+        while k < n8 {
+            let c0 = _mm_loadu_ps(c.as_ptr().add(k));
+            let c1 = _mm_loadu_ps(c.as_ptr().add(k + 4));
+            for i in 0..4 {
+                let p = rows[i].as_ptr().add(k);
+                acc[2 * i] = _mm_add_ps(acc[2 * i], _mm_mul_ps(_mm_loadu_ps(p), c0));
+                acc[2 * i + 1] = _mm_add_ps(acc[2 * i + 1], _mm_mul_ps(_mm_loadu_ps(p.add(4)), c1));
+            }
+            k += 8;
+        }
+        for (i, o) in out.iter_mut().enumerate() {
+            let mut lanes = [0.0f32; 4];
+            _mm_storeu_ps(lanes.as_mut_ptr(), _mm_add_ps(acc[2 * i], acc[2 * i + 1]));
+            *o = lanes.iter().sum();
+        }
+    }
+    for (i, o) in out.iter_mut().enumerate() {
+        for (x, y) in rows[i][n8..].iter().zip(&c[n8..]) {
+            *o += x * y;
+        }
+    }
+    out
+}
+
+/// Four dot products `rows[i] . c` (each row as long as `c`) with NEON fused multiply-adds.
+#[cfg(target_arch = "aarch64")]
+fn rows4(rows: [&[f32]; 4], c: &[f32]) -> [f32; 4] {
+    use std::arch::aarch64::*;
+    let n = c.len();
+    let n8 = n - n % 8;
+    let mut out = [0.0f32; 4];
+    // SAFETY: NEON is part of every aarch64 CPU; each 4-lane load reads k..k+8 <= n8 <= n
+    // elements of `c` or of a row, both n long.
+    unsafe {
+        let mut acc = [vdupq_n_f32(0.0); 8];
+        let mut k = 0;
+        while k < n8 {
+            let c0 = vld1q_f32(c.as_ptr().add(k));
+            let c1 = vld1q_f32(c.as_ptr().add(k + 4));
+            for i in 0..4 {
+                let p = rows[i].as_ptr().add(k);
+                acc[2 * i] = vfmaq_f32(acc[2 * i], vld1q_f32(p), c0);
+                acc[2 * i + 1] = vfmaq_f32(acc[2 * i + 1], vld1q_f32(p.add(4)), c1);
+            }
+            k += 8;
+        }
+        for (i, o) in out.iter_mut().enumerate() {
+            *o = vaddvq_f32(vaddq_f32(acc[2 * i], acc[2 * i + 1]));
+        }
+    }
+    for (i, o) in out.iter_mut().enumerate() {
+        for (x, y) in rows[i][n8..].iter().zip(&c[n8..]) {
+            *o += x * y;
+        }
+    }
+    out
 }
 
 #[inline(always)]
@@ -472,9 +592,11 @@ fn dot(a: &[f32], b: &[f32]) -> f32 {
 
 /// `out[i] = |x_i - q|^2` for the stored samples `x_i`, each `q.len()` long (a multiple of 8,
 /// zero-padded past h, so the padding adds nothing).
-fn sq_dists(samples: &[f32], q: &[f32], out: &mut [f64]) {
+fn sq_dists(samples: &[f32], q: &[f32], out: &mut [f64], avx2_fma: bool) {
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = avx2_fma;
     #[cfg(target_arch = "x86_64")]
-    if super::has_avx2_fma() {
+    if avx2_fma {
         // SAFETY: the CPU supports the features the function was compiled for.
         unsafe { sq_dists_avx2(samples, q, out) };
         return;
@@ -519,34 +641,38 @@ mod tests {
         let b: Vec<f32> = (0..52).map(|i| (i % 7) as f32).collect();
         let want: f32 = a.iter().zip(&b).map(|(x, y)| (x - y) * (x - y)).sum();
         let samples: Vec<f32> = pad(a.clone()).into_iter().chain(pad(b.clone())).collect();
-        let mut d = [0.0f64; 2];
-        sq_dists(&samples, &pad(b), &mut d);
-        assert!(
-            (d[0] - want as f64).abs() <= 1e-3 * want as f64,
-            "{d:?} vs {want}"
-        );
-        assert_eq!(d[1], 0.0);
-        // Six rows of 1025: the four-row SIMD block, two single rows and a ragged tail.
+        for avx2_fma in [false, Kernels::Native.avx2_fma()] {
+            let mut d = [0.0f64; 2];
+            sq_dists(&samples, &pad(b.clone()), &mut d, avx2_fma);
+            assert!(
+                (d[0] - want as f64).abs() <= 1e-3 * want as f64,
+                "{d:?} vs {want}"
+            );
+            assert_eq!(d[1], 0.0);
+        }
+        // Seven rows of 1025: the four-row block, three single rows and a ragged tail.
         let n = 1025;
-        let w: Vec<f32> = (0..6 * n)
+        let w: Vec<f32> = (0..7 * n)
             .map(|i| ((i * 7919) % 101) as f32 * 0.01 - 0.5)
             .collect();
         let c: Vec<f32> = (0..n).map(|i| ((i * 31) % 17) as f32 - 8.0).collect();
-        let mut q = [0.0f32; 6];
-        project(&w, &[], &c, &mut q);
-        for (j, qj) in q.iter().enumerate() {
-            let want: f64 = (0..n).map(|k| w[j * n + k] as f64 * c[k] as f64).sum();
-            assert!(
-                (*qj as f64 - want).abs() <= 1e-3 * want.abs().max(1.0),
-                "row {j}"
-            );
+        for avx2_fma in [false, Kernels::Native.avx2_fma()] {
+            let mut q = [0.0f32; 7];
+            project(&w, &[], &c, &mut q, avx2_fma);
+            for (j, qj) in q.iter().enumerate() {
+                let want: f64 = (0..n).map(|k| w[j * n + k] as f64 * c[k] as f64).sum();
+                assert!(
+                    (*qj as f64 - want).abs() <= 1e-3 * want.abs().max(1.0),
+                    "row {j}, avx2_fma {avx2_fma}: {qj} vs {want}"
+                );
+            }
         }
         // The half-precision copy: each weight within 2^-11 of its own magnitude, so each
         // product too; the sum is then within 2^-11 of the sum of |w c|.
-        let w16 = half_matrix(&w);
-        if !w16.is_empty() {
-            let mut q16 = [0.0f32; 6];
-            project(&w, &w16, &c, &mut q16);
+        if Kernels::Native.avx2_fma() {
+            let w16 = half_matrix(&w);
+            let mut q16 = [0.0f32; 7];
+            project(&w, &w16, &c, &mut q16, true);
             for (j, qj) in q16.iter().enumerate() {
                 let want: f64 = (0..n).map(|k| w[j * n + k] as f64 * c[k] as f64).sum();
                 let abs: f64 = (0..n)
@@ -556,6 +682,23 @@ mod tests {
                     (*qj as f64 - want).abs() <= abs / 2048.0 + 1e-3,
                     "row {j}: {qj} vs {want}"
                 );
+            }
+        }
+    }
+
+    #[test]
+    fn portable_rows_match_a_dot_product_for_every_row_count() {
+        // 0 to 9 rows: no block, one block with 0-3 single rows, two blocks; n not a multiple of 8.
+        let n = 37;
+        for rows in 0..10 {
+            let w: Vec<f32> = (0..rows * n).map(|i| (i % 13) as f32 - 6.0).collect();
+            let c: Vec<f32> = (0..n).map(|i| (i % 5) as f32 * 0.25).collect();
+            let mut q = vec![f32::NAN; rows];
+            project_portable(&w, &c, &mut q);
+            for (j, qj) in q.iter().enumerate() {
+                // Small integers and quarters: every partial sum is exact in f32.
+                let want: f32 = (0..n).map(|k| w[j * n + k] * c[k]).sum();
+                assert_eq!(*qj, want, "{rows} rows, row {j}");
             }
         }
     }

@@ -1,0 +1,106 @@
+#!/usr/bin/env bash
+# Tests the Debian packages that scripts/package-deb.sh wrote, in throwaway Debian roots made
+# with debootstrap (minbase of this machine's release plus what a robot's computer has: systemd,
+# procps, iproute2; cached under target/deb-test/):
+# - amd64: `dpkg -i` into a fresh root (its Depends met by the root's own packages), the
+#   binary runs there, `systemd-analyze verify` accepts both units, an edited conffile and the
+#   user's model survive remove and reinstall, purge removes the rest and keeps the model;
+# - arm64: the root gets arm64 as a foreign architecture and Debian's libc6:arm64 and
+#   libgcc-s1:arm64, `dpkg -i` installs the arm64 package there, and its /usr/bin/presrs, run
+#   under qemu-aarch64 with that root's libraries, classifies every image of two simulated
+#   datasets (static presses; G2 stances) as the x86-64 binary does.
+set -euo pipefail
+root=$(cd "$(dirname "$0")/.." && pwd)
+cd "$root"
+[ "$(id -u)" -eq 0 ] || { echo "test-package: needs root (chroot, debootstrap)" >&2; exit 1; }
+
+meta=$(cargo metadata --no-deps --format-version 1)
+version=$(python3 -c 'import json,sys; print(next(p["version"] for p in json.load(sys.stdin)["packages"] if p["name"]=="presrs"))' <<<"$meta")
+target_dir=$(python3 -c 'import json,sys; print(json.load(sys.stdin)["target_directory"])' <<<"$meta")
+amd="$target_dir/debian/presrs_${version}_amd64.deb"
+arm="$target_dir/debian/presrs_${version}_arm64.deb"
+for d in "$amd" "$arm"; do
+  [ -s "$d" ] || { echo "test-package: $d is missing: run scripts/package-deb.sh --arch amd64 and arm64" >&2; exit 1; }
+done
+
+fail() { echo "test-package: FAILED: $*" >&2; exit 1; }
+work="$target_dir/deb-test"
+codename=$(. /etc/os-release && echo "${VERSION_CODENAME:-bookworm}")
+base="$work/base-$codename-systemd"
+if [ ! -e "$base/.complete" ]; then
+  echo "test-package: debootstrap --variant=minbase $codename (a throwaway root)"
+  rm -rf "$base"; mkdir -p "$work"
+  debootstrap --variant=minbase --include=systemd,procps,iproute2 "$codename" "$base" \
+    >"$work/debootstrap.log" 2>&1 ||
+    { tail -20 "$work/debootstrap.log" >&2; fail "debootstrap (log: $work/debootstrap.log)"; }
+  touch "$base/.complete"
+fi
+fresh() { rm -rf "$1"; cp -a "$base" "$1"; cp /etc/resolv.conf "$1/etc/resolv.conf"; }
+in_root() { local r=$1; shift; chroot "$r" /usr/bin/env -i PATH=/usr/sbin:/usr/bin:/sbin:/bin LC_ALL=C "$@"; }
+
+# ---- amd64: install, run, verify the units, conffiles across remove/reinstall/purge
+r="$work/root-amd64"; fresh "$r"
+cp "$amd" "$r/tmp/presrs.deb"
+in_root "$r" dpkg -i /tmp/presrs.deb >/dev/null || fail "dpkg -i $(basename "$amd") into a fresh root"
+in_root "$r" presrs --help >/dev/null || fail "the installed presrs does not run in the fresh root"
+for f in /usr/bin/presrs /etc/presrs/node.toml /etc/presrs/controller.toml \
+         /lib/systemd/system/presrs-node.service /usr/share/doc/presrs/presrs.dbc; do
+  [ -e "$r$f" ] || fail "$f not installed"
+done
+# verify resolves ExecStart= and the units' dependencies inside the root.
+systemd-analyze verify --root="$r" presrs-node.service presrs-controller.service ||
+  fail "systemd-analyze verify rejects the units"
+echo "# edited on the robot" >> "$r/etc/presrs/node.toml"
+echo '{"user": "model"}' > "$r/etc/presrs/model.json"
+in_root "$r" dpkg -r presrs >/dev/null || fail "dpkg -r presrs"
+[ ! -e "$r/usr/bin/presrs" ] || fail "remove left /usr/bin/presrs"
+grep -q "edited on the robot" "$r/etc/presrs/node.toml" || fail "remove lost the edited node.toml"
+in_root "$r" dpkg -i /tmp/presrs.deb >/dev/null </dev/null || fail "reinstall after remove"
+grep -q "edited on the robot" "$r/etc/presrs/node.toml" || fail "reinstall overwrote the edited node.toml"
+in_root "$r" dpkg -P presrs >/dev/null || fail "dpkg -P presrs"
+[ ! -e "$r/etc/presrs/controller.toml" ] || fail "purge left controller.toml"
+[ -e "$r/etc/presrs/model.json" ] || fail "purge removed the user's model"
+echo "test-package: amd64: installs into a fresh $codename root, runs, units verify, edited config kept on remove and reinstall, purge keeps the model"
+
+# ---- arm64: a root with Debian's arm64 libc, the package installed there, its binary run
+r="$work/root-arm64"; fresh "$r"
+in_root "$r" dpkg --add-architecture arm64
+in_root "$r" apt-get update -qq >/dev/null || fail "apt-get update in the arm64 root"
+in_root "$r" env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends \
+  libc6:arm64 libgcc-s1:arm64 >/dev/null || fail "installing libc6:arm64 libgcc-s1:arm64 in the root"
+cp "$arm" "$r/tmp/presrs.deb"
+in_root "$r" dpkg -i /tmp/presrs.deb >/dev/null || fail "dpkg -i $(basename "$arm") into the arm64 root"
+[ "$(in_root "$r" dpkg-query -W -f='${Architecture} ${Status}' presrs)" = "arm64 install ok installed" ] ||
+  fail "presrs:arm64 is not installed in the root"
+file_arch=$(readelf -h "$r/usr/bin/presrs" | sed -n 's/.*Machine: *//p')
+[ "$file_arch" = "AArch64" ] || fail "the installed binary is $file_arch, not AArch64"
+arm_presrs=(qemu-aarch64 -L "$r" "$r/usr/bin/presrs")
+"${arm_presrs[@]}" --help >/dev/null || fail "the arm64 presrs does not start under qemu-aarch64"
+
+# The same terrain from both binaries for every image: models and data made on x86-64.
+cargo build --release --quiet --bin presrs
+x86="$target_dir/release/presrs"
+data="$work/data"; rm -rf "$data"; mkdir -p "$data"
+"$x86" dataset static --out "$data/static" --seed 3 >/dev/null
+"$x86" dataset dynamic --gait G2 --out "$data/g2" --seed 3 >/dev/null
+"$x86" train --data "$data/static" --out "$data/static.json" --crop 2,2,2,2 >/dev/null
+"$x86" train --data "$data/g2" --out "$data/g2.json" --crop 0,3,6,0 --normalize-load >/dev/null
+for set in static g2; do
+  mapfile -t files < <(find "$data/$set" -name '*.pgm' | sort)
+  "$x86" classify --model "$data/$set.json" "${files[@]}" > "$data/$set.x86_64.tsv"
+  "${arm_presrs[@]}" classify --model "$data/$set.json" "${files[@]}" > "$data/$set.aarch64.tsv"
+  python3 - "$data/$set.x86_64.tsv" "$data/$set.aarch64.tsv" "$set" <<'EOF' || fail "arm64 and x86-64 disagree on $set"
+import sys
+a = [l.rstrip("\n").split("\t") for l in open(sys.argv[1])]
+b = [l.rstrip("\n").split("\t") for l in open(sys.argv[2])]
+assert len(a) == len(b) and len(a) > 0, f"{len(a)} vs {len(b)} lines"
+differ = [(x[0], x[1], y[1]) for x, y in zip(a, b) if x[0] != y[0] or x[1] != y[1]]
+dconf = max(abs(float(x[2]) - float(y[2])) for x, y in zip(a, b))
+print(f"test-package: {sys.argv[3]}: {len(a)} images, {len(a) - len(differ)} same terrain on arm64 "
+      f"(qemu) and x86-64, largest confidence difference {dconf:.3f}")
+for d in differ[:10]:
+    print("  differs:", *d)
+sys.exit(1 if differ else 0)
+EOF
+done
+echo "test-package: arm64: installs with Debian's arm64 libc, and its binary classifies as the x86-64 one"
