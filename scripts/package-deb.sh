@@ -72,6 +72,7 @@ doc="$stage/usr/share/doc/presrs"
 install -D -m 644 packaging/debian/copyright "$doc/copyright"
 install -m 644 protocol/presrs.dbc README.md "$doc/"
 for f in docs/*.md; do install -m 644 "$f" "$doc/"; done
+install -D -m 644 examples/terrains.toml "$doc/examples/terrains.toml"
 printf 'presrs (%s) unstable; urgency=medium\n\n  * Built from the presrs workspace.\n\n -- PreSRS developers <presrs@localhost>  %s\n' \
   "$version" "$(date -R -u -d "@${SOURCE_DATE_EPOCH:-$(git log -1 --format=%ct 2>/dev/null || date +%s)}")" |
   gzip -9n > "$doc/changelog.Debian.gz"

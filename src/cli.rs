@@ -8,9 +8,33 @@ use anyhow::{Context, Result, bail};
 use node::classifier::dataset::{load_dataset, read_image, read_images, write_pgm};
 use node::classifier::train::{TrainOptions, train as train_model};
 use node::classifier::{Classifier, Crop, Kernels, Model, repair as repair_mod};
+use protocol::TerrainCatalog;
 use rand::SeedableRng;
 
-pub fn train(data: &Path, out: &Path, opts: &TrainOptions, skip_bad: bool) -> Result<ExitCode> {
+/// `--terrains FILE`: the lab's own terrains beside the paper's twelve (`protocol::terrain`).
+#[derive(clap::Args, Clone, Debug, Default)]
+pub struct TerrainsArg {
+    /// A terrains file adding your own terrains to the paper's twelve: entries
+    /// `[[terrain]]` with `id = 20` and `name = "asphalt"` (ids 0-254, names [a-z0-9_]+).
+    #[arg(long, value_name = "FILE")]
+    pub terrains: Option<PathBuf>,
+}
+
+impl TerrainsArg {
+    /// The catalog: the paper's terrains plus the file's.
+    pub fn catalog(&self) -> Result<TerrainCatalog> {
+        Ok(TerrainCatalog::load(self.terrains.as_deref())?)
+    }
+}
+
+pub fn train(
+    data: &Path,
+    out: &Path,
+    opts: &TrainOptions,
+    skip_bad: bool,
+    terrains: &TerrainsArg,
+) -> Result<ExitCode> {
+    let catalog = terrains.catalog()?;
     let ds = load_dataset(data, skip_bad)?;
     if !ds.bad.is_empty() {
         eprintln!(
@@ -19,7 +43,7 @@ pub fn train(data: &Path, out: &Path, opts: &TrainOptions, skip_bad: bool) -> Re
             ds.bad[0]
         );
     }
-    let set = presrs::simdata::TrainingSet::from_dataset(ds);
+    let set = presrs::simdata::TrainingSet::from_dataset(ds, &catalog)?;
     let classes = &set.classes;
     let labelled = set.labelled();
     if labelled.is_empty() {
@@ -70,7 +94,12 @@ pub struct EvalOptions {
     pub kernels: Kernels,
 }
 
-pub fn eval(model_path: &Path, data: &Path, o: &EvalOptions) -> Result<ExitCode> {
+pub fn eval(
+    model_path: &Path,
+    data: &Path,
+    o: &EvalOptions,
+    terrains: &TerrainsArg,
+) -> Result<ExitCode> {
     let &EvalOptions {
         damage,
         repair,
@@ -80,6 +109,7 @@ pub fn eval(model_path: &Path, data: &Path, o: &EvalOptions) -> Result<ExitCode>
         kernels,
     } = o;
     let model = Model::load(model_path)?;
+    model.check_catalog(&terrains.catalog()?)?;
     let ds = load_dataset(data, skip_bad)?;
     let names: Vec<String> = model.classes.iter().map(|c| c.name.clone()).collect();
     let used: std::collections::HashSet<String> = model
@@ -201,8 +231,9 @@ pub fn eval(model_path: &Path, data: &Path, o: &EvalOptions) -> Result<ExitCode>
     Ok(ExitCode::SUCCESS)
 }
 
-pub fn classify(model_path: &Path, files: &[PathBuf]) -> Result<ExitCode> {
+pub fn classify(model_path: &Path, files: &[PathBuf], terrains: &TerrainsArg) -> Result<ExitCode> {
     let model = Model::load(model_path)?;
+    model.check_catalog(&terrains.catalog()?)?;
     let names: Vec<String> = model.classes.iter().map(|c| c.name.clone()).collect();
     let mut c = Classifier::new(model);
     for f in files {
@@ -258,37 +289,66 @@ pub enum DatasetKind {
     Dynamic,
 }
 
-pub fn dataset(
-    kind: DatasetKind,
-    out: &Path,
-    n: Option<usize>,
-    gait: &str,
-    damage: f64,
-    sensor: u64,
-    seed: u64,
-) -> Result<ExitCode> {
+/// `presrs dataset`.
+#[derive(clap::Args)]
+pub struct DatasetArgs {
+    /// static (section 4), sandpaper (section 5) or dynamic (section 7, on the hopper).
+    #[arg(value_enum)]
+    pub kind: DatasetKind,
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Images per terrain (default: the paper's counts; Table 4 for dynamic).
+    #[arg(long)]
+    pub n: Option<usize>,
+    /// Hopper gait for the dynamic set: G1, G2 or G3.
+    #[arg(long, default_value = "G2")]
+    pub gait: String,
+    /// Sensor damage, percent of sensels on dead rows and columns (eq. 6).
+    #[arg(long, default_value_t = 0.0)]
+    pub damage: f64,
+    /// Serial number of the simulated sensor that records the images: its gain pattern and
+    /// faults. Train on the sensor the robot wears (`presrs sim --sensor`, the same default).
+    #[arg(long, default_value_t = sim::DEFAULT_SENSOR)]
+    pub sensor: u64,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    // Checked like every command's; the simulator generates the paper's terrains, which every
+    // catalog holds.
+    #[command(flatten)]
+    pub terrains: TerrainsArg,
+}
+
+pub fn dataset(a: &DatasetArgs) -> Result<ExitCode> {
     use sim::dataset::{Kind, Options, generate};
+    let catalog = a.terrains.catalog()?;
+    let (out, gait, damage) = (&a.out, a.gait.as_str(), a.damage);
     let gait = controller::Gait::by_name(gait)
         .with_context(|| format!("--gait {gait}: expected G1, G2 or G3"))?;
     anyhow::ensure!(
         (0.0..=100.0).contains(&damage),
         "--damage {damage}: expected a percentage in 0..=100"
     );
-    let kind = match kind {
+    let kind = match a.kind {
         DatasetKind::Static => Kind::Static,
         DatasetKind::Sandpaper => Kind::Sandpaper,
         DatasetKind::Dynamic => Kind::Dynamic,
     };
     let samples = generate(&Options {
         kind,
-        n,
+        n: a.n,
         gait,
         damage_pct: damage,
-        sensor,
-        seed,
+        sensor: a.sensor,
+        seed: a.seed,
     });
     let mut counts = std::collections::BTreeMap::new();
     for s in &samples {
+        anyhow::ensure!(
+            catalog.by_id(s.terrain.id()) == Some(s.terrain),
+            "terrain {} (id {}) is not in the catalog",
+            s.terrain,
+            s.terrain.id()
+        );
         let dir = out.join(s.terrain.name());
         std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
         let k = counts.entry(s.terrain.name()).or_insert(0usize);
@@ -299,7 +359,7 @@ pub fn dataset(
         *k += 1;
     }
     for t in kind.terrains() {
-        let of: Vec<&sim::dataset::Sample> = samples.iter().filter(|s| s.terrain == *t).collect();
+        let of: Vec<&sim::dataset::Sample> = samples.iter().filter(|s| s.terrain == t).collect();
         if of.is_empty() {
             continue;
         }

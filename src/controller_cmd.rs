@@ -27,6 +27,9 @@ pub struct ControllerArgs {
     /// the simulator runs slower or faster than real time (on a robot: 1).
     #[arg(long, default_value_t = 1.0)]
     pub time_scale: f64,
+    /// Overrides the config's `terrains` key.
+    #[command(flatten)]
+    pub terrains: crate::cli::TerrainsArg,
 }
 
 pub fn load_config(path: Option<&std::path::Path>) -> Result<ControllerConfig> {
@@ -46,7 +49,12 @@ pub fn run(a: ControllerArgs) -> Result<ExitCode> {
         "--time-scale {}: expected a positive factor (1 = real time)",
         a.time_scale
     );
-    let cfg = load_config(a.config.as_deref())?;
+    let mut cfg = load_config(a.config.as_deref())?;
+    if a.terrains.terrains.is_some() {
+        cfg.terrains = a.terrains.terrains.clone();
+        let catalog = cfg.catalog().map_err(anyhow::Error::msg)?;
+        cfg.validate(&catalog).map_err(anyhow::Error::msg)?;
+    }
     let signals = Signals::install()?;
     run_on(
         cfg,
@@ -66,7 +74,8 @@ pub fn run_on(
 ) -> Result<u64> {
     let ids = cfg.ids.clone();
     let foot = cfg.foot;
-    let mut ctrl = Controller::new(cfg);
+    let catalog = cfg.catalog().map_err(anyhow::Error::msg)?;
+    let mut ctrl = Controller::new(cfg, &catalog);
     let start = Instant::now();
     let now_us = || (start.elapsed().as_secs_f64() * time_scale * 1e6) as u64;
     let mut out: Vec<Message> = Vec::with_capacity(8);

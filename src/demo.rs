@@ -17,7 +17,6 @@ use protocol::bus::{CanBus, InProcBus};
 use protocol::clock::ManualClock;
 use protocol::messages::{self, Message, NodeState, NodeStatus};
 use sim::runner::{SimConfig, SimRobot, Track};
-use sim::terrain::Terrain;
 
 /// Where the demo keeps the model it trains on first run.
 fn cache_path() -> PathBuf {
@@ -47,7 +46,7 @@ pub fn sim_model(seed: u64) -> Result<Model> {
         };
         samples.extend(sim::dataset::generate(&opts));
     }
-    let set = TrainingSet::from_samples(samples, &Terrain::DYNAMIC);
+    let set = TrainingSet::from_samples(samples, &sim::dataset::Kind::Dynamic.terrains());
     // Load-normalised (the paper's intensity scaling): a gait switch or a terrain change
     // changes the load at 70 ms for a few steps, and the texture should decide, not the load.
     let opts = TrainOptions {
@@ -135,6 +134,9 @@ pub struct DemoArgs {
     /// Sensor damage from the start, percent of sensels on dead rows and columns (eq. 6).
     #[arg(long, default_value_t = 0.0, value_name = "PCT")]
     pub damage: f64,
+    /// For the track's terrain names and the node's and controller's catalogs.
+    #[command(flatten)]
+    pub terrains: crate::cli::TerrainsArg,
 }
 
 pub fn run(a: DemoArgs) -> Result<ExitCode> {
@@ -143,10 +145,16 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
         "--damage {}: expected a percentage in 0..=100",
         a.damage
     );
-    let track = crate::sim_cmd::load_track(a.track.as_deref())?;
+    let catalog = a.terrains.catalog()?;
+    let track = crate::sim_cmd::load_track(a.track.as_deref(), &catalog)?;
     let model = load_or_train(a.model.as_deref())?;
-    let ctrl_cfg = ControllerConfig::default();
-    let node_cfg = crate::node_cmd::load_config(a.node_config.as_deref())?;
+    let mut ctrl_cfg = ControllerConfig::default();
+    let mut node_cfg = crate::node_cmd::load_config(a.node_config.as_deref())?;
+    if a.terrains.terrains.is_some() {
+        ctrl_cfg.terrains = a.terrains.terrains.clone();
+        node_cfg.terrains = a.terrains.terrains.clone();
+    }
+    model.check_catalog(&node_cfg.catalog().map_err(anyhow::Error::msg)?)?;
     let fixed = match &a.fixed_gait {
         Some(g) => Some(
             controller::Gait::by_name(g)
@@ -220,6 +228,7 @@ fn closed_loop_realtime(
         duration: Some(steps as f64 * 0.4 + 1.0),
         report: None,
         seed,
+        terrains: a.terrains.clone(),
     };
     if show {
         eprintln!(
@@ -328,8 +337,15 @@ fn closed_loop_with_falls(
     let mut node_cfg = p.node.clone();
     // Lock-step simulated time: a refit lands at the step that asked for it, as in a replay.
     node_cfg.refit = node_cfg.refit.reproducible();
+    let catalog = node_cfg.catalog().map_err(anyhow::Error::msg)?;
     let mut pipeline = StancePipeline::new(node_cfg, Some(model));
-    let mut ctrl = p.controller.map(|c| Controller::new(c.clone()));
+    let mut ctrl = match p.controller {
+        Some(c) => Some(Controller::new(
+            c.clone(),
+            &c.catalog().map_err(anyhow::Error::msg)?,
+        )),
+        None => None,
+    };
     let mut rows: Vec<StepRow> = Vec::new();
     let mut t_us = 0u64;
     let mut next_status = 0u64;
@@ -363,9 +379,7 @@ fn closed_loop_with_falls(
                     t_s: t_us as f64 * 1e-6,
                     step: tc.step,
                     truth: truth.to_string(),
-                    classified: messages::terrain_name(tc.terrain)
-                        .unwrap_or("?")
-                        .to_string(),
+                    classified: catalog.describe(tc.terrain),
                     confidence_pct: tc.confidence_pct,
                     gait: robot.gait_in_effect(foot).unwrap_or(0),
                     speed_m_s: speed,

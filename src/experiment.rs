@@ -59,6 +59,9 @@ pub struct ExperimentArgs {
     /// With `--data`: go on past unreadable images and count them.
     #[arg(long, requires = "data")]
     pub skip_bad: bool,
+    /// With `--data`: the catalog its class folders are named in.
+    #[command(flatten)]
+    pub terrains: crate::cli::TerrainsArg,
 }
 
 /// A user's dataset given with `--data`.
@@ -119,7 +122,7 @@ pub fn run(a: ExperimentArgs) -> Result<ExitCode> {
             }
             Some(UserData {
                 dir: dir.clone(),
-                set: TrainingSet::from_dataset(ds),
+                set: TrainingSet::from_dataset(ds, &a.terrains.catalog()?)?,
                 crop: a.crop.unwrap_or_default(),
             })
         }
@@ -239,7 +242,7 @@ fn dataset(kind: Kind, n: usize, gait: controller::Gait, seed: u64) -> TrainingS
         sensor: sim::DEFAULT_SENSOR,
         seed,
     });
-    TrainingSet::from_samples(samples, kind.terrains())
+    TrainingSet::from_samples(samples, &kind.terrains())
 }
 
 fn train_on(
@@ -533,7 +536,7 @@ fn gaits(ctx: &Ctx) -> Result<String> {
                 seed: ctx.seed + 20 + g.id as u64,
             });
             (
-                TrainingSet::from_samples(samples.clone(), &Terrain::DYNAMIC),
+                TrainingSet::from_samples(samples.clone(), &Kind::Dynamic.terrains()),
                 samples,
             )
         })
@@ -584,10 +587,10 @@ fn gaits(ctx: &Ctx) -> Result<String> {
         [0.99, 0.97, 0.84, 1.49],
     ];
     let order = [
-        Terrain::Wood,
-        Terrain::Carpet,
-        Terrain::Clay,
-        Terrain::Grass,
+        Terrain::WOOD,
+        Terrain::CARPET,
+        Terrain::CLAY,
+        Terrain::GRASS,
     ];
     let _ = writeln!(
         md,
@@ -832,7 +835,7 @@ fn lifespan(ctx: &Ctx, curves: &Curves) -> Result<String> {
     let g = controller::Gait::g2();
     let mut h = sim::hopper::Hopper::launch(sim::hopper::HopperParams::default(), &g);
     let mut cmd = sim::fixed_gait::FixedGait::new(g.clone());
-    let ground = Terrain::Wood.ground();
+    let ground = sim::terrain::Physics::Wood.ground();
     let (mut steps, mut t0, mut x0) = (0u32, 0.0, 0.0);
     let horizon = if ctx.quick { 10.0 } else { 30.0 };
     while h.t < horizon + 5.0 {

@@ -36,6 +36,8 @@ enum Cmd {
         /// Output file (stdout when absent).
         #[arg(long)]
         out: Option<PathBuf>,
+        #[command(flatten)]
+        terrains: cli::TerrainsArg,
     },
     /// The terrain node: foot switch and tactile frames in, one TerrainClass per step out
     /// (on a CAN interface, or `--replay` of a candump log).
@@ -74,6 +76,8 @@ enum Cmd {
         /// Skip unreadable files (counted) instead of stopping.
         #[arg(long)]
         skip_bad: bool,
+        #[command(flatten)]
+        terrains: cli::TerrainsArg,
     },
     /// Evaluate a model on a dataset: confusion matrix (detected vs actual, %) and accuracy.
     Eval {
@@ -83,12 +87,16 @@ enum Cmd {
         data: PathBuf,
         #[command(flatten)]
         opts: cli::EvalOptions,
+        #[command(flatten)]
+        terrains: cli::TerrainsArg,
     },
     /// Classify image files: one line per image (file, terrain, confidence).
     Classify {
         #[arg(long)]
         model: PathBuf,
         files: Vec<PathBuf>,
+        #[command(flatten)]
+        terrains: cli::TerrainsArg,
     },
     /// Print an image's feature vector (eqs. 1-3).
     Features {
@@ -105,35 +113,14 @@ enum Cmd {
         out: PathBuf,
     },
     /// Generate a simulated dataset: DIR/<terrain>/<n>.pgm, as `train` and `eval` read it.
-    Dataset {
-        /// static (section 4), sandpaper (section 5) or dynamic (section 7, on the hopper).
-        #[arg(value_enum)]
-        kind: cli::DatasetKind,
-        #[arg(long)]
-        out: PathBuf,
-        /// Images per terrain (default: the paper's counts; Table 4 for dynamic).
-        #[arg(long)]
-        n: Option<usize>,
-        /// Hopper gait for the dynamic set: G1, G2 or G3.
-        #[arg(long, default_value = "G2")]
-        gait: String,
-        /// Sensor damage, percent of sensels on dead rows and columns (eq. 6).
-        #[arg(long, default_value_t = 0.0)]
-        damage: f64,
-        /// Serial number of the simulated sensor that records the images: its gain pattern and
-        /// faults. Train on the sensor the robot wears (`presrs sim --sensor`, the same default).
-        #[arg(long, default_value_t = sim::DEFAULT_SENSOR)]
-        sensor: u64,
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-    },
+    Dataset(cli::DatasetArgs),
     /// Reproduce the paper's tables and figures on simulated data: Markdown and PNG plots.
     Experiment(experiment::ExperimentArgs),
 }
 
 fn run(cli: Cli) -> Result<ExitCode> {
     match cli.cmd {
-        Cmd::Dbc { ids, out } => {
+        Cmd::Dbc { ids, out, terrains } => {
             let cfg = match ids {
                 None => protocol::IdConfig::default(),
                 Some(p) => {
@@ -149,7 +136,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 }
             };
             cfg.validate().context("identifier map")?;
-            let text = protocol::dbc::generate(&cfg);
+            let text = protocol::dbc::generate(&cfg, &terrains.catalog()?);
             match out {
                 Some(p) => {
                     std::fs::write(&p, text).with_context(|| format!("writing {}", p.display()))?
@@ -174,6 +161,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             dims,
             seed,
             skip_bad,
+            terrains,
         } => {
             let opts = node::classifier::train::TrainOptions {
                 per_class,
@@ -184,21 +172,22 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 h: dims,
                 seed,
             };
-            cli::train(&data, &out, &opts, skip_bad)
+            cli::train(&data, &out, &opts, skip_bad, &terrains)
         }
-        Cmd::Eval { model, data, opts } => cli::eval(&model, &data, &opts),
-        Cmd::Classify { model, files } => cli::classify(&model, &files),
+        Cmd::Eval {
+            model,
+            data,
+            opts,
+            terrains,
+        } => cli::eval(&model, &data, &opts, &terrains),
+        Cmd::Classify {
+            model,
+            files,
+            terrains,
+        } => cli::classify(&model, &files, &terrains),
         Cmd::Features { file, crop, json } => cli::features(&file, &crop, json),
         Cmd::Repair { file, out } => cli::repair(&file, &out),
-        Cmd::Dataset {
-            kind,
-            out,
-            n,
-            gait,
-            damage,
-            sensor,
-            seed,
-        } => cli::dataset(kind, &out, n, &gait, damage, sensor, seed),
+        Cmd::Dataset(a) => cli::dataset(&a),
         Cmd::Experiment(args) => experiment::run(args),
     }
 }

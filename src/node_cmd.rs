@@ -22,7 +22,7 @@ use crossbeam_channel::{Receiver, RecvTimeoutError, Sender, TrySendError, bounde
 use node::classifier::Model;
 use node::{NodeConfig, StancePipeline};
 use protocol::frame::{CanFrame, Stamped};
-use protocol::messages::{self, Message, NodeState, NodeStatus, TerrainClass};
+use protocol::messages::{Message, NodeState, NodeStatus, TerrainClass};
 
 use crate::runtime::{Backoff, BusSource, Signals, after_bus_error, open_source_with_retry};
 
@@ -44,6 +44,9 @@ pub struct NodeArgs {
     /// Replay: print each TerrainClass as a JSON line.
     #[arg(long)]
     pub json: bool,
+    /// Overrides the config's `terrains` key.
+    #[command(flatten)]
+    pub terrains: crate::cli::TerrainsArg,
 }
 
 pub fn load_config(path: Option<&Path>) -> Result<NodeConfig> {
@@ -56,10 +59,17 @@ pub fn load_config(path: Option<&Path>) -> Result<NodeConfig> {
 }
 
 pub fn run(a: NodeArgs) -> Result<ExitCode> {
-    let cfg = load_config(a.config.as_deref())?;
+    let mut cfg = load_config(a.config.as_deref())?;
+    if a.terrains.terrains.is_some() {
+        cfg.terrains = a.terrains.terrains.clone();
+    }
+    let catalog = cfg.catalog().map_err(anyhow::Error::msg)?;
     let model = Model::load(&a.model).with_context(|| format!("--model {}", a.model.display()))?;
+    model
+        .check_catalog(&catalog)
+        .with_context(|| format!("--model {}", a.model.display()))?;
     match (&a.replay, &a.iface) {
-        (Some(log), _) => replay(cfg, model, log, a.json),
+        (Some(log), _) => replay(cfg, model, log, a.json, &catalog),
         (None, Some(iface)) => {
             let signals = Signals::install()?;
             live(
@@ -75,7 +85,13 @@ pub fn run(a: NodeArgs) -> Result<ExitCode> {
     }
 }
 
-fn replay(mut cfg: NodeConfig, model: Model, log: &Path, json: bool) -> Result<ExitCode> {
+fn replay(
+    mut cfg: NodeConfig,
+    model: Model,
+    log: &Path,
+    json: bool,
+    catalog: &protocol::TerrainCatalog,
+) -> Result<ExitCode> {
     // The same decisions on every replay: a refit lands at the step that asked for it.
     cfg.refit = cfg.refit.reproducible();
     let file = std::fs::File::open(log).with_context(|| format!("opening {}", log.display()))?;
@@ -88,7 +104,7 @@ fn replay(mut cfg: NodeConfig, model: Model, log: &Path, json: bool) -> Result<E
         t_us = r.stamped.t_us;
         pipeline.on_frame(&r.stamped, &mut |foot, tc| out.push((foot, tc)));
         for (foot, tc) in out.drain(..) {
-            print_class(t_us, foot, &tc, json);
+            print_class(t_us, foot, &tc, json, catalog);
         }
     }
     let c = pipeline.counters;
@@ -110,8 +126,14 @@ fn replay(mut cfg: NodeConfig, model: Model, log: &Path, json: bool) -> Result<E
     Ok(ExitCode::SUCCESS)
 }
 
-fn print_class(t_us: u64, foot: u8, tc: &TerrainClass, json: bool) {
-    let name = messages::terrain_name(tc.terrain).unwrap_or("unknown");
+fn print_class(
+    t_us: u64,
+    foot: u8,
+    tc: &TerrainClass,
+    json: bool,
+    catalog: &protocol::TerrainCatalog,
+) {
+    let name = catalog.describe(tc.terrain);
     if json {
         println!(
             "{}",
@@ -167,6 +189,8 @@ pub fn live(
     source: BusSource,
     signals: Signals,
 ) -> Result<Arc<Shared>> {
+    let catalog = cfg.catalog().map_err(anyhow::Error::msg)?;
+    model.check_catalog(&catalog)?;
     let shared = Arc::new(Shared::default());
     shared.model_id.store(model.id(), Ordering::Relaxed);
     // About 0.4 s of one foot's FD tactile stream: room for the pipeline to fall briefly behind.
@@ -195,7 +219,7 @@ pub fn live(
         let (sig, sh, path) = (signals.clone(), shared.clone(), model_path.to_path_buf());
         std::thread::Builder::new()
             .name("pipeline".into())
-            .spawn(move || pipeline_loop(cfg, model, &path, &sig, &sh, rx_rx, out_tx))?
+            .spawn(move || pipeline_loop(cfg, (model, &catalog), &path, &sig, &sh, rx_rx, out_tx))?
     };
     let send = {
         let (src, sig, sh) = (source, signals.clone(), shared.clone());
@@ -256,7 +280,7 @@ fn receive_loop(source: &BusSource, sig: &Signals, sh: &Shared, to_pipeline: Sen
 
 fn pipeline_loop(
     cfg: NodeConfig,
-    model: Model,
+    (model, catalog): (Model, &protocol::TerrainCatalog),
     model_path: &Path,
     sig: &Signals,
     sh: &Shared,
@@ -270,7 +294,13 @@ fn pipeline_loop(
     let mut last_counters = pipeline.counters;
     loop {
         if sig.take_reload() {
-            match Model::load(model_path) {
+            let loaded = Model::load(model_path)
+                .map_err(anyhow::Error::from)
+                .and_then(|m| {
+                    m.check_catalog(catalog)?;
+                    Ok(m)
+                });
+            match loaded {
                 Ok(m) => {
                     let id = m.id();
                     pipeline.set_model(Some(m));

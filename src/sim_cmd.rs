@@ -53,6 +53,9 @@ pub struct SimArgs {
     pub report: Option<PathBuf>,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Track terrains and reported names come from this catalog.
+    #[command(flatten)]
+    pub terrains: crate::cli::TerrainsArg,
 }
 
 #[derive(Clone, Debug, serde::Serialize)]
@@ -70,13 +73,17 @@ pub struct StepRecord {
     pub speed_m_s: f64,
 }
 
-/// The `--track` file, or the default track (wood, grass, clay, carpet quarters).
-pub fn load_track(path: Option<&std::path::Path>) -> Result<Track> {
+/// The `--track` file (its terrains named in `catalog`), or the default track (wood, grass,
+/// clay, carpet quarters).
+pub fn load_track(
+    path: Option<&std::path::Path>,
+    catalog: &protocol::TerrainCatalog,
+) -> Result<Track> {
     match path {
         Some(p) => {
             let text = std::fs::read_to_string(p)
                 .with_context(|| format!("reading --track {}", p.display()))?;
-            Track::from_toml(&text, &p.display().to_string()).map_err(anyhow::Error::msg)
+            Track::from_toml(&text, &p.display().to_string(), catalog).map_err(anyhow::Error::msg)
         }
         None => Ok(Track::default()),
     }
@@ -101,7 +108,7 @@ pub struct SimReport {
 
 pub fn run(a: SimArgs) -> Result<ExitCode> {
     let signals = Signals::install()?;
-    let track = load_track(a.track.as_deref())?;
+    let track = load_track(a.track.as_deref(), &a.terrains.catalog()?)?;
     let r = run_on(&a, track, BusSource::Iface(a.iface.clone()), &signals)?;
     let n = r.steps.len();
     let correct = r.steps.iter().filter(|s| s.truth == s.classified).count();
@@ -156,6 +163,7 @@ pub fn run_on(
         ..Default::default()
     };
     let ids = cfg.ids.clone();
+    let catalog = a.terrains.catalog()?;
     let mut robot = SimRobot::new(cfg, a.seed);
     let start = Instant::now();
     let mut records: Vec<StepRecord> = Vec::new();
@@ -226,9 +234,7 @@ pub fn run_on(
                     foot,
                     step: tc.step,
                     truth: truth.to_string(),
-                    classified: messages::terrain_name(tc.terrain)
-                        .unwrap_or("unknown")
-                        .to_string(),
+                    classified: catalog.describe(tc.terrain),
                     confidence_pct: tc.confidence_pct,
                     damage_pct: tc.damage_pct,
                     gait: robot.gait_in_effect(foot).unwrap_or(0),

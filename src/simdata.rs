@@ -4,8 +4,22 @@
 use node::classifier::dataset::Dataset;
 use node::classifier::train::Labelled;
 use node::classifier::{ClassInfo, PressureImage};
+use protocol::terrain::{Terrain, TerrainCatalog};
 use sim::dataset::Sample;
-use sim::terrain::Terrain;
+
+/// A dataset's class folder whose name is no terrain of the catalog.
+#[derive(Debug, thiserror::Error)]
+#[error(
+    "class folder {folder}: `{name}` is not a terrain in the catalog; add it to a terrains file \
+     ([[terrain]] id = N, name = \"{name}\", with N from 12 to 254 and unused) and pass \
+     --terrains FILE, or rename the folder after a known terrain"
+)]
+pub struct NotInCatalog {
+    /// The folder.
+    pub folder: String,
+    /// Its name.
+    pub name: String,
+}
 
 /// Images, each one's class (an index into `classes`), and the classes in the order of the
 /// terrains given: the name and the terrain id the model puts on the bus.
@@ -39,24 +53,29 @@ impl TrainingSet {
         }
     }
 
-    /// A user's dataset (`DIR/<class>/<images>`), with terrain ids as `presrs train` gives
-    /// them: the protocol's id for a known terrain name, 100 + the class index otherwise.
-    pub fn from_dataset(ds: Dataset) -> Self {
+    /// A user's dataset (`DIR/<class>/<images>`): every class folder must be named after a
+    /// terrain in `catalog`, whose id the model then sends; no id is ever made up.
+    pub fn from_dataset(ds: Dataset, catalog: &TerrainCatalog) -> Result<Self, NotInCatalog> {
         let classes = ds
             .classes
             .iter()
-            .enumerate()
-            .map(|(i, n)| ClassInfo {
-                name: n.clone(),
-                terrain_id: protocol::messages::terrain_id(n).unwrap_or(100 + i as u8),
+            .map(|n| match catalog.by_name(n).filter(|t| !t.is_unknown()) {
+                Some(t) => Ok(ClassInfo {
+                    name: t.name().to_string(),
+                    terrain_id: t.id(),
+                }),
+                None => Err(NotInCatalog {
+                    folder: ds.root.join(n).display().to_string(),
+                    name: n.clone(),
+                }),
             })
-            .collect();
+            .collect::<Result<_, _>>()?;
         let (images, labels) = ds.samples.into_iter().map(|s| (s.image, s.class)).unzip();
-        Self {
+        Ok(Self {
             classes,
             images,
             labels,
-        }
+        })
     }
 
     /// The images with their classes, as `node::classifier::train::train` takes them.

@@ -12,7 +12,6 @@ use node::{NodeConfig, StancePipeline};
 use presrs::simdata::TrainingSet;
 use protocol::Stamped;
 use sim::runner::{SimConfig, SimRobot};
-use sim::terrain::Terrain;
 
 fn small_model(dir: &std::path::Path) -> std::path::PathBuf {
     let samples = sim::dataset::generate(&sim::dataset::Options {
@@ -23,7 +22,7 @@ fn small_model(dir: &std::path::Path) -> std::path::PathBuf {
         sensor: sim::DEFAULT_SENSOR,
         seed: 4,
     });
-    let set = TrainingSet::from_samples(samples, &Terrain::DYNAMIC);
+    let set = TrainingSet::from_samples(samples, &sim::dataset::Kind::Dynamic.terrains());
     let opts = TrainOptions {
         crop: Crop {
             top: 0,

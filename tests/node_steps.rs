@@ -55,7 +55,10 @@ fn the_decision_comes_with_the_sampled_frame_not_a_frame_later() {
         sensor: sim::DEFAULT_SENSOR,
         seed: 3,
     });
-    let set = presrs::simdata::TrainingSet::from_samples(samples, &sim::terrain::Terrain::DYNAMIC);
+    let set = presrs::simdata::TrainingSet::from_samples(
+        samples,
+        &sim::dataset::Kind::Dynamic.terrains(),
+    );
     let opts = node::classifier::train::TrainOptions {
         per_class: 20,
         train: 13,
@@ -99,7 +102,10 @@ fn g2_model(seed: u64) -> node::classifier::Model {
         sensor: sim::DEFAULT_SENSOR,
         seed,
     });
-    let set = presrs::simdata::TrainingSet::from_samples(samples, &sim::terrain::Terrain::DYNAMIC);
+    let set = presrs::simdata::TrainingSet::from_samples(
+        samples,
+        &sim::dataset::Kind::Dynamic.terrains(),
+    );
     let opts = node::classifier::train::TrainOptions {
         per_class: 30,
         train: 20,
@@ -139,11 +145,8 @@ fn damaged_run(
     let correct = decided
         .iter()
         .filter(|tc| {
-            let truth = robot
-                .steps
-                .get(tc.step as usize - 1)
-                .map(|s| s.terrain.name());
-            truth.and_then(protocol::messages::terrain_id) == Some(tc.terrain)
+            let truth = robot.steps.get(tc.step as usize - 1).map(|s| s.terrain);
+            truth.map(|t| t.id()) == Some(tc.terrain)
         })
         .count();
     (correct, decided.len(), p.counters)

@@ -12,9 +12,8 @@
 
 use std::collections::BTreeMap;
 
-use protocol::messages::{
-    self, GaitReason, GaitStatus, LegCommand, Message, Phase, TERRAIN_UNKNOWN,
-};
+use protocol::messages::{GaitReason, GaitStatus, LegCommand, Message, Phase, TERRAIN_UNKNOWN};
+use protocol::terrain::TerrainCatalog;
 use serde::{Deserialize, Serialize};
 
 use crate::gait::Gait;
@@ -24,8 +23,11 @@ use crate::laws;
 #[serde(deny_unknown_fields, default)]
 pub struct ControllerConfig {
     pub gaits: Vec<Gait>,
-    /// Terrain name (the bus table) -> gait id.
+    /// Terrain name (the catalog's) -> gait id. A terrain not listed gets the safe gait.
     pub terrain_gaits: BTreeMap<String, u8>,
+    /// A terrains file adding a lab's terrains to the paper's (see `protocol::terrain`), for
+    /// `terrain_gaits` keys beyond the paper's twelve.
+    pub terrains: Option<std::path::PathBuf>,
     pub initial_gait: u8,
     /// Gait for unknown terrain and a lost node.
     pub safe_gait: u8,
@@ -65,6 +67,7 @@ impl Default for ControllerConfig {
         Self {
             gaits: Gait::paper_gaits(),
             terrain_gaits,
+            terrains: None,
             initial_gait: 2,
             safe_gait: 1,
             switch_after_steps: 2,
@@ -80,8 +83,14 @@ impl Default for ControllerConfig {
 }
 
 impl ControllerConfig {
-    /// Checks every field; the error names the field and the allowed range.
-    pub fn validate(&self) -> Result<(), String> {
+    /// The catalog the `terrains` key names (the paper's twelve without it).
+    pub fn catalog(&self) -> Result<TerrainCatalog, String> {
+        TerrainCatalog::load(self.terrains.as_deref()).map_err(|e| format!("terrains: {e}"))
+    }
+
+    /// Checks every field; the error names the field and the allowed range. `terrain_gaits`
+    /// keys must be names in `catalog`.
+    pub fn validate(&self, catalog: &TerrainCatalog) -> Result<(), String> {
         if self.gaits.is_empty() {
             return Err("gaits: at least one gait is needed".into());
         }
@@ -99,8 +108,11 @@ impl ControllerConfig {
             }
         }
         for (t, g) in &self.terrain_gaits {
-            if messages::terrain_id(t).is_none() {
-                return Err(format!("terrain_gaits.{t}: unknown terrain name"));
+            if catalog.by_name(t).is_none_or(|t| t.is_unknown()) {
+                return Err(format!(
+                    "terrain_gaits.{t}: `{t}` is not a terrain in the catalog; add it to a \
+                     terrains file ([[terrain]] id = N, name = \"{t}\") and set `terrains = \"FILE\"`"
+                ));
             }
             if !has(*g) {
                 return Err(format!("terrain_gaits.{t} = {g}: allowed gait ids {ids:?}"));
@@ -138,14 +150,16 @@ impl ControllerConfig {
         Ok(())
     }
 
-    /// Parses TOML or JSON (by the file's extension) and validates.
+    /// Parses TOML or JSON (by the file's extension) and validates it against the catalog its
+    /// `terrains` key names.
     pub fn parse(text: &str, path: &str) -> Result<Self, String> {
         let c: Self = if path.ends_with(".json") {
             serde_json::from_str(text).map_err(|e| format!("{path}: {e}"))?
         } else {
             toml::from_str(text).map_err(|e| format!("{path}: {e}"))?
         };
-        c.validate().map_err(|e| format!("{path}: {e}"))?;
+        let catalog = c.catalog().map_err(|e| format!("{path}: {e}"))?;
+        c.validate(&catalog).map_err(|e| format!("{path}: {e}"))?;
         Ok(c)
     }
 }
@@ -161,6 +175,8 @@ pub const MAX_ANGLE_FROM_DESIRED: f64 = 0.35;
 /// The controller.
 pub struct Controller {
     cfg: ControllerConfig,
+    /// `terrain_gaits` by terrain id (the catalog's), resolved once.
+    gait_of_terrain: BTreeMap<u8, u8>,
     gait: Gait,
     reason: GaitReason,
     terrain: u8,
@@ -186,7 +202,14 @@ pub struct Controller {
 }
 
 impl Controller {
-    pub fn new(cfg: ControllerConfig) -> Self {
+    /// A controller for a validated config; `catalog` maps the TerrainClass ids it will hear
+    /// to the names of `terrain_gaits`.
+    pub fn new(cfg: ControllerConfig, catalog: &TerrainCatalog) -> Self {
+        let gait_of_terrain = cfg
+            .terrain_gaits
+            .iter()
+            .filter_map(|(name, &g)| Some((catalog.by_name(name)?.id(), g)))
+            .collect();
         let gait = cfg
             .gaits
             .iter()
@@ -213,6 +236,7 @@ impl Controller {
             seq: 0,
             switches: 0,
             gait_resets: 0,
+            gait_of_terrain,
             cfg,
         }
     }
@@ -334,11 +358,9 @@ impl Controller {
                         self.candidate = (tc.terrain, 1);
                     }
                     if self.candidate.1 >= self.cfg.switch_after_steps {
-                        let name = messages::terrain_name(tc.terrain).unwrap_or("unknown");
                         let gid = self
-                            .cfg
-                            .terrain_gaits
-                            .get(name)
+                            .gait_of_terrain
+                            .get(&tc.terrain)
                             .copied()
                             .unwrap_or(self.cfg.safe_gait);
                         self.request(gid, GaitReason::Terrain, tc.terrain);
@@ -449,11 +471,11 @@ mod tests {
 
     #[test]
     fn switches_in_flight_after_two_confident_steps() {
-        let mut c = Controller::new(ControllerConfig::default());
+        let mut c = Controller::new(ControllerConfig::default(), &TerrainCatalog::paper());
         let mut out = Vec::new();
         let mut t = 0;
         let hb = Message::NodeStatus(NodeStatus::default());
-        let wood = messages::terrain_id("wood").unwrap_or(8);
+        let wood = protocol::Terrain::WOOD.id();
         for step in 0..3 {
             t += 100_000;
             let before = c.gait().id;
@@ -472,18 +494,43 @@ mod tests {
         assert_eq!(c.switches, 1);
         assert_eq!(c.reason(), GaitReason::Terrain);
         // A low-confidence step neither counts nor resets the gait.
-        c.on_message(
-            0,
-            &tc(messages::terrain_id("clay").unwrap_or(10), 10.0),
-            t,
-            &mut |m| out.push(m),
-        );
+        c.on_message(0, &tc(protocol::Terrain::CLAY.id(), 10.0), t, &mut |m| {
+            out.push(m)
+        });
         assert_eq!(c.gait().id, 3);
     }
 
     #[test]
+    fn a_lab_terrain_from_the_catalog_gets_its_gait() {
+        let cat =
+            TerrainCatalog::from_toml("[[terrain]]\nid = 20\nname = \"asphalt\"\n", "t").unwrap();
+        let mut cfg = ControllerConfig::default();
+        cfg.terrain_gaits.insert("asphalt".into(), 3);
+        let e = cfg.validate(&TerrainCatalog::paper()).unwrap_err();
+        assert!(
+            e.contains("terrain_gaits.asphalt") && e.contains("terrains file"),
+            "{e}"
+        );
+        cfg.validate(&cat).unwrap();
+        let mut c = Controller::new(cfg, &cat);
+        let mut out = Vec::new();
+        let hb = Message::NodeStatus(NodeStatus::default());
+        let mut t = 0;
+        for _ in 0..2 {
+            t += 100_000;
+            c.on_message(0, &hb, t, &mut |m| out.push(m));
+            c.on_message(0, &contact(true, t), t, &mut |m| out.push(m));
+            c.on_message(0, &tc(20, 90.0), t + 70_000, &mut |m| out.push(m));
+            t += 140_000;
+            c.on_message(0, &contact(false, t), t, &mut |m| out.push(m));
+        }
+        assert_eq!(c.gait().id, 3);
+        assert_eq!(c.reason(), GaitReason::Terrain);
+    }
+
+    #[test]
     fn lost_heartbeat_goes_to_the_safe_gait() {
-        let mut c = Controller::new(ControllerConfig::default());
+        let mut c = Controller::new(ControllerConfig::default(), &TerrainCatalog::paper());
         let mut out = Vec::new();
         c.on_message(
             0,
@@ -503,7 +550,7 @@ mod tests {
 
     #[test]
     fn stance_commands_follow_eq4_and_bounce_is_ignored() {
-        let mut c = Controller::new(ControllerConfig::default());
+        let mut c = Controller::new(ControllerConfig::default(), &TerrainCatalog::paper());
         let mut out = Vec::new();
         c.on_message(0, &contact(true, 1_000_000), 1_000_000, &mut |m| {
             out.push(m)
@@ -538,7 +585,7 @@ mod tests {
             heartbeat_timeout_ms: 60_000,
             ..Default::default()
         };
-        let mut c = Controller::new(cfg);
+        let mut c = Controller::new(cfg, &TerrainCatalog::paper());
         let mut out = Vec::new();
         // A touchdown at foot time 5.000 s and its liftoff at 5.150 s, both arriving 2 ms
         // apart at our 9.000 s (the leg's frames were held up): not a bounce.
@@ -582,7 +629,7 @@ mod tests {
         // 200 ms on.
         assert!((stance_len(&mut c, 9_261_000) - law(0.08)).abs() < 1e-9);
         // The foot's 32-bit clock wraps: an edge just after the wrap is still 100 ms later.
-        let mut c = Controller::new(ControllerConfig::default());
+        let mut c = Controller::new(ControllerConfig::default(), &TerrainCatalog::paper());
         let before = u32::MAX as u64 - 50_000;
         c.on_message(0, &contact(true, before), 0, &mut |m| out.push(m));
         c.on_message(0, &contact(false, before + 100_000), 100_000, &mut |m| {
@@ -593,7 +640,7 @@ mod tests {
 
     #[test]
     fn a_fall_restarts_the_touchdown_law_from_beta_des() {
-        let mut c = Controller::new(ControllerConfig::default());
+        let mut c = Controller::new(ControllerConfig::default(), &TerrainCatalog::paper());
         let mut out = Vec::new();
         let ls = |angle: f64, foot_us: u32| {
             Message::LegState(protocol::messages::LegState {

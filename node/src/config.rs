@@ -63,6 +63,9 @@ pub struct NodeConfig {
     pub status_hz: f64,
     /// Incomplete tactile images are dropped after this long, µs.
     pub reassembly_timeout_us: u64,
+    /// A terrains file adding a lab's terrains to the paper's (`protocol::terrain`): the model's
+    /// classes are checked against this catalog at load.
+    pub terrains: Option<std::path::PathBuf>,
     pub ids: IdConfig,
 }
 
@@ -80,6 +83,7 @@ impl Default for NodeConfig {
             low_confidence: 0.6,
             status_hz: 10.0,
             reassembly_timeout_us: 50_000,
+            terrains: None,
             ids: IdConfig::default(),
         }
     }
@@ -91,6 +95,12 @@ impl NodeConfig {
         let c: Self = toml::from_str(text).map_err(|e| format!("{path}: {e}"))?;
         c.validate().map_err(|e| format!("{path}: {e}"))?;
         Ok(c)
+    }
+
+    /// The catalog the `terrains` key names (the paper's twelve without it).
+    pub fn catalog(&self) -> Result<protocol::TerrainCatalog, String> {
+        protocol::TerrainCatalog::load(self.terrains.as_deref())
+            .map_err(|e| format!("terrains: {e}"))
     }
 
     pub fn validate(&self) -> Result<(), String> {

@@ -42,7 +42,7 @@ fn classes() -> Vec<ClassInfo> {
         .iter()
         .map(|n| ClassInfo {
             name: n.to_string(),
-            terrain_id: protocol::messages::terrain_id(n).unwrap(),
+            terrain_id: protocol::TerrainCatalog::paper().by_name(n).unwrap().id(),
         })
         .collect()
 }

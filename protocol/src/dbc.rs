@@ -11,9 +11,10 @@ use std::fmt::Write;
 
 use crate::ids::{IdConfig, MAX_FEET, MessageKind};
 use crate::messages::{
-    ANGLE_SCALE_RAD, LENGTH_SCALE_M, OMEGA_SCALE, PERCENT_SCALE, TERRAIN_UNKNOWN, TERRAINS,
+    ANGLE_SCALE_RAD, LENGTH_SCALE_M, OMEGA_SCALE, PERCENT_SCALE, TERRAIN_UNKNOWN,
 };
 use crate::tactile::Variant;
+use crate::terrain::TerrainCatalog;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Mux {
@@ -215,8 +216,8 @@ fn fmt_num(v: f64) -> String {
     }
 }
 
-/// The DBC text for an identifier map.
-pub fn generate(ids: &IdConfig) -> String {
+/// The DBC text for an identifier map, with the catalog's terrains in the TerrainId value table.
+pub fn generate(ids: &IdConfig, terrains: &TerrainCatalog) -> String {
     let mut o = String::new();
     let _ = writeln!(
         o,
@@ -229,13 +230,13 @@ pub fn generate(ids: &IdConfig) -> String {
     );
     let _ = writeln!(o, "BS_:\n");
     let _ = writeln!(o, "BU_: Controller Leg Foot Node\n");
-    let mut terrains = String::new();
-    for (id, name) in TERRAINS {
-        let _ = write!(terrains, " {id} \"{name}\"");
+    let mut table = String::new();
+    for t in terrains.iter() {
+        let _ = write!(table, " {} \"{}\"", t.id(), t.name());
     }
-    let _ = write!(terrains, " {TERRAIN_UNKNOWN} \"unknown\"");
+    let _ = write!(table, " {TERRAIN_UNKNOWN} \"unknown\"");
     let tables: [(&str, String); 4] = [
-        ("Terrain", terrains.clone()),
+        ("Terrain", table.clone()),
         ("Phase", " 0 \"flight\" 1 \"stance\"".to_string()),
         (
             "NodeState",
@@ -343,7 +344,7 @@ mod tests {
     fn shipped_dbc_matches_generator() {
         let shipped = include_str!("../presrs.dbc");
         assert!(
-            shipped == generate(&IdConfig::default()),
+            shipped == generate(&IdConfig::default(), &TerrainCatalog::paper()),
             "protocol/presrs.dbc is stale: regenerate it with `cargo run -- dbc --out protocol/presrs.dbc`"
         );
     }
@@ -381,12 +382,27 @@ mod tests {
     }
 
     #[test]
+    fn a_terrains_file_names_its_terrains_in_the_value_table() {
+        let cat =
+            TerrainCatalog::from_toml("[[terrain]]\nid = 20\nname = \"asphalt\"\n", "t").unwrap();
+        let d = generate(&IdConfig::default(), &cat);
+        let table = d
+            .lines()
+            .find(|l| l.starts_with("VAL_TABLE_ Terrain"))
+            .unwrap_or_default();
+        assert!(
+            table.contains(" 11 \"grass\" 20 \"asphalt\" 255 \"unknown\""),
+            "{table}"
+        );
+    }
+
+    #[test]
     fn extended_ids_are_flagged() {
         let ids = IdConfig {
             extended: true,
             ..IdConfig::default()
         };
-        let d = generate(&ids);
+        let d = generate(&ids, &TerrainCatalog::paper());
         assert!(d.contains(&format!(
             "BO_ {} FootContact_F0: 8 Foot",
             0x100u32 | 0x8000_0000

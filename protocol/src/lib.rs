@@ -12,6 +12,7 @@
 //! - [`ids`]: the identifier map, relocatable per message, 11- or 29-bit;
 //! - [`messages`]: typed messages and their byte layouts;
 //! - [`tactile`]: segmentation and reassembly of pressure images;
+//! - [`terrain`]: the terrain type and the catalog of terrain ids (the paper's and a lab's own);
 //! - [`dbc`]: the DBC file for any CAN tool; [`candump`]: can-utils log files;
 //! - [`bus`]: SocketCAN and an in-process bus behind one trait; [`clock`]: time sources;
 //! - [`error`]: the error types.
@@ -36,8 +37,10 @@ pub mod frame;
 pub mod ids;
 pub mod messages;
 pub mod tactile;
+pub mod terrain;
 
 pub use error::{BusError, ConfigError, DecodeError};
 pub use frame::{CanFrame, Stamped};
 pub use ids::{IdConfig, MessageKind};
 pub use messages::Message;
+pub use terrain::{Terrain, TerrainCatalog};

@@ -10,39 +10,7 @@ use crate::frame::{CanFrame, make_id};
 use crate::ids::{IdConfig, MessageKind};
 
 /// Terrain id meaning "not classified" (no sample, or below the unknown threshold).
-pub const TERRAIN_UNKNOWN: u8 = 0xFF;
-
-/// The terrain ids used on the bus, with their names (the DBC's value table).
-pub const TERRAINS: [(u8, &str); 12] = [
-    (0, "aluminum"),
-    (1, "sand"),
-    (2, "pine_needles"),
-    (3, "gravel"),
-    (4, "sandpaper_220"),
-    (5, "sandpaper_150"),
-    (6, "sandpaper_100"),
-    (7, "sandpaper_60"),
-    (8, "wood"),
-    (9, "carpet"),
-    (10, "clay"),
-    (11, "grass"),
-];
-
-/// The bus name of a terrain id (`"unknown"` for 0xFF, `None` for an id nobody assigned).
-pub fn terrain_name(id: u8) -> Option<&'static str> {
-    if id == TERRAIN_UNKNOWN {
-        return Some("unknown");
-    }
-    TERRAINS.iter().find(|(i, _)| *i == id).map(|(_, n)| *n)
-}
-
-/// The terrain id of a bus name.
-pub fn terrain_id(name: &str) -> Option<u8> {
-    if name == "unknown" {
-        return Some(TERRAIN_UNKNOWN);
-    }
-    TERRAINS.iter().find(|(_, n)| *n == name).map(|(i, _)| *i)
-}
+pub const TERRAIN_UNKNOWN: u8 = crate::terrain::UNKNOWN_ID;
 
 fn sat_u(v: f64, max: f64) -> f64 {
     if v.is_nan() {
@@ -150,7 +118,7 @@ pub mod flags {
 pub struct TerrainClass {
     /// Step counter of this foot (wrapping).
     pub step: u16,
-    /// Terrain id ([`TERRAINS`]), [`TERRAIN_UNKNOWN`] when not classified.
+    /// Terrain id (a [`crate::terrain::TerrainCatalog`]'s), [`TERRAIN_UNKNOWN`] when not classified.
     pub terrain: u8,
     /// Posterior of the chosen class, 0..=100 %.
     pub confidence_pct: f64,
@@ -605,13 +573,5 @@ mod tests {
         let st =
             CanFrame::classic(make_id(0x280, false).unwrap(), &[0, 9, 0, 0, 0, 0, 0, 0]).unwrap();
         assert!(decode(&st, &ids).is_err());
-    }
-
-    #[test]
-    fn terrain_names() {
-        assert_eq!(terrain_name(11), Some("grass"));
-        assert_eq!(terrain_id("wood"), Some(8));
-        assert_eq!(terrain_name(0xFF), Some("unknown"));
-        assert_eq!(terrain_name(200), None);
     }
 }

@@ -9,7 +9,7 @@ use crate::faults::FaultParams;
 use crate::fixed_gait::FixedGait;
 use crate::hopper::{Event, Hopper, HopperParams};
 use crate::skin::{Footprint, Skin, SkinParams};
-use crate::terrain::Terrain;
+use crate::terrain::{Physics, Terrain};
 
 /// The static load of the test platform, N (section 4.1).
 pub const STATIC_LOAD_N: f64 = 10.0;
@@ -27,16 +27,21 @@ pub enum Kind {
 }
 
 impl Kind {
-    pub fn terrains(self) -> &'static [Terrain] {
+    pub fn physics(self) -> &'static [Physics] {
         match self {
-            Kind::Static => &Terrain::STATIC,
-            Kind::Sandpaper => &Terrain::SANDPAPER,
-            Kind::Dynamic => &Terrain::DYNAMIC,
+            Kind::Static => &Physics::STATIC,
+            Kind::Sandpaper => &Physics::SANDPAPER,
+            Kind::Dynamic => &Physics::DYNAMIC,
         }
     }
 
+    /// The set's terrains, in the paper's order.
+    pub fn terrains(self) -> Vec<Terrain> {
+        self.physics().iter().map(|p| p.terrain()).collect()
+    }
+
     /// The paper's sample count for a terrain (Table 4 for the dynamic set).
-    pub fn default_count(self, terrain: Terrain, gait: u8) -> usize {
+    pub fn default_count(self, terrain: Physics, gait: u8) -> usize {
         match self {
             Kind::Static => 100,
             Kind::Sandpaper => 50,
@@ -46,7 +51,7 @@ impl Kind {
                     3 => [71, 76, 102, 86],
                     _ => [60, 65, 113, 85],
                 };
-                let i = Terrain::DYNAMIC
+                let i = Physics::DYNAMIC
                     .iter()
                     .position(|t| *t == terrain)
                     .unwrap_or(0);
@@ -94,7 +99,7 @@ pub fn generate(opts: &Options) -> Vec<Sample> {
         ..Default::default()
     };
     let mut skin = Skin::of_sensor(opts.sensor, SkinParams::default(), faults);
-    for (ti, &terrain) in opts.kind.terrains().iter().enumerate() {
+    for (ti, &terrain) in opts.kind.physics().iter().enumerate() {
         // One stream per terrain, so a class's samples do not depend on the others' counts.
         let mut rng = ChaCha8Rng::seed_from_u64(opts.seed ^ ((ti as u64 + 1) << 32));
         let n = opts
@@ -121,7 +126,7 @@ pub fn generate(opts: &Options) -> Vec<Sample> {
 /// One static press of a fresh patch of `terrain`.
 pub fn press(
     skin: &mut Skin,
-    terrain: Terrain,
+    terrain: Physics,
     load_n: f64,
     fp: Footprint,
     rng: &mut impl Rng,
@@ -131,7 +136,7 @@ pub fn press(
     let mut pixels = vec![0; rows * cols];
     skin.image(&contact, load_n, rng, &mut pixels);
     Sample {
-        terrain,
+        terrain: terrain.terrain(),
         rows,
         cols,
         pixels,
@@ -145,7 +150,7 @@ pub fn press(
 /// nearest 70 ms after touchdown. The hopper runs 20 settling steps first.
 pub fn stances(
     skin: &mut Skin,
-    terrain: Terrain,
+    terrain: Physics,
     gait: &Gait,
     n: usize,
     rng: &mut impl Rng,
@@ -177,7 +182,7 @@ pub fn stances(
                         skin.image(&contact, load, rng, &mut pixels);
                         let speed = last_td.map_or(0.0, |(t0, x)| (x0 - x) / (t - t0));
                         out.push(Sample {
-                            terrain,
+                            terrain: terrain.terrain(),
                             rows,
                             cols,
                             pixels,

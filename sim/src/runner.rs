@@ -12,29 +12,69 @@ use protocol::tactile::{ImageRef, Segmenter, Variant};
 use protocol::{CanFrame, IdConfig};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use serde::{Deserialize, Serialize};
+use serde::Deserialize;
 
 use crate::faults::FaultParams;
 use crate::fixed_gait::FixedGait;
 use crate::hopper::{Event, Hopper, HopperParams, LegCommands};
 use crate::skin::{Contact, FRAME_PERIOD_US, Footprint, Skin, SkinParams};
-use crate::terrain::Terrain;
+use crate::terrain::{CannotSimulate, Physics, Terrain};
+use protocol::terrain::TerrainCatalog;
 
-/// One stretch of the track.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+/// One stretch of the track: a catalog terrain the simulator has a model for.
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Segment {
-    pub terrain: Terrain,
+    terrain: Terrain,
+    physics: Physics,
     /// Length along the track, m.
     pub length_m: f64,
 }
 
+impl Segment {
+    /// A stretch of `terrain`; an error when the simulator cannot simulate it.
+    pub fn new(terrain: Terrain, length_m: f64) -> Result<Self, CannotSimulate> {
+        Ok(Self {
+            terrain,
+            physics: Physics::of(terrain)?,
+            length_m,
+        })
+    }
+
+    fn of(physics: Physics, length_m: f64) -> Self {
+        Self {
+            terrain: physics.terrain(),
+            physics,
+            length_m,
+        }
+    }
+
+    /// The terrain of this stretch.
+    pub fn terrain(&self) -> Terrain {
+        self.terrain
+    }
+}
+
 /// The paper's circular track (2.8 m diameter) made of terrain segments.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Track {
-    #[serde(default = "default_diameter")]
     pub diameter_m: f64,
     pub segments: Vec<Segment>,
+}
+
+/// A track file: `diameter_m` and `[[segments]]` with `terrain` (a catalog name) and `length_m`.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TrackFile {
+    #[serde(default = "default_diameter")]
+    diameter_m: f64,
+    segments: Vec<SegmentFile>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SegmentFile {
+    terrain: String,
+    length_m: f64,
 }
 
 fn default_diameter() -> f64 {
@@ -48,61 +88,81 @@ impl Default for Track {
         Self {
             diameter_m: 2.8,
             segments: [
-                Terrain::Wood,
-                Terrain::Grass,
-                Terrain::Clay,
-                Terrain::Carpet,
+                Physics::Wood,
+                Physics::Grass,
+                Physics::Clay,
+                Physics::Carpet,
             ]
             .into_iter()
-            .map(|terrain| Segment {
-                terrain,
-                length_m: q,
-            })
+            .map(|p| Segment::of(p, q))
             .collect(),
         }
     }
 }
 
 impl Track {
-    /// Parses a TOML track file and checks it.
-    pub fn from_toml(text: &str, path: &str) -> Result<Self, String> {
-        let t: Self = toml::from_str(text).map_err(|e| format!("{path}: {e}"))?;
+    /// Parses a TOML track file (`path` names it in errors) and checks it: every terrain a name
+    /// in `catalog` that the simulator can simulate, every length positive.
+    pub fn from_toml(text: &str, path: &str, catalog: &TerrainCatalog) -> Result<Self, String> {
+        let t: TrackFile = toml::from_str(text).map_err(|e| format!("{path}: {e}"))?;
         if t.segments.is_empty() {
             return Err(format!("{path}: segments: at least one segment is needed"));
         }
-        if let Some((i, s)) = t
-            .segments
-            .iter()
-            .enumerate()
-            .find(|(_, s)| s.length_m.is_nan() || s.length_m <= 0.0)
-        {
-            return Err(format!(
-                "{path}: segments[{i}].length_m = {}: must be > 0",
-                s.length_m
-            ));
+        let mut segments = Vec::with_capacity(t.segments.len());
+        for (i, s) in t.segments.iter().enumerate() {
+            if s.length_m.is_nan() || s.length_m <= 0.0 {
+                return Err(format!(
+                    "{path}: segments[{i}].length_m = {}: must be > 0",
+                    s.length_m
+                ));
+            }
+            let terrain = catalog
+                .by_name(&s.terrain)
+                .filter(|t| !t.is_unknown())
+                .ok_or_else(|| {
+                    format!(
+                        "{path}: segments[{i}].terrain = \"{}\": not a terrain in the catalog \
+                         (a terrains file adds one: --terrains FILE)",
+                        s.terrain
+                    )
+                })?;
+            segments.push(
+                Segment::new(terrain, s.length_m)
+                    .map_err(|e| format!("{path}: segments[{i}]: {e}"))?,
+            );
         }
-        Ok(t)
+        Ok(Self {
+            diameter_m: t.diameter_m,
+            segments,
+        })
     }
 
     pub fn length(&self) -> f64 {
         self.segments.iter().map(|s| s.length_m).sum()
     }
 
-    /// The terrain at distance `x` m along the track (wrapping).
-    pub fn terrain_at(&self, x: f64) -> Terrain {
+    /// The stretch at distance `x` m along the track (wrapping).
+    pub fn segment_at(&self, x: f64) -> Segment {
         let mut x = x.rem_euclid(self.length().max(1e-9));
         for s in &self.segments {
             if x < s.length_m {
-                return s.terrain;
+                return *s;
             }
             x -= s.length_m;
         }
-        self.segments.last().map_or(Terrain::Wood, |s| s.terrain)
+        self.segments
+            .last()
+            .copied()
+            .unwrap_or(Segment::of(Physics::Wood, 1.0))
+    }
+
+    /// The terrain at distance `x` m along the track (wrapping).
+    pub fn terrain_at(&self, x: f64) -> Terrain {
+        self.segment_at(x).terrain
     }
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct SimConfig {
     pub track: Track,
     /// The gait held without a controller (G1..G3).
@@ -225,7 +285,7 @@ impl SimRobot {
                     },
                     skin,
                     contact: None,
-                    stance_terrain: Terrain::Wood,
+                    stance_terrain: Terrain::WOOD,
                     pixels: vec![0; params.rows * params.cols],
                     contact_seq: 0,
                     image_seq: 0,
@@ -304,16 +364,20 @@ impl SimRobot {
             if dt <= 1e-9 {
                 break;
             }
-            let ground = self.cfg.track.terrain_at(leg.hopper.x).ground();
+            let ground = self.cfg.track.segment_at(leg.hopper.x).physics.ground();
             let ev = leg.hopper.advance(dt, ground, &mut leg.cmd);
             let ev_us = (leg.hopper.t * 1e6) as u64;
             match ev {
                 Some(Event::Touchdown { beta, .. }) => {
                     leg.cmd.fixed.on_touchdown(beta);
-                    let terrain = self.cfg.track.terrain_at(leg.hopper.x);
+                    let segment = self.cfg.track.segment_at(leg.hopper.x);
+                    let terrain = segment.terrain;
                     leg.stance_terrain = terrain;
-                    leg.contact =
-                        Some(leg.skin.contact_on(terrain, Footprint::FOOT, &mut self.rng));
+                    leg.contact = Some(leg.skin.contact_on(
+                        segment.physics,
+                        Footprint::FOOT,
+                        &mut self.rng,
+                    ));
                     leg.skin.faults.on_step(&mut self.rng);
                     bounce(&mut leg.edges, ev_us, true, &mut self.rng);
                     let speed = self.last_td[foot].map_or(leg.hopper.vx, |(t0, x0)| {
@@ -448,5 +512,55 @@ fn bounce(edges: &mut Vec<(u64, bool)>, t: u64, state: bool, rng: &mut impl Rng)
         edges.push((at, !state));
         at += rng.random_range(100..400);
         edges.push((at, state));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_track_names_catalog_terrains_and_refuses_what_it_cannot_simulate() {
+        let paper = TerrainCatalog::paper();
+        let t = Track::from_toml(
+            "[[segments]]\nterrain = \"sand\"\nlength_m = 2.0\n[[segments]]\nterrain = \"wood\"\nlength_m = 1.0\n",
+            "t.toml",
+            &paper,
+        )
+        .unwrap();
+        assert_eq!(t.terrain_at(0.5), Terrain::SAND);
+        assert_eq!(t.terrain_at(2.5), Terrain::WOOD);
+        assert_eq!(t.terrain_at(3.5), Terrain::SAND, "wraps");
+        assert_eq!(t.segment_at(0.5).physics, Physics::Sand);
+
+        let text = "[[segments]]\nterrain = \"asphalt\"\nlength_m = 1.0\n";
+        let e = Track::from_toml(text, "t.toml", &paper).unwrap_err();
+        assert!(e.contains("asphalt") && e.contains("--terrains"), "{e}");
+        let lab =
+            TerrainCatalog::from_toml("[[terrain]]\nid = 20\nname = \"asphalt\"\n", "x").unwrap();
+        let e = Track::from_toml(text, "t.toml", &lab).unwrap_err();
+        assert!(
+            e.contains("cannot simulate terrain `asphalt` (id 20)"),
+            "{e}"
+        );
+        let e = Track::from_toml(
+            "[[segments]]\nterrain = \"wood\"\nlength_m = 0\n",
+            "t",
+            &paper,
+        )
+        .unwrap_err();
+        assert!(e.contains("length_m"), "{e}");
+    }
+
+    #[test]
+    fn every_model_maps_to_its_own_catalog_terrain_by_name() {
+        for p in Physics::ALL {
+            assert_eq!(Physics::of(p.terrain()), Ok(p));
+        }
+        let ids: Vec<u8> = Physics::ALL.iter().map(|p| p.terrain().id()).collect();
+        let mut sorted = ids.clone();
+        sorted.sort();
+        sorted.dedup();
+        assert_eq!(sorted.len(), 12, "{ids:?}");
     }
 }

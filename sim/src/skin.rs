@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::faults::Faults;
 use crate::field::{Field, normal};
-use crate::terrain::{Surface, Terrain};
+use crate::terrain::{Physics, Surface};
 
 /// Weight of the rigid-punch rim concentration on the softest ground (see `Skin::contact`).
 const RIM_GAIN: f64 = 0.5;
@@ -210,15 +210,15 @@ impl Skin {
         )
     }
 
-    /// A fresh random patch of `terrain` under `footprint`: one static press or one stance.
+    /// A fresh random patch of a surface under `footprint`: one static press or one stance.
     pub fn contact_on(
         &mut self,
-        terrain: Terrain,
+        physics: Physics,
         footprint: Footprint,
         rng: &mut impl Rng,
     ) -> Contact {
         let (r, c, cell) = self.grid();
-        let surface = terrain.surface(r, c, cell, rng);
+        let surface = physics.surface(r, c, cell, rng);
         self.contact(&surface, footprint)
     }
 

@@ -3,23 +3,25 @@
 //!
 //! Every sample is a fresh random patch (stones, needles and particles placed anew), so no two
 //! samples are alike. The physical reasoning per surface is in the comments of
-//! [`Terrain::surface`]; how the skin turns a surface into pressure is in `skin.rs`.
+//! [`Physics::surface`]; how the skin turns a surface into pressure is in `skin.rs`.
 
 use std::f64::consts::PI;
-use std::fmt;
-use std::str::FromStr;
 
 use rand::Rng;
 use rand_distr::{Distribution, Poisson};
 use serde::{Deserialize, Serialize};
 
+pub use protocol::terrain::Terrain;
+
 use crate::field::{Field, normal};
 use crate::hopper::Ground;
 
-/// The surfaces of the paper's three experiments.
+/// The simulator's model of each surface of the paper's three experiments. A [`Terrain`]
+/// (the catalog's) picks its model by name ([`Physics::of`]); nothing depends on this enum's
+/// order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
-pub enum Terrain {
+pub enum Physics {
     Aluminum,
     Sand,
     PineNeedles,
@@ -34,6 +36,15 @@ pub enum Terrain {
     Grass,
 }
 
+/// A catalog terrain the simulator has no model for.
+#[derive(Debug, thiserror::Error, Clone, Copy, PartialEq, Eq)]
+#[error(
+    "the simulator cannot simulate terrain `{0}` (id {id}): it models the paper's twelve \
+     (aluminum, sand, pine_needles, gravel, sandpaper_220/150/100/60, wood, carpet, clay, grass); \
+     record this terrain on the robot instead (docs/deploy.md)", id = .0.id()
+)]
+pub struct CannotSimulate(pub Terrain);
+
 /// A terrain patch under the sensor.
 pub struct Surface {
     /// Height of the surface at the felt's scale (a millimetre and up), mm; higher touches first.
@@ -45,65 +56,94 @@ pub struct Surface {
     pub stiffness_kpa_mm: f64,
 }
 
-impl Terrain {
-    pub const ALL: [Terrain; 12] = [
-        Terrain::Aluminum,
-        Terrain::Sand,
-        Terrain::PineNeedles,
-        Terrain::Gravel,
-        Terrain::Sandpaper220,
-        Terrain::Sandpaper150,
-        Terrain::Sandpaper100,
-        Terrain::Sandpaper60,
-        Terrain::Wood,
-        Terrain::Carpet,
-        Terrain::Clay,
-        Terrain::Grass,
+impl Physics {
+    pub const ALL: [Physics; 12] = [
+        Physics::Aluminum,
+        Physics::Sand,
+        Physics::PineNeedles,
+        Physics::Gravel,
+        Physics::Sandpaper220,
+        Physics::Sandpaper150,
+        Physics::Sandpaper100,
+        Physics::Sandpaper60,
+        Physics::Wood,
+        Physics::Carpet,
+        Physics::Clay,
+        Physics::Grass,
     ];
     /// Section 4: the static set.
-    pub const STATIC: [Terrain; 4] = [
-        Terrain::Aluminum,
-        Terrain::Sand,
-        Terrain::PineNeedles,
-        Terrain::Gravel,
+    pub const STATIC: [Physics; 4] = [
+        Physics::Aluminum,
+        Physics::Sand,
+        Physics::PineNeedles,
+        Physics::Gravel,
     ];
     /// Section 5: the sandpaper set.
-    pub const SANDPAPER: [Terrain; 5] = [
-        Terrain::Aluminum,
-        Terrain::Sandpaper220,
-        Terrain::Sandpaper150,
-        Terrain::Sandpaper100,
-        Terrain::Sandpaper60,
+    pub const SANDPAPER: [Physics; 5] = [
+        Physics::Aluminum,
+        Physics::Sandpaper220,
+        Physics::Sandpaper150,
+        Physics::Sandpaper100,
+        Physics::Sandpaper60,
     ];
     /// Section 7: the dynamic set.
-    pub const DYNAMIC: [Terrain; 4] = [
-        Terrain::Wood,
-        Terrain::Carpet,
-        Terrain::Clay,
-        Terrain::Grass,
+    pub const DYNAMIC: [Physics; 4] = [
+        Physics::Wood,
+        Physics::Carpet,
+        Physics::Clay,
+        Physics::Grass,
     ];
 
-    /// The bus name (the protocol's terrain table).
+    /// The terrain this models (the paper's catalog entry of the same name).
+    pub fn terrain(self) -> Terrain {
+        match self {
+            Physics::Aluminum => Terrain::ALUMINUM,
+            Physics::Sand => Terrain::SAND,
+            Physics::PineNeedles => Terrain::PINE_NEEDLES,
+            Physics::Gravel => Terrain::GRAVEL,
+            Physics::Sandpaper220 => Terrain::SANDPAPER_220,
+            Physics::Sandpaper150 => Terrain::SANDPAPER_150,
+            Physics::Sandpaper100 => Terrain::SANDPAPER_100,
+            Physics::Sandpaper60 => Terrain::SANDPAPER_60,
+            Physics::Wood => Terrain::WOOD,
+            Physics::Carpet => Terrain::CARPET,
+            Physics::Clay => Terrain::CLAY,
+            Physics::Grass => Terrain::GRASS,
+        }
+    }
+
+    /// The model of a catalog terrain, chosen by its name; an error for a terrain (a lab's
+    /// own, say) that the simulator has no physics for.
+    pub fn of(terrain: Terrain) -> Result<Physics, CannotSimulate> {
+        Ok(match terrain.name() {
+            "aluminum" => Physics::Aluminum,
+            "sand" => Physics::Sand,
+            "pine_needles" => Physics::PineNeedles,
+            "gravel" => Physics::Gravel,
+            "sandpaper_220" => Physics::Sandpaper220,
+            "sandpaper_150" => Physics::Sandpaper150,
+            "sandpaper_100" => Physics::Sandpaper100,
+            "sandpaper_60" => Physics::Sandpaper60,
+            "wood" => Physics::Wood,
+            "carpet" => Physics::Carpet,
+            "clay" => Physics::Clay,
+            "grass" => Physics::Grass,
+            _ => return Err(CannotSimulate(terrain)),
+        })
+    }
+
+    /// The paper's name of the terrain this models.
     pub fn name(self) -> &'static str {
-        protocol::messages::terrain_name(self.id()).unwrap_or("unknown")
-    }
-
-    /// The bus id (the protocol's terrain table).
-    pub fn id(self) -> u8 {
-        Self::ALL.iter().position(|t| *t == self).unwrap_or(0) as u8
-    }
-
-    pub fn from_id(id: u8) -> Option<Self> {
-        Self::ALL.get(id as usize).copied()
+        self.terrain().name()
     }
 
     /// Aluminum-oxide particle diameter of a sandpaper, mm (the paper's Table 2).
     pub fn grit_diameter_mm(self) -> Option<f64> {
         match self {
-            Terrain::Sandpaper220 => Some(0.058),
-            Terrain::Sandpaper150 => Some(0.082),
-            Terrain::Sandpaper100 => Some(0.129),
-            Terrain::Sandpaper60 => Some(0.260),
+            Physics::Sandpaper220 => Some(0.058),
+            Physics::Sandpaper150 => Some(0.082),
+            Physics::Sandpaper100 => Some(0.129),
+            Physics::Sandpaper60 => Some(0.260),
             _ => None,
         }
     }
@@ -112,19 +152,19 @@ impl Terrain {
     pub fn ground(self) -> Ground {
         let (stiffness, damping) = match self {
             // Rigid for a 2 kg hopper.
-            Terrain::Aluminum | Terrain::Wood | Terrain::Gravel => (2e5, 5.0),
-            Terrain::Sandpaper220
-            | Terrain::Sandpaper150
-            | Terrain::Sandpaper100
-            | Terrain::Sandpaper60 => (2e5, 5.0),
+            Physics::Aluminum | Physics::Wood | Physics::Gravel => (2e5, 5.0),
+            Physics::Sandpaper220
+            | Physics::Sandpaper150
+            | Physics::Sandpaper100
+            | Physics::Sandpaper60 => (2e5, 5.0),
             // Low-pile carpet on a hard floor: some give, some loss.
-            Terrain::Carpet => (3e4, 40.0),
+            Physics::Carpet => (3e4, 40.0),
             // Semi-moist clay: soft and lossy (it deforms plastically).
-            Terrain::Clay => (1.5e4, 120.0),
+            Physics::Clay => (1.5e4, 120.0),
             // Thick grass: soft and springy.
-            Terrain::Grass => (8e3, 15.0),
-            Terrain::Sand => (1e4, 150.0),
-            Terrain::PineNeedles => (1.2e4, 60.0),
+            Physics::Grass => (8e3, 15.0),
+            Physics::Sand => (1e4, 150.0),
+            Physics::PineNeedles => (1.2e4, 60.0),
         };
         Ground { stiffness, damping }
     }
@@ -135,12 +175,12 @@ impl Terrain {
         let h = rows as f64 * cell_mm;
         let mut asperity = None;
         let (height, stiffness_kpa_mm) = match self {
-            Terrain::Aluminum => {
+            Physics::Aluminum => {
                 // Polished plate: a slight tilt against the die and sub-micron roughness.
                 asperity = Some(Field::random_smooth(rows, cols, cell_mm, 0.0005, 0.2, rng));
                 (plate(rows, cols, cell_mm, 0.0, rng), 1e6)
             }
-            Terrain::Sand => {
+            Physics::Sand => {
                 // Dry beach sand settles under the die: mm-scale mottling of the bed and grains
                 // of 0.1-0.5 mm, on a bed far softer than the skin.
                 let mut f = Field::random_smooth(rows, cols, cell_mm, 0.12, 3.0, rng);
@@ -150,17 +190,17 @@ impl Terrain {
                 }
                 (f, 12.0)
             }
-            Terrain::PineNeedles => (strands(&NEEDLES, rows, cols, cell_mm, w, h, rng), 60.0),
-            Terrain::Gravel => (stones(rows, cols, cell_mm, w, h, rng), 1e5),
-            Terrain::Sandpaper220
-            | Terrain::Sandpaper150
-            | Terrain::Sandpaper100
-            | Terrain::Sandpaper60 => {
+            Physics::PineNeedles => (strands(&NEEDLES, rows, cols, cell_mm, w, h, rng), 60.0),
+            Physics::Gravel => (stones(rows, cols, cell_mm, w, h, rng), 1e5),
+            Physics::Sandpaper220
+            | Physics::Sandpaper150
+            | Physics::Sandpaper100
+            | Physics::Sandpaper60 => {
                 let d = self.grit_diameter_mm().unwrap_or(0.1);
                 asperity = Some(grit(rows, cols, cell_mm, d, rng));
                 (plate(rows, cols, cell_mm, 0.0, rng), 1e5)
             }
-            Terrain::Wood => {
+            Physics::Wood => {
                 // Planed pine: grain ridges about 2-4 mm apart (earlywood/latewood), a few
                 // microns to tens of microns high, along the plank; now and then a plank seam.
                 let mut f = plate(rows, cols, cell_mm, 0.002, rng);
@@ -183,7 +223,7 @@ impl Terrain {
                 }
                 (f, 2e3)
             }
-            Terrain::Carpet => {
+            Physics::Carpet => {
                 // Loop pile: tufts on a square gauge of 3.6 mm. One carpet: the gauge varies only
                 // by manufacturing tolerance, the orientation and offset by where the foot lands
                 // (a gauge drawn anew per stance made every step a different carpet). The loops
@@ -208,7 +248,7 @@ impl Terrain {
                 }
                 (f, 1000.0)
             }
-            Terrain::Clay => {
+            Physics::Clay => {
                 // Semi-moist clay dirt: a soft, mostly conforming bed with clods and a few
                 // embedded pebbles, and drying cracks.
                 let mut f = Field::random_smooth(rows, cols, cell_mm, 0.25, 5.0, rng);
@@ -230,7 +270,7 @@ impl Terrain {
                 }
                 (f, 15.0)
             }
-            Terrain::Grass => {
+            Physics::Grass => {
                 // Thick grass: many blades 3-6 mm wide lying in random directions at several
                 // heights; the foot presses the top layer.
                 (strands(&BLADES, rows, cols, cell_mm, w, h, rng), 20.0)
@@ -426,27 +466,4 @@ fn grit(rows: usize, cols: usize, cell_mm: f64, d: f64, rng: &mut impl Rng) -> F
         *x += top as f32;
     }
     f
-}
-
-impl fmt::Display for Terrain {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-impl FromStr for Terrain {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        Self::ALL
-            .iter()
-            .copied()
-            .find(|t| t.name() == s)
-            .ok_or_else(|| {
-                let names: Vec<&str> = Self::ALL.iter().map(|t| t.name()).collect();
-                format!(
-                    "unknown terrain '{s}': expected one of {}",
-                    names.join(", ")
-                )
-            })
-    }
 }

@@ -49,7 +49,7 @@ fn sandpaper_roughness_grows_with_particle_size() {
             .collect();
         v.iter().sum::<f64>() / v.len() as f64
     };
-    let order: Vec<f64> = Terrain::SANDPAPER.iter().map(|t| spread(*t)).collect();
+    let order: Vec<f64> = Kind::Sandpaper.terrains().into_iter().map(spread).collect();
     assert!(
         order.windows(2).all(|w| w[0] < w[1]),
         "aluminum, 220, 150, 100, 60: {order:?}"
@@ -79,14 +79,14 @@ fn static_presses_carry_the_platform_load() {
             .map(|x| x.pixels[..].iter().filter(|&&v| v == 0).count())
             .sum::<usize>()
     };
-    assert!(zeros(Terrain::Gravel) > 3 * zeros(Terrain::Sand));
+    assert!(zeros(Terrain::GRAVEL) > 3 * zeros(Terrain::SAND));
 }
 
 #[test]
 fn stance_times_and_speeds_in_documented_ranges() {
     for g in Gait::paper_gaits() {
         let s = generate(&opts(Kind::Dynamic, 15, g.clone(), 5));
-        for t in Terrain::DYNAMIC {
+        for t in Kind::Dynamic.terrains() {
             let of: Vec<_> = s.iter().filter(|x| x.terrain == t).collect();
             assert_eq!(of.len(), 15, "G{} {t}: every stance sampled", g.id);
             let stance = of.iter().map(|x| x.stance_s).sum::<f64>() / 15.0;
@@ -113,7 +113,7 @@ fn stance_times_and_speeds_in_documented_ranges() {
             .collect();
         of.iter().sum::<f64>() / of.len() as f64
     };
-    for t in Terrain::DYNAMIC {
+    for t in Kind::Dynamic.terrains() {
         let l2 = mean_load(Gait::g2(), t);
         for g in [Gait::g1(), Gait::g3()] {
             let l = mean_load(g.clone(), t);

@@ -4,6 +4,7 @@
 decode DBC VECTORS.json   decode frames made by our Rust encoder, compare every signal
 encode DBC OUT.json SEED  encode random messages (and whole tactile images) with cantools
 log DBC LOG               read a candump log with python-can, decode it with cantools, print a summary
+choice DBC ID HEX SIGNAL  decode one frame and print the signal's named value (its VAL_ choice)
 """
 import json
 import random
@@ -42,6 +43,12 @@ def decode(dbc, vectors):
                 bad += 1
     print(f"cantools decoded {len(vecs)} frames, {n_sig} signals, {bad} mismatches")
     return 1 if bad else 0
+
+
+def choice(dbc, frame_id_text, data_hex, signal):
+    msg = load(dbc).get_message_by_frame_id(int(frame_id_text))
+    print(msg.decode(bytes.fromhex(data_hex), decode_choices=True)[signal])
+    return 0
 
 
 def rand_value(rng, sig):
@@ -117,4 +124,4 @@ def log(dbc, path):
 
 if __name__ == "__main__":
     cmd = sys.argv[1]
-    sys.exit({"decode": decode, "encode": encode, "log": log}[cmd](*sys.argv[2:]))
+    sys.exit({"decode": decode, "encode": encode, "log": log, "choice": choice}[cmd](*sys.argv[2:]))

@@ -355,6 +355,8 @@ pub struct Sample {
 
 #[derive(Clone, Debug, Default)]
 pub struct Dataset {
+    /// The dataset's directory.
+    pub root: PathBuf,
     pub classes: Vec<String>,
     pub samples: Vec<Sample>,
     /// Files skipped with `skip_bad`, with why.
@@ -372,7 +374,10 @@ pub fn load_dataset(dir: &Path, skip_bad: bool) -> Result<Dataset, ImageError> {
         v.sort();
         Ok(v)
     };
-    let mut ds = Dataset::default();
+    let mut ds = Dataset {
+        root: dir.to_path_buf(),
+        ..Dataset::default()
+    };
     for class_dir in read_dir(dir)?.into_iter().filter(|p| p.is_dir()) {
         let k = ds.classes.len();
         ds.classes.push(

@@ -19,6 +19,37 @@ pub struct ClassInfo {
     pub terrain_id: u8,
 }
 
+/// A model whose classes name terrains differently from the catalog the node runs with.
+#[derive(Debug, thiserror::Error, Clone, PartialEq, Eq)]
+pub enum CatalogMismatch {
+    /// The model sends an id the catalog does not know.
+    #[error(
+        "model class `{name}` sends terrain id {id}, which the terrain catalog does not have: run \
+         with the terrains file the model was trained with (--terrains FILE, or `terrains = \"FILE\"` \
+         in the config)"
+    )]
+    MissingId {
+        /// The class's name in the model.
+        name: String,
+        /// The id the model sends for it.
+        id: u8,
+    },
+    /// The model and the catalog give one id two names.
+    #[error(
+        "model class `{name}` sends terrain id {id}, but the terrain catalog calls id {id} \
+         `{catalog_name}`: the model and the bus would disagree on what it means; use the \
+         terrains file the model was trained with, or retrain"
+    )]
+    NameDiffers {
+        /// The class's name in the model.
+        name: String,
+        /// The id the model sends for it.
+        id: u8,
+        /// What the catalog calls that id.
+        catalog_name: String,
+    },
+}
+
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Model {
@@ -113,6 +144,30 @@ impl Model {
     }
 
     /// Checks every dimension, so a hand-edited or truncated file fails here, not mid-flight.
+    /// Checks that every class's terrain id means the same terrain in `catalog` (the node's),
+    /// so that what the node sends is what the controller and the DBC read.
+    pub fn check_catalog(&self, catalog: &protocol::TerrainCatalog) -> Result<(), CatalogMismatch> {
+        for c in &self.classes {
+            match catalog.by_id(c.terrain_id) {
+                None => {
+                    return Err(CatalogMismatch::MissingId {
+                        name: c.name.clone(),
+                        id: c.terrain_id,
+                    });
+                }
+                Some(t) if t.name() != c.name => {
+                    return Err(CatalogMismatch::NameDiffers {
+                        name: c.name.clone(),
+                        id: c.terrain_id,
+                        catalog_name: t.name().to_string(),
+                    });
+                }
+                Some(_) => {}
+            }
+        }
+        Ok(())
+    }
+
     pub fn validate(&self) -> Result<(), String> {
         let n = self.feature_len();
         if self.classes.is_empty() || self.classes.len() > MAX_CLASSES {
