@@ -35,11 +35,7 @@ pub struct ControllerArgs {
 pub fn load_config(path: Option<&std::path::Path>) -> Result<ControllerConfig> {
     match path {
         None => Ok(ControllerConfig::default()),
-        Some(p) => {
-            let text = std::fs::read_to_string(p)
-                .with_context(|| format!("reading --config {}", p.display()))?;
-            ControllerConfig::parse(&text, &p.display().to_string()).map_err(anyhow::Error::msg)
-        }
+        Some(p) => ControllerConfig::load(p).context("--config"),
     }
 }
 
@@ -52,8 +48,8 @@ pub fn run(a: ControllerArgs) -> Result<ExitCode> {
     let mut cfg = load_config(a.config.as_deref())?;
     if a.terrains.terrains.is_some() {
         cfg.terrains = a.terrains.terrains.clone();
-        let catalog = cfg.catalog().map_err(anyhow::Error::msg)?;
-        cfg.validate(&catalog).map_err(anyhow::Error::msg)?;
+        let catalog = cfg.catalog()?;
+        cfg.validate(&catalog)?;
     }
     let signals = Signals::install()?;
     run_on(
@@ -74,7 +70,7 @@ pub fn run_on(
 ) -> Result<u64> {
     let ids = cfg.ids.clone();
     let foot = cfg.foot;
-    let catalog = cfg.catalog().map_err(anyhow::Error::msg)?;
+    let catalog = cfg.catalog()?;
     let mut ctrl = Controller::new(cfg, &catalog);
     let start = Instant::now();
     let now_us = || (start.elapsed().as_secs_f64() * time_scale * 1e6) as u64;

@@ -154,7 +154,7 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
         ctrl_cfg.terrains = a.terrains.terrains.clone();
         node_cfg.terrains = a.terrains.terrains.clone();
     }
-    model.check_catalog(&node_cfg.catalog().map_err(anyhow::Error::msg)?)?;
+    model.check_catalog(&node_cfg.catalog()?)?;
     let fixed = match &a.fixed_gait {
         Some(g) => Some(
             controller::Gait::by_name(g)
@@ -337,13 +337,10 @@ fn closed_loop_with_falls(
     let mut node_cfg = p.node.clone();
     // Lock-step simulated time: a refit lands at the step that asked for it, as in a replay.
     node_cfg.refit = node_cfg.refit.reproducible();
-    let catalog = node_cfg.catalog().map_err(anyhow::Error::msg)?;
+    let catalog = node_cfg.catalog()?;
     let mut pipeline = StancePipeline::new(node_cfg, Some(model));
     let mut ctrl = match p.controller {
-        Some(c) => Some(Controller::new(
-            c.clone(),
-            &c.catalog().map_err(anyhow::Error::msg)?,
-        )),
+        Some(c) => Some(Controller::new(c.clone(), &c.catalog()?)),
         None => None,
     };
     let mut rows: Vec<StepRow> = Vec::new();

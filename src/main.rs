@@ -123,19 +123,8 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Cmd::Dbc { ids, out, terrains } => {
             let cfg = match ids {
                 None => protocol::IdConfig::default(),
-                Some(p) => {
-                    let text = std::fs::read_to_string(&p)
-                        .with_context(|| format!("reading {}", p.display()))?;
-                    #[derive(serde::Deserialize)]
-                    struct File {
-                        ids: protocol::IdConfig,
-                    }
-                    let f: File = toml_from_str(&text)
-                        .with_context(|| format!("parsing the [ids] table of {}", p.display()))?;
-                    f.ids
-                }
+                Some(p) => protocol::IdConfig::from_file(&p)?,
             };
-            cfg.validate().context("identifier map")?;
             let text = protocol::dbc::generate(&cfg, &terrains.catalog()?);
             match out {
                 Some(p) => {
@@ -190,10 +179,6 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Cmd::Dataset(a) => cli::dataset(&a),
         Cmd::Experiment(args) => experiment::run(args),
     }
-}
-
-fn toml_from_str<T: serde::de::DeserializeOwned>(s: &str) -> Result<T> {
-    Ok(toml::from_str(s)?)
 }
 
 fn main() -> ExitCode {

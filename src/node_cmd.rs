@@ -53,9 +53,7 @@ pub fn load_config(path: Option<&Path>) -> Result<NodeConfig> {
     let Some(p) = path else {
         return Ok(NodeConfig::default());
     };
-    let text =
-        std::fs::read_to_string(p).with_context(|| format!("reading --config {}", p.display()))?;
-    NodeConfig::from_toml(&text, &p.display().to_string()).map_err(anyhow::Error::msg)
+    NodeConfig::load(p).context("--config")
 }
 
 pub fn run(a: NodeArgs) -> Result<ExitCode> {
@@ -63,7 +61,7 @@ pub fn run(a: NodeArgs) -> Result<ExitCode> {
     if a.terrains.terrains.is_some() {
         cfg.terrains = a.terrains.terrains.clone();
     }
-    let catalog = cfg.catalog().map_err(anyhow::Error::msg)?;
+    let catalog = cfg.catalog()?;
     let model = Model::load(&a.model).with_context(|| format!("--model {}", a.model.display()))?;
     model
         .check_catalog(&catalog)
@@ -189,7 +187,7 @@ pub fn live(
     source: BusSource,
     signals: Signals,
 ) -> Result<Arc<Shared>> {
-    let catalog = cfg.catalog().map_err(anyhow::Error::msg)?;
+    let catalog = cfg.catalog()?;
     model.check_catalog(&catalog)?;
     let shared = Arc::new(Shared::default());
     shared.model_id.store(model.id(), Ordering::Relaxed);

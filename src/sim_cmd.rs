@@ -83,7 +83,7 @@ pub fn load_track(
         Some(p) => {
             let text = std::fs::read_to_string(p)
                 .with_context(|| format!("reading --track {}", p.display()))?;
-            Track::from_toml(&text, &p.display().to_string(), catalog).map_err(anyhow::Error::msg)
+            Ok(Track::from_toml(&text, &p.display().to_string(), catalog)?)
         }
         None => Ok(Track::default()),
     }

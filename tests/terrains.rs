@@ -189,7 +189,7 @@ fn a_lab_terrain_from_a_terrains_file_trains_classifies_switches_and_decodes() {
     );
     let bare =
         ControllerConfig::parse("initial_gait = 1\n[terrain_gaits]\nasphalt = 3\n", "c.toml");
-    let e = bare.unwrap_err();
+    let e = bare.unwrap_err().to_string();
     assert!(
         e.contains("terrain_gaits.asphalt") && e.contains("terrains"),
         "{e}"

@@ -479,10 +479,18 @@ fn sim_node_and_controller_as_processes_classify_steps_and_survive_a_node_restar
                 // the first on a new terrain): too soon to judge the switch.
                 continue;
             }
-            if let Some(j) = (i..steps.len())
+            let t = |k: usize| steps[k]["t_s"].as_f64().unwrap_or(f64::NAN);
+            let switch = (i..steps.len())
                 .take_while(|&j| steps[j]["truth"] == steps[i]["truth"])
-                .find(|&j| steps[j]["gait"].as_u64() == want)
-            {
+                .find(|&j| steps[j]["gait"].as_u64() == want);
+            // The kill fell between this change and its switch (one CI run: two carpet
+            // steps, the kill, then two more after the restart before the controller,
+            // which forgets its count on NodeLost, switched): not the controller's delay.
+            let until = t(switch.unwrap_or(i + run - 1));
+            if (t(i)..=until).contains(&killed_robot_s) {
+                continue;
+            }
+            if let Some(j) = switch {
                 // Steps the node got wrong before the switch: each one restarts the
                 // controller's count of consecutive steps (the policy's N = 2).
                 let wrong = (i..j)

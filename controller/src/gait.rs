@@ -1,5 +1,6 @@
 //! Gaits `G_i(omega, phi, c, beta_des)` and their parameters (section 6 and 7.1 of the paper).
 
+use protocol::config::Invalid;
 use serde::{Deserialize, Serialize};
 
 /// One gait: the parameters of eqs. (4) and (5).
@@ -78,19 +79,24 @@ impl Gait {
         }
     }
 
-    /// Checks every field against its allowed range; the error names the field and the range.
-    pub fn validate(&self, path: &str) -> Result<(), String> {
+    /// Checks every field against its allowed range; the error names the field (under `path`,
+    /// e.g. `gaits[0]`) and the range.
+    pub fn validate(&self, path: &str) -> Result<(), Invalid> {
         let check = |name: &str, v: f64, lo: f64, hi: f64| {
             if v.is_finite() && v >= lo && v <= hi {
                 Ok(())
             } else {
-                Err(format!(
-                    "{path}.{name} = {v} is outside the allowed range {lo}..={hi}"
+                Err(Invalid::new(
+                    format!("{path}.{name}"),
+                    format!("{path}.{name} = {v} is outside the allowed range {lo}..={hi}"),
                 ))
             }
         };
         if self.id == 0 {
-            return Err(format!("{path}.id = 0: gait ids start at 1"));
+            return Err(Invalid::new(
+                format!("{path}.id"),
+                format!("{path}.id = 0: gait ids start at 1"),
+            ));
         }
         check("omega", self.omega, 0.1, 100.0)?;
         check("beta_des", self.beta_des, 0.0, 1.2)?;
@@ -125,6 +131,7 @@ mod tests {
         let mut g = Gait::g1();
         g.c = -0.5;
         let e = g.validate("gaits[0]").unwrap_err();
-        assert!(e.contains("gaits[0].c") && e.contains("0.01..=1.99"), "{e}");
+        assert_eq!(e.key, "gaits[0].c");
+        assert!(e.message.contains("0.01..=1.99"), "{e}");
     }
 }

@@ -12,8 +12,9 @@
 
 use std::collections::BTreeMap;
 
+use protocol::config::{ConfigFileError, Invalid};
 use protocol::messages::{GaitReason, GaitStatus, LegCommand, Message, Phase, TERRAIN_UNKNOWN};
-use protocol::terrain::TerrainCatalog;
+use protocol::terrain::{CatalogError, TerrainCatalog};
 use serde::{Deserialize, Serialize};
 
 use crate::gait::Gait;
@@ -84,15 +85,15 @@ impl Default for ControllerConfig {
 
 impl ControllerConfig {
     /// The catalog the `terrains` key names (the paper's twelve without it).
-    pub fn catalog(&self) -> Result<TerrainCatalog, String> {
-        TerrainCatalog::load(self.terrains.as_deref()).map_err(|e| format!("terrains: {e}"))
+    pub fn catalog(&self) -> Result<TerrainCatalog, CatalogError> {
+        TerrainCatalog::load(self.terrains.as_deref())
     }
 
     /// Checks every field; the error names the field and the allowed range. `terrain_gaits`
     /// keys must be names in `catalog`.
-    pub fn validate(&self, catalog: &TerrainCatalog) -> Result<(), String> {
+    pub fn validate(&self, catalog: &TerrainCatalog) -> Result<(), Invalid> {
         if self.gaits.is_empty() {
-            return Err("gaits: at least one gait is needed".into());
+            return Err(Invalid::new("gaits", "gaits: at least one gait is needed"));
         }
         for (i, g) in self.gaits.iter().enumerate() {
             g.validate(&format!("gaits[{i}]"))?;
@@ -104,25 +105,29 @@ impl ControllerConfig {
             ("safe_gait", self.safe_gait),
         ] {
             if !has(id) {
-                return Err(format!("{name} = {id}: allowed gait ids {ids:?}"));
+                return Err(Invalid::range(name, id, format!("gait ids {ids:?}")));
             }
         }
         for (t, g) in &self.terrain_gaits {
+            let key = format!("terrain_gaits.{t}");
             if catalog.by_name(t).is_none_or(|t| t.is_unknown()) {
-                return Err(format!(
-                    "terrain_gaits.{t}: `{t}` is not a terrain in the catalog; add it to a \
-                     terrains file ([[terrain]] id = N, name = \"{t}\") and set `terrains = \"FILE\"`"
+                return Err(Invalid::new(
+                    &key,
+                    format!(
+                        "{key}: `{t}` is not a terrain in the catalog; add it to a terrains file \
+                         ([[terrain]] id = N, name = \"{t}\") and set `terrains = \"FILE\"`"
+                    ),
                 ));
             }
             if !has(*g) {
-                return Err(format!("terrain_gaits.{t} = {g}: allowed gait ids {ids:?}"));
+                return Err(Invalid::range(&key, g, format!("gait ids {ids:?}")));
             }
         }
         let range = |name: &str, v: f64, lo: f64, hi: f64| {
             if v.is_finite() && (lo..=hi).contains(&v) {
                 Ok(())
             } else {
-                Err(format!("{name} = {v}: allowed {lo}..={hi}"))
+                Err(Invalid::range(name, v, format!("{lo}..={hi}")))
             }
         };
         range(
@@ -146,21 +151,32 @@ impl ControllerConfig {
             0.0,
             (protocol::ids::MAX_FEET - 1) as f64,
         )?;
-        self.ids.validate().map_err(|e| format!("ids: {e}"))?;
+        self.ids
+            .validate()
+            .map_err(|e| Invalid::new("ids", format!("ids: {e}")))?;
         Ok(())
     }
 
     /// Parses TOML or JSON (by the file's extension) and validates it against the catalog its
     /// `terrains` key names.
-    pub fn parse(text: &str, path: &str) -> Result<Self, String> {
-        let c: Self = if path.ends_with(".json") {
-            serde_json::from_str(text).map_err(|e| format!("{path}: {e}"))?
-        } else {
-            toml::from_str(text).map_err(|e| format!("{path}: {e}"))?
-        };
-        let catalog = c.catalog().map_err(|e| format!("{path}: {e}"))?;
-        c.validate(&catalog).map_err(|e| format!("{path}: {e}"))?;
+    pub fn parse(text: &str, path: &str) -> Result<Self, ConfigFileError> {
+        let c: Self = protocol::config::parse(text, path)?;
+        let catalog = c.catalog().map_err(|source| ConfigFileError::Terrains {
+            path: path.to_string(),
+            source,
+        })?;
+        c.validate(&catalog)
+            .map_err(|e| ConfigFileError::invalid(path, e))?;
         Ok(c)
+    }
+
+    /// Reads and validates a config file (see [`ControllerConfig::parse`]).
+    pub fn load(path: &std::path::Path) -> Result<Self, ConfigFileError> {
+        let text = std::fs::read_to_string(path).map_err(|e| ConfigFileError::Read {
+            path: path.display().to_string(),
+            reason: e.to_string(),
+        })?;
+        Self::parse(&text, &path.display().to_string())
     }
 }
 
@@ -507,10 +523,8 @@ mod tests {
         let mut cfg = ControllerConfig::default();
         cfg.terrain_gaits.insert("asphalt".into(), 3);
         let e = cfg.validate(&TerrainCatalog::paper()).unwrap_err();
-        assert!(
-            e.contains("terrain_gaits.asphalt") && e.contains("terrains file"),
-            "{e}"
-        );
+        assert_eq!(e.key, "terrain_gaits.asphalt");
+        assert!(e.message.contains("terrains file"), "{e}");
         cfg.validate(&cat).unwrap();
         let mut c = Controller::new(cfg, &cat);
         let mut out = Vec::new();
@@ -689,11 +703,12 @@ mod tests {
     #[test]
     fn invalid_config_names_the_field() {
         let e = ControllerConfig::parse("safe_gait = 9", "c.toml").unwrap_err();
-        assert!(e.contains("safe_gait = 9"), "{e}");
+        assert!(e.to_string().contains("c.toml: safe_gait = 9"), "{e}");
         let e = ControllerConfig::parse("min_confidence_pct = 120.0", "c.toml").unwrap_err();
-        assert!(
-            e.contains("min_confidence_pct") && e.contains("0..=100"),
-            "{e}"
-        );
+        let ConfigFileError::Invalid { source, .. } = &e else {
+            panic!("{e:?}");
+        };
+        assert_eq!(source.key, "min_confidence_pct");
+        assert!(source.message.contains("0..=100"), "{e}");
     }
 }

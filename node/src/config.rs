@@ -1,6 +1,8 @@
 //! The node's configuration file (`node.toml`).
 
 use protocol::IdConfig;
+use protocol::config::{ConfigFileError, Invalid};
+use protocol::terrain::{CatalogError, TerrainCatalog};
 use serde::{Deserialize, Serialize};
 
 /// How dead sensor lines are repaired before classification.
@@ -90,51 +92,69 @@ impl Default for NodeConfig {
 }
 
 impl NodeConfig {
-    /// Parses and checks a TOML config; the error names the file, the field and the range.
-    pub fn from_toml(text: &str, path: &str) -> Result<Self, String> {
-        let c: Self = toml::from_str(text).map_err(|e| format!("{path}: {e}"))?;
-        c.validate().map_err(|e| format!("{path}: {e}"))?;
+    /// Parses and checks a TOML config (JSON with a `.json` name); the error names the file,
+    /// the key and the range.
+    pub fn from_toml(text: &str, path: &str) -> Result<Self, ConfigFileError> {
+        let c: Self = protocol::config::parse(text, path)?;
+        c.validate()
+            .map_err(|e| ConfigFileError::invalid(path, e))?;
+        c.catalog().map_err(|source| ConfigFileError::Terrains {
+            path: path.to_string(),
+            source,
+        })?;
         Ok(c)
     }
 
-    /// The catalog the `terrains` key names (the paper's twelve without it).
-    pub fn catalog(&self) -> Result<protocol::TerrainCatalog, String> {
-        protocol::TerrainCatalog::load(self.terrains.as_deref())
-            .map_err(|e| format!("terrains: {e}"))
+    /// Reads and checks a config file.
+    pub fn load(path: &std::path::Path) -> Result<Self, ConfigFileError> {
+        let text = std::fs::read_to_string(path).map_err(|e| ConfigFileError::Read {
+            path: path.display().to_string(),
+            reason: e.to_string(),
+        })?;
+        Self::from_toml(&text, &path.display().to_string())
     }
 
-    pub fn validate(&self) -> Result<(), String> {
+    /// The catalog the `terrains` key names (the paper's twelve without it).
+    pub fn catalog(&self) -> Result<TerrainCatalog, CatalogError> {
+        TerrainCatalog::load(self.terrains.as_deref())
+    }
+
+    /// Checks every key against its allowed range.
+    pub fn validate(&self) -> Result<(), Invalid> {
         if self.feet == 0 || self.feet > protocol::ids::MAX_FEET {
-            return Err(format!(
-                "feet = {}: allowed 1..={}",
+            return Err(Invalid::range(
+                "feet",
                 self.feet,
-                protocol::ids::MAX_FEET
+                format!("1..={}", protocol::ids::MAX_FEET),
             ));
         }
         if self.debounce_us > 50_000 {
-            return Err(format!(
-                "debounce_us = {}: allowed 0..=50000",
-                self.debounce_us
-            ));
+            return Err(Invalid::range("debounce_us", self.debounce_us, "0..=50000"));
         }
         if !(10..=500).contains(&self.sample_ms) {
-            return Err(format!("sample_ms = {}: allowed 10..=500", self.sample_ms));
+            return Err(Invalid::range("sample_ms", self.sample_ms, "10..=500"));
         }
         if self.window_ms[0] >= self.window_ms[1] {
-            return Err(format!(
-                "window_ms = {:?}: the start must be before the end",
-                self.window_ms
+            return Err(Invalid::new(
+                "window_ms",
+                format!(
+                    "window_ms = {:?}: the start must be before the end",
+                    self.window_ms
+                ),
             ));
         }
         if !(0.0..=1.0).contains(&self.low_confidence) {
-            return Err(format!(
-                "low_confidence = {}: allowed 0..=1",
-                self.low_confidence
+            return Err(Invalid::range(
+                "low_confidence",
+                self.low_confidence,
+                "0..=1",
             ));
         }
         if !(0.1..=100.0).contains(&self.status_hz) {
-            return Err(format!("status_hz = {}: allowed 0.1..=100", self.status_hz));
+            return Err(Invalid::range("status_hz", self.status_hz, "0.1..=100"));
         }
-        self.ids.validate().map_err(|e| format!("ids: {e}"))
+        self.ids
+            .validate()
+            .map_err(|e| Invalid::new("ids", format!("ids: {e}")))
     }
 }

@@ -15,7 +15,7 @@
 //! - [`terrain`]: the terrain type and the catalog of terrain ids (the paper's and a lab's own);
 //! - [`dbc`]: the DBC file for any CAN tool; [`candump`]: can-utils log files;
 //! - [`bus`]: SocketCAN and an in-process bus behind one trait; [`clock`]: time sources;
-//! - [`error`]: the error types.
+//! - [`config`]: the one config-file loader and its errors; [`error`]: the error types.
 //!
 //! ```
 //! use presrs_protocol::{bus::{CanBus, InProcBus}, ids::IdConfig, messages::*};
@@ -31,6 +31,7 @@
 pub mod bus;
 pub mod candump;
 pub mod clock;
+pub mod config;
 pub mod dbc;
 pub mod error;
 pub mod frame;

@@ -19,6 +19,7 @@ use crate::fixed_gait::FixedGait;
 use crate::hopper::{Event, Hopper, HopperParams, LegCommands};
 use crate::skin::{Contact, FRAME_PERIOD_US, Footprint, Skin, SkinParams};
 use crate::terrain::{CannotSimulate, Physics, Terrain};
+use protocol::config::{ConfigFileError, Invalid};
 use protocol::terrain::TerrainCatalog;
 
 /// One stretch of the track: a catalog terrain the simulator has a model for.
@@ -103,33 +104,43 @@ impl Default for Track {
 impl Track {
     /// Parses a TOML track file (`path` names it in errors) and checks it: every terrain a name
     /// in `catalog` that the simulator can simulate, every length positive.
-    pub fn from_toml(text: &str, path: &str, catalog: &TerrainCatalog) -> Result<Self, String> {
-        let t: TrackFile = toml::from_str(text).map_err(|e| format!("{path}: {e}"))?;
+    pub fn from_toml(
+        text: &str,
+        path: &str,
+        catalog: &TerrainCatalog,
+    ) -> Result<Self, ConfigFileError> {
+        let t: TrackFile = protocol::config::parse(text, path)?;
+        let invalid = |key: String, message: String| {
+            ConfigFileError::invalid(path, Invalid::new(key, message))
+        };
         if t.segments.is_empty() {
-            return Err(format!("{path}: segments: at least one segment is needed"));
+            return Err(invalid(
+                "segments".into(),
+                "segments: at least one segment is needed".into(),
+            ));
         }
         let mut segments = Vec::with_capacity(t.segments.len());
         for (i, s) in t.segments.iter().enumerate() {
             if s.length_m.is_nan() || s.length_m <= 0.0 {
-                return Err(format!(
-                    "{path}: segments[{i}].length_m = {}: must be > 0",
-                    s.length_m
-                ));
+                let key = format!("segments[{i}].length_m");
+                let message = format!("{key} = {}: must be > 0", s.length_m);
+                return Err(invalid(key, message));
             }
+            let key = format!("segments[{i}].terrain");
             let terrain = catalog
                 .by_name(&s.terrain)
                 .filter(|t| !t.is_unknown())
                 .ok_or_else(|| {
-                    format!(
-                        "{path}: segments[{i}].terrain = \"{}\": not a terrain in the catalog \
-                         (a terrains file adds one: --terrains FILE)",
+                    let message = format!(
+                        "{key} = \"{}\": not a terrain in the catalog (a terrains file adds one: \
+                         --terrains FILE)",
                         s.terrain
-                    )
+                    );
+                    invalid(key.clone(), message)
                 })?;
-            segments.push(
-                Segment::new(terrain, s.length_m)
-                    .map_err(|e| format!("{path}: segments[{i}]: {e}"))?,
-            );
+            let segment = Segment::new(terrain, s.length_m)
+                .map_err(|e| invalid(key.clone(), format!("{key}: {e}")))?;
+            segments.push(segment);
         }
         Ok(Self {
             diameter_m: t.diameter_m,
@@ -534,11 +545,15 @@ mod tests {
         assert_eq!(t.segment_at(0.5).physics, Physics::Sand);
 
         let text = "[[segments]]\nterrain = \"asphalt\"\nlength_m = 1.0\n";
-        let e = Track::from_toml(text, "t.toml", &paper).unwrap_err();
+        let e = Track::from_toml(text, "t.toml", &paper)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("asphalt") && e.contains("--terrains"), "{e}");
         let lab =
             TerrainCatalog::from_toml("[[terrain]]\nid = 20\nname = \"asphalt\"\n", "x").unwrap();
-        let e = Track::from_toml(text, "t.toml", &lab).unwrap_err();
+        let e = Track::from_toml(text, "t.toml", &lab)
+            .unwrap_err()
+            .to_string();
         assert!(
             e.contains("cannot simulate terrain `asphalt` (id 20)"),
             "{e}"
@@ -549,7 +564,10 @@ mod tests {
             &paper,
         )
         .unwrap_err();
-        assert!(e.contains("length_m"), "{e}");
+        let ConfigFileError::Invalid { source, .. } = &e else {
+            panic!("{e:?}");
+        };
+        assert_eq!(source.key, "segments[0].length_m");
     }
 
     #[test]

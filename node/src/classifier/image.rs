@@ -13,17 +13,20 @@ pub struct Crop {
     pub right: usize,
 }
 
+/// A crop that is not four whole numbers.
+#[derive(Debug, thiserror::Error, Clone, PartialEq, Eq)]
+#[error("crop `{0}`: expected four whole numbers T,B,L,R such as 2,2,2,2")]
+pub struct ParseCropError(pub String);
+
 impl std::str::FromStr for Crop {
-    type Err = String;
+    type Err = ParseCropError;
     /// `T,B,L,R`, e.g. `2,2,2,2`.
-    fn from_str(s: &str) -> Result<Self, String> {
+    fn from_str(s: &str) -> Result<Self, ParseCropError> {
         let v: Vec<usize> = s
             .split(',')
             .map(|x| x.trim().parse::<usize>())
             .collect::<Result<_, _>>()
-            .map_err(|_| {
-                format!("crop `{s}`: expected four whole numbers T,B,L,R such as 2,2,2,2")
-            })?;
+            .map_err(|_| ParseCropError(s.to_string()))?;
         match v[..] {
             [top, bottom, left, right] => Ok(Crop {
                 top,
@@ -31,10 +34,7 @@ impl std::str::FromStr for Crop {
                 left,
                 right,
             }),
-            _ => Err(format!(
-                "crop `{s}`: expected four numbers T,B,L,R, got {}",
-                v.len()
-            )),
+            _ => Err(ParseCropError(s.to_string())),
         }
     }
 }
@@ -200,7 +200,13 @@ mod tests {
             .is_none()
         );
         assert!("1,2,3".parse::<Crop>().is_err());
-        assert!("a,b,c,d".parse::<Crop>().unwrap_err().contains("T,B,L,R"));
+        assert!(
+            "a,b,c,d"
+                .parse::<Crop>()
+                .unwrap_err()
+                .to_string()
+                .contains("T,B,L,R")
+        );
     }
 
     #[test]

@@ -63,15 +63,18 @@ impl Kernels {
     }
 }
 
+/// A kernel choice other than `native` or `portable`.
+#[derive(Debug, thiserror::Error, Clone, PartialEq, Eq)]
+#[error("`{0}` is not a kernel choice: use native or portable")]
+pub struct ParseKernelsError(pub String);
+
 impl std::str::FromStr for Kernels {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = ParseKernelsError;
+    fn from_str(s: &str) -> Result<Self, ParseKernelsError> {
         match s {
             "native" => Ok(Kernels::Native),
             "portable" => Ok(Kernels::Portable),
-            _ => Err(format!(
-                "`{s}` is not a kernel choice: use native or portable"
-            )),
+            _ => Err(ParseKernelsError(s.to_string())),
         }
     }
 }

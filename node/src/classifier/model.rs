@@ -3,6 +3,7 @@
 
 use std::path::Path;
 
+use protocol::config::Invalid;
 use serde::{Deserialize, Serialize};
 
 use super::image::Crop;
@@ -168,37 +169,49 @@ impl Model {
         Ok(())
     }
 
-    pub fn validate(&self) -> Result<(), String> {
+    /// Checks that the model's parts fit together (sizes, indexes, finite numbers).
+    pub fn validate(&self) -> Result<(), Invalid> {
         let n = self.feature_len();
         if self.classes.is_empty() || self.classes.len() > MAX_CLASSES {
-            return Err(format!(
-                "{} classes (1..={MAX_CLASSES} allowed)",
-                self.classes.len()
+            return Err(Invalid::new(
+                "classes",
+                format!("{} classes (1..={MAX_CLASSES} allowed)", self.classes.len()),
             ));
         }
-        let (r, c) = self.work_size().ok_or("crop leaves no pixels")?;
+        let (r, c) = self
+            .work_size()
+            .ok_or_else(|| Invalid::new("crop", "crop leaves no pixels"))?;
         if super::features::fft_len(r * c) != self.n_fft {
-            return Err(format!("n_fft {} does not fit {r}x{c} images", self.n_fft));
+            return Err(Invalid::new(
+                "n_fft",
+                format!("n_fft {} does not fit {r}x{c} images", self.n_fft),
+            ));
         }
         if self.pca_mean.len() != n {
-            return Err(format!(
-                "pca_mean has {} values, expected {n}",
-                self.pca_mean.len()
+            return Err(Invalid::new(
+                "pca_mean",
+                format!("pca_mean has {} values, expected {n}", self.pca_mean.len()),
             ));
         }
         if self.h == 0 || self.pca_matrix.len() != self.h * n {
-            return Err(format!(
-                "pca_matrix has {} values, expected h x n = {} x {n}",
-                self.pca_matrix.len(),
-                self.h
+            return Err(Invalid::new(
+                "pca_matrix",
+                format!(
+                    "pca_matrix has {} values, expected h x n = {} x {n}",
+                    self.pca_matrix.len(),
+                    self.h
+                ),
             ));
         }
         if self.samples.len() != self.n_samples() * self.h || self.n_samples() == 0 {
-            return Err(format!(
-                "samples has {} values for {} labels and h = {}",
-                self.samples.len(),
-                self.n_samples(),
-                self.h
+            return Err(Invalid::new(
+                "samples",
+                format!(
+                    "samples has {} values for {} labels and h = {}",
+                    self.samples.len(),
+                    self.n_samples(),
+                    self.h
+                ),
             ));
         }
         if let Some(bad) = self
@@ -206,12 +219,15 @@ impl Model {
             .iter()
             .find(|&&k| k >= self.classes.len())
         {
-            return Err(format!("sample class {bad} is not a class index"));
+            return Err(Invalid::new(
+                "sample_classes",
+                format!("sample class {bad} is not a class index"),
+            ));
         }
         if !(self.kernel_width.is_finite() && self.kernel_width > 0.0) {
-            return Err(format!(
-                "kernel_width {} must be positive",
-                self.kernel_width
+            return Err(Invalid::new(
+                "kernel_width",
+                format!("kernel_width {} must be positive", self.kernel_width),
             ));
         }
         let finite = self
@@ -221,24 +237,33 @@ impl Model {
             .chain(&self.samples)
             .all(|v| v.is_finite());
         if !finite {
-            return Err("non-finite numbers in the PCA or samples".into());
+            return Err(Invalid::new(
+                "pca_matrix",
+                "non-finite numbers in the PCA or samples",
+            ));
         }
         if let Some(im) = &self.images {
             if im.pixels.len() != self.n_samples()
                 || im.n_train == 0
                 || im.n_train >= im.pixels.len()
             {
-                return Err(format!(
-                    "images holds {} images ({} for training) for {} stored samples",
-                    im.pixels.len(),
-                    im.n_train,
-                    self.n_samples()
+                return Err(Invalid::new(
+                    "images",
+                    format!(
+                        "images holds {} images ({} for training) for {} stored samples",
+                        im.pixels.len(),
+                        im.n_train,
+                        self.n_samples()
+                    ),
                 ));
             }
             if let Some(i) = im.pixels.iter().position(|p| p.len() != r * c) {
-                return Err(format!(
-                    "stored image {i} has {} pixels, expected {r}x{c}",
-                    im.pixels[i].len()
+                return Err(Invalid::new(
+                    "images",
+                    format!(
+                        "stored image {i} has {} pixels, expected {r}x{c}",
+                        im.pixels[i].len()
+                    ),
                 ));
             }
         }
@@ -276,9 +301,9 @@ impl Model {
             path: path.into(),
             msg: e.to_string(),
         })?;
-        m.validate().map_err(|msg| ModelError::Invalid {
+        m.validate().map_err(|e| ModelError::Invalid {
             path: path.into(),
-            msg,
+            msg: e.to_string(),
         })?;
         Ok(m)
     }

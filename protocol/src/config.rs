@@ -1,0 +1,145 @@
+//! Config files: the one loader of the node's, the controller's, the simulator's and the DBC
+//! tool's files (TOML, or JSON by the file's extension), and the errors every config check
+//! returns: each names the file, the key and what is allowed.
+//!
+//! ```
+//! use presrs_protocol::{config, IdConfig};
+//! #[derive(serde::Deserialize)]
+//! struct File { ids: IdConfig }
+//! let f: File = config::parse("[ids]\nextended = true\n", "robot.toml")?;
+//! assert!(f.ids.extended);
+//! match config::parse::<File>("[ids]\nextended = 3\n", "robot.toml") {
+//!     Err(e) => assert!(e.to_string().starts_with("robot.toml: ")),
+//!     Ok(_) => unreachable!("3 is not a bool"),
+//! }
+//! # Ok::<(), config::ConfigFileError>(())
+//! ```
+
+use std::fmt::Display;
+use std::path::Path;
+
+use serde::de::DeserializeOwned;
+use thiserror::Error;
+
+use crate::terrain::CatalogError;
+
+/// A config value outside what works, or a file that does not fit together.
+#[derive(Debug, Error, Clone, PartialEq, Eq)]
+#[error("{message}")]
+pub struct Invalid {
+    /// The key, as written in the file (`feet`, `gaits[0].omega`, `segments[2].length_m`).
+    pub key: String,
+    /// The whole message: the key, its value and what is allowed.
+    pub message: String,
+}
+
+impl Invalid {
+    /// A problem with `key`, described by `message` (which names the key).
+    pub fn new(key: impl Into<String>, message: impl Into<String>) -> Self {
+        Self {
+            key: key.into(),
+            message: message.into(),
+        }
+    }
+
+    /// `key = value: allowed ALLOWED`.
+    pub fn range(key: &str, value: impl Display, allowed: impl Display) -> Self {
+        Self::new(key, format!("{key} = {value}: allowed {allowed}"))
+    }
+}
+
+/// A config file that cannot be used.
+#[derive(Debug, Error, Clone, PartialEq, Eq)]
+pub enum ConfigFileError {
+    /// The file cannot be read.
+    #[error("cannot read {path}: {reason}")]
+    Read {
+        /// The file.
+        path: String,
+        /// What the OS said.
+        reason: String,
+    },
+    /// Not TOML (or JSON) of the expected shape: a typo in a key, a value of the wrong type.
+    #[error("{path}: {reason}")]
+    Parse {
+        /// The file.
+        path: String,
+        /// What the parser said (with the line and the key).
+        reason: String,
+    },
+    /// Parsed, but a value is outside what works.
+    #[error("{path}: {source}")]
+    Invalid {
+        /// The file.
+        path: String,
+        /// Which key and why.
+        source: Invalid,
+    },
+    /// The terrains file the config names cannot be used.
+    #[error("{path}: terrains: {source}")]
+    Terrains {
+        /// The config file.
+        path: String,
+        /// What is wrong with the terrains file.
+        source: CatalogError,
+    },
+}
+
+impl ConfigFileError {
+    /// The error for `path` whose content failed `check`.
+    pub fn invalid(path: &str, source: Invalid) -> Self {
+        Self::Invalid {
+            path: path.to_string(),
+            source,
+        }
+    }
+}
+
+/// Parses a config's text: JSON when `path` ends in `.json`, TOML otherwise. `path` names the
+/// file in errors.
+pub fn parse<T: DeserializeOwned>(text: &str, path: &str) -> Result<T, ConfigFileError> {
+    let parsed = if path.ends_with(".json") {
+        serde_json::from_str(text).map_err(|e| e.to_string())
+    } else {
+        toml::from_str(text).map_err(|e| e.to_string())
+    };
+    parsed.map_err(|reason| ConfigFileError::Parse {
+        path: path.to_string(),
+        reason: reason.trim_end().to_string(),
+    })
+}
+
+/// Reads and parses a config file (see [`parse`]).
+pub fn read<T: DeserializeOwned>(path: &Path) -> Result<T, ConfigFileError> {
+    let name = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|e| ConfigFileError::Read {
+        path: name.clone(),
+        reason: e.to_string(),
+    })?;
+    parse(&text, &name)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(serde::Deserialize, Debug)]
+    #[serde(deny_unknown_fields)]
+    struct C {
+        feet: u8,
+    }
+
+    #[test]
+    fn toml_or_json_by_extension_and_errors_name_the_file() {
+        assert_eq!(parse::<C>("feet = 2", "a.toml").unwrap().feet, 2);
+        assert_eq!(parse::<C>("{\"feet\": 3}", "a.json").unwrap().feet, 3);
+        let e = parse::<C>("fet = 2", "node.toml").unwrap_err().to_string();
+        assert!(e.starts_with("node.toml: ") && e.contains("fet"), "{e}");
+        let e = read::<C>(Path::new("/nonexistent/node.toml")).unwrap_err();
+        assert!(matches!(e, ConfigFileError::Read { .. }), "{e}");
+        assert_eq!(
+            Invalid::range("feet", 0, "1..=8").to_string(),
+            "feet = 0: allowed 1..=8"
+        );
+    }
+}
