@@ -15,7 +15,7 @@
 //! The figures go to a report (`--json`), not to a timed test: the machines are noisy.
 
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::{Child, Command, ExitCode, Stdio};
 use std::time::{Duration, Instant};
 
@@ -29,7 +29,7 @@ use protocol::messages::{self, FootContact, Message, flags};
 use protocol::tactile::{ImageRef, Segmenter, Variant};
 
 use crate::cli::percentile;
-use crate::runtime::{BusSource, Signals};
+use protocol::bus::BusSource;
 
 const FRAME_US: u64 = 10_000;
 const STEP_US: u64 = 300_000;
@@ -126,21 +126,8 @@ pub fn run(a: BenchNodeArgs) -> Result<ExitCode> {
     match &a.iface {
         None => {
             let bus = InProcBus::new();
-            let signals = Signals::manual();
-            let node = {
-                let (bus, sig, cfg, model) = (bus.clone(), signals.clone(), cfg.clone(), model);
-                std::thread::Builder::new()
-                    .name("bench-node".into())
-                    .spawn(move || {
-                        crate::node_cmd::live(
-                            cfg,
-                            model,
-                            Path::new("(bench)"),
-                            BusSource::InProc(bus),
-                            sig,
-                        )
-                    })?
-            };
+            let node = node::NodeService::new(cfg.clone(), model)?
+                .start(BusSource::InProc(bus.clone()))?;
             let cpu = || task_cpu_ns("self", Some(&["receive", "pipeline", "send"]));
             let result = measure(
                 &mut bus.endpoint(),
@@ -151,18 +138,12 @@ pub fn run(a: BenchNodeArgs) -> Result<ExitCode> {
                 total_us,
                 &cpu,
             );
-            signals
-                .stop
-                .store(true, std::sync::atomic::Ordering::Relaxed);
-            let shared = match node.join() {
-                Ok(r) => r?,
-                Err(_) => anyhow::bail!("the node thread panicked"),
-            };
+            let stats = node.stop();
             let (m, cpu_ns) = result?;
             let mem = memory("self");
             let extra = serde_json::json!({
-                "node_rx_frames": shared.rx_frames.load(std::sync::atomic::Ordering::Relaxed),
-                "node_rx_dropped": shared.rx_dropped.load(std::sync::atomic::Ordering::Relaxed),
+                "node_rx_frames": stats.rx_frames,
+                "node_rx_dropped": stats.rx_dropped,
                 "bus_overruns": bus.overruns(),
             });
             report(

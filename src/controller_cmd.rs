@@ -13,7 +13,8 @@ use protocol::bus::CanBus;
 use protocol::ids::MessageKind;
 use protocol::messages::{self, Message};
 
-use crate::runtime::{Backoff, BusSource, Signals, after_bus_error, open_source_with_retry};
+use crate::runtime::Signals;
+use protocol::bus::{Backoff, BusSource, after_bus_error, open_with_retry};
 
 #[derive(clap::Args)]
 pub struct ControllerArgs {
@@ -78,8 +79,7 @@ pub fn run_on(
     let mut backoff = Backoff::default();
     let mut switches_logged = 0;
     'open: while !signals.stopping() {
-        let Some(mut bus) =
-            open_source_with_retry(&source, &signals.stop, "controller", &mut || {})
+        let Some(mut bus) = open_with_retry(&source, &signals.stop, "controller", &mut || {})
         else {
             break;
         };

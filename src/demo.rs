@@ -11,11 +11,11 @@ use anyhow::{Context, Result};
 use controller::{Controller, ControllerConfig};
 use node::classifier::train::{TrainOptions, train};
 use node::classifier::{Crop, Model};
-use node::{NodeConfig, StancePipeline};
+use node::{NodeConfig, NodeService, Output};
 use presrs::simdata::TrainingSet;
 use protocol::bus::{CanBus, InProcBus};
 use protocol::clock::ManualClock;
-use protocol::messages::{self, Message, NodeState, NodeStatus};
+use protocol::messages;
 use sim::runner::{SimConfig, SimRobot, Track};
 
 /// Where the demo keeps the model it trains on first run.
@@ -194,18 +194,12 @@ fn closed_loop_realtime(
     ctrl_cfg: &ControllerConfig,
     a: &DemoArgs,
 ) -> Result<(Vec<StepRow>, u64)> {
-    use crate::runtime::{BusSource, Signals};
+    use crate::runtime::Signals;
+    use protocol::bus::BusSource;
     let (steps, seed, show) = (a.steps, a.seed, !a.json);
     let bus = protocol::bus::InProcBus::new();
     let signals = Signals::manual();
-    let node = {
-        let (src, sig) = (BusSource::InProc(bus.clone()), signals.clone());
-        std::thread::Builder::new()
-            .name("node".into())
-            .spawn(move || {
-                crate::node_cmd::live(node_cfg, model, Path::new("(demo model)"), src, sig)
-            })?
-    };
+    let node = node::NodeService::new(node_cfg, model)?.start(BusSource::InProc(bus.clone()))?;
     let controller = {
         let (cfg, src, sig) = (
             ctrl_cfg.clone(),
@@ -243,8 +237,7 @@ fn closed_loop_realtime(
     let switches = controller
         .join()
         .map_err(|_| anyhow::anyhow!("the controller thread panicked"))??;
-    node.join()
-        .map_err(|_| anyhow::anyhow!("the node thread panicked"))??;
+    node.stop();
     let report = report?;
     let rows: Vec<StepRow> = report
         .steps
@@ -338,20 +331,18 @@ fn closed_loop_with_falls(
     // Lock-step simulated time: a refit lands at the step that asked for it, as in a replay.
     node_cfg.refit = node_cfg.refit.reproducible();
     let catalog = node_cfg.catalog()?;
-    let mut pipeline = StancePipeline::new(node_cfg, Some(model));
+    let mut node = NodeService::new(node_cfg, model)?;
     let mut ctrl = match p.controller {
         Some(c) => Some(Controller::new(c.clone(), &c.catalog()?)),
         None => None,
     };
     let mut rows: Vec<StepRow> = Vec::new();
     let mut t_us = 0u64;
-    let mut next_status = 0u64;
-    let mut heartbeat = 0u8;
     let zero = Duration::ZERO;
     let limit_us = (steps as u64 + 20) * 1_000_000;
     // Reused every millisecond: the loop allocates only when a step is logged.
     let mut sent = Vec::new();
-    let mut decided = Vec::new();
+    let mut said = Vec::new();
     let mut out = Vec::new();
     while rows.len() < steps && t_us < limit_us {
         t_us += 1000;
@@ -360,45 +351,36 @@ fn closed_loop_with_falls(
         for f in sent.drain(..) {
             sim_ep.send(&f).context("simulator send")?;
         }
-        // The node.
+        // The node: frames, then what is due by now (deadlines, the heartbeat).
         while let Some(st) = node_ep.recv(zero).context("node receive")? {
-            pipeline.on_frame(&st, &mut |foot, tc| decided.push((foot, tc)));
-            for (foot, tc) in decided.drain(..) {
-                if let Some(f) = pipeline.to_frame(foot, &tc) {
-                    node_ep.send(&f).context("node send")?;
-                }
-                let truth = robot
-                    .step_at(foot, t_us)
-                    .map(|s| s.terrain.name())
-                    .unwrap_or("?");
-                let (speed, _) = robot.speed_and_position(foot).unwrap_or((0.0, 0.0));
-                let row = StepRow {
-                    t_s: t_us as f64 * 1e-6,
-                    step: tc.step,
-                    truth: truth.to_string(),
-                    classified: catalog.describe(tc.terrain),
-                    confidence_pct: tc.confidence_pct,
-                    gait: robot.gait_in_effect(foot).unwrap_or(0),
-                    speed_m_s: speed,
-                };
-                if show {
-                    print_row(&row);
-                }
-                rows.push(row);
-            }
+            node.process(&st, &mut |o| said.push(o));
         }
-        if t_us >= next_status {
-            next_status = t_us + 100_000;
-            heartbeat = heartbeat.wrapping_add(1);
-            let st = NodeStatus {
-                heartbeat,
-                state: NodeState::Running,
-                damage_pct: pipeline.damage_pct(),
-                ..Default::default()
-            };
-            if let Some(f) = Message::NodeStatus(st).to_frame(&ids, 0) {
-                node_ep.send(&f).context("node status send")?;
+        node.tick(t_us, &mut |o| said.push(o));
+        for o in said.drain(..) {
+            if let Some(f) = node.frame(&o) {
+                node_ep.send(&f).context("node send")?;
             }
+            let Output::Class { foot, class: tc } = o else {
+                continue;
+            };
+            let truth = robot
+                .step_at(foot, t_us)
+                .map(|s| s.terrain.name())
+                .unwrap_or("?");
+            let (speed, _) = robot.speed_and_position(foot).unwrap_or((0.0, 0.0));
+            let row = StepRow {
+                t_s: t_us as f64 * 1e-6,
+                step: tc.step,
+                truth: truth.to_string(),
+                classified: catalog.describe(tc.terrain),
+                confidence_pct: tc.confidence_pct,
+                gait: robot.gait_in_effect(foot).unwrap_or(0),
+                speed_m_s: speed,
+            };
+            if show {
+                print_row(&row);
+            }
+            rows.push(row);
         }
         // The controller.
         while let Some(st) = ctrl_ep.recv(zero).context("controller receive")? {

@@ -18,7 +18,8 @@ use protocol::messages::{self, Message};
 use sim::faults::FaultParams;
 use sim::runner::{SimConfig, SimRobot, Track};
 
-use crate::runtime::{Backoff, BusSource, Signals, after_bus_error, open_source_with_retry};
+use crate::runtime::Signals;
+use protocol::bus::{Backoff, BusSource, after_bus_error, open_with_retry};
 
 #[derive(clap::Args)]
 pub struct SimArgs {
@@ -253,7 +254,7 @@ fn open_sim_bus(
     signals: &Signals,
     ids: &protocol::IdConfig,
 ) -> Option<Box<dyn CanBus>> {
-    let mut bus = open_source_with_retry(source, &signals.stop, "sim", &mut || {})?;
+    let mut bus = open_with_retry(source, &signals.stop, "sim", &mut || {})?;
     let kinds = [MessageKind::LegCommand, MessageKind::TerrainClass];
     if let Err(e) = bus.set_filters(&ids.filters(&kinds)) {
         // Unfiltered still works; it only costs the simulator time.

@@ -1,8 +1,8 @@
 //! Per-step terrain classification: micro-switch debounce, the stance, the sampled frame, the
 //! repair, the decision, and exactly one `TerrainClass` per step.
 //!
-//! [`StancePipeline::on_frame`] is the whole node on one thread: the live node and the replay
-//! both drive it. All times in the decision are the foot's own timestamps (FootContact and the
+//! [`StancePipeline::on_frame`] and [`StancePipeline::tick`] are the whole decision on one
+//! thread; [`crate::NodeService`] drives them live, in a replay and in the demo. All times in the decision are the foot's own timestamps (FootContact and the
 //! tactile header), so a replay decides exactly as the live run did. Nothing here allocates per
 //! frame: buffers are sized when the model is installed.
 
@@ -105,6 +105,9 @@ struct Foot {
     /// single-frame rule can decide on the nearest frame without waiting for the next one.
     last_image_us: Option<u32>,
     period_us: Option<u32>,
+    /// The last frame heard from this foot: its receive time and the foot's timestamp in it,
+    /// so [`StancePipeline::tick`] can tell the foot's time from the receiver's.
+    heard: Option<(u64, u32)>,
 }
 
 impl Foot {
@@ -128,6 +131,7 @@ impl Foot {
             asked: None,
             last_image_us: None,
             period_us: None,
+            heard: None,
         }
     }
 }
@@ -360,6 +364,7 @@ impl StancePipeline {
 
     fn on_contact(&mut self, foot: u8, fc: FootContact, out: &mut impl FnMut(u8, TerrainClass)) {
         let f = &mut self.feet[foot as usize];
+        f.heard = Some((self.now_rx_us, fc.timestamp_us));
         if !f.have_raw || fc.stance != f.raw {
             f.raw = fc.stance;
             f.raw_since = fc.timestamp_us;
@@ -408,6 +413,7 @@ impl StancePipeline {
             f.period_us = (1_000..=50_000).contains(&p).then_some(p).or(f.period_us);
         }
         f.last_image_us = Some(ts);
+        f.heard = Some((rx_us, ts));
         if !f.state || f.decided {
             return;
         }
@@ -464,6 +470,42 @@ impl StancePipeline {
         let next_further = f.period_us.is_some_and(|p| dt + p / 2 >= sample_us);
         if dt >= sample_us || next_further {
             self.decide(foot, out);
+        }
+    }
+
+    /// Decides every step whose sample deadline has passed by `now_rx_us` (the receiver's
+    /// clock, as in [`Stamped::t_us`]) when no nearer frame can still come: a frame lost right
+    /// after the best candidate would otherwise hold the decision until liftoff (~200 ms later).
+    ///
+    /// The deadline is in the foot's time: the sample time plus the best frame's distance from
+    /// it (a later frame can only be further), plus one frame period for the transfer of a
+    /// frame already captured. The foot's time is its last frame's timestamp advanced by the
+    /// receiver time since, so the decision replays exactly from a log's timestamps.
+    pub fn tick(&mut self, now_rx_us: u64, out: &mut impl FnMut(u8, TerrainClass)) {
+        let sample_us = self.cfg.sample_ms * 1000;
+        let w1 = self.cfg.window_ms[1] * 1000;
+        for foot in 0..self.feet.len() {
+            let f = &self.feet[foot];
+            let Some((rx, ts)) = f.heard else { continue };
+            if !f.state || f.decided || now_rx_us < rx {
+                continue;
+            }
+            let foot_now = ts.wrapping_add((now_rx_us - rx).min(u32::MAX as u64 / 2) as u32);
+            let dt = foot_now.wrapping_sub(f.touchdown_us);
+            if dt > 10_000_000 {
+                continue;
+            }
+            let margin = f.period_us.unwrap_or(10_000);
+            let due = if self.cfg.multi_frame {
+                f.used > 0 && dt >= w1 + margin
+            } else {
+                f.best_err
+                    .is_some_and(|e| dt >= sample_us.saturating_add(e).saturating_add(margin))
+            };
+            if due {
+                self.now_rx_us = now_rx_us;
+                self.decide(foot as u8, out);
+            }
         }
     }
 

@@ -6,9 +6,11 @@
 //! endpoint; an endpoint does not receive its own frames (SocketCAN's default).
 
 mod inproc;
+mod retry;
 mod socket;
 
 pub use inproc::{InProcBus, InProcEndpoint};
+pub use retry::{Backoff, BusSource, after_bus_error, open_with_retry};
 pub use socket::{SocketCanBus, interface_mtu};
 
 use std::time::Duration;

@@ -1,0 +1,323 @@
+//! The node service with a small fake foot (no simulator): one decision per step from the image
+//! nearest the sample time, a lost frame decided by `tick` at the deadline, "no sample" at
+//! liftoff, the heartbeat at `status_hz`, model checks, and the threaded node on a bus.
+
+use std::time::{Duration, Instant};
+
+use presrs_node::classifier::train::{Labelled, TrainOptions, train};
+use presrs_node::classifier::{ClassInfo, Crop, Model, PressureImage};
+use presrs_node::{NodeConfig, NodeService, Output, ServiceError};
+use protocol::bus::{BusSource, CanBus, InProcBus};
+use protocol::messages::{self, FootContact, Message, NodeState, TerrainClass, flags};
+use protocol::tactile::{ImageRef, Segmenter, Variant};
+use protocol::{CanFrame, IdConfig, Stamped, TerrainCatalog};
+use rand::{Rng, SeedableRng};
+
+/// 44x44 texture: `period` sets the contact-patch spacing (the terrain), with random offset,
+/// load and noise.
+fn texture(rng: &mut impl Rng, period: usize) -> Vec<u16> {
+    let (dy, dx) = (rng.random_range(0..period), rng.random_range(0..period));
+    let load = rng.random_range(0.8..1.2);
+    (0..44 * 44)
+        .map(|i| {
+            let (r, c) = (i / 44 + dy, i % 44 + dx);
+            let on = r % period < period / 2 && c % period < period / 2;
+            let v: f64 = if on { 150.0 * load } else { 10.0 * load } + rng.random_range(-8.0..8.0);
+            v.clamp(0.0, 255.0) as u16
+        })
+        .collect()
+}
+
+const PERIODS: [usize; 3] = [4, 7, 11];
+const NAMES: [&str; 3] = ["wood", "carpet", "grass"];
+
+fn model() -> Model {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(1);
+    let imgs: Vec<(PressureImage, usize)> = (0..3)
+        .flat_map(|k| (0..30).map(move |_| k))
+        .map(|k| {
+            (
+                PressureImage::new(44, 44, 8, texture(&mut rng, PERIODS[k])),
+                k,
+            )
+        })
+        .collect();
+    let data: Vec<Labelled> = imgs
+        .iter()
+        .map(|(image, class)| Labelled {
+            image,
+            class: *class,
+        })
+        .collect();
+    let classes: Vec<ClassInfo> = NAMES
+        .iter()
+        .map(|n| ClassInfo {
+            name: n.to_string(),
+            terrain_id: TerrainCatalog::paper().by_name(n).unwrap().id(),
+        })
+        .collect();
+    let opts = TrainOptions {
+        crop: "2,2,2,2".parse::<Crop>().unwrap(),
+        ..TrainOptions::default()
+    };
+    train(&data, &classes, &opts).unwrap().0
+}
+
+/// One foot that steps on a terrain: FootContact every 5 ms, a tactile image every 10 ms
+/// (captured 5 ms into each period, received 1 ms later), on the foot's own clock.
+struct FakeFoot {
+    ids: IdConfig,
+    seg: Segmenter,
+    rng: rand::rngs::StdRng,
+    seq: u8,
+}
+
+impl FakeFoot {
+    fn new() -> Self {
+        let ids = IdConfig::default();
+        Self {
+            seg: Segmenter::new(Variant::Fd, ids.clone()),
+            ids,
+            rng: rand::rngs::StdRng::seed_from_u64(7),
+            seq: 0,
+        }
+    }
+
+    /// The frames of a stance from `touchdown_us` lasting `stance_ms`, as (receive time,
+    /// frame); `keep_image(dt_ms)` drops images by their time after touchdown.
+    fn stance(
+        &mut self,
+        terrain: usize,
+        touchdown_us: u64,
+        stance_ms: u64,
+        keep_image: impl Fn(u64) -> bool,
+    ) -> Vec<Stamped> {
+        let mut out = Vec::new();
+        let contact = |stance: bool, t: u64, seq: u8| {
+            let m = Message::FootContact(FootContact {
+                stance,
+                seq,
+                timestamp_us: t as u32,
+            });
+            Stamped {
+                t_us: t + 200,
+                frame: m.to_frame(&self.ids, 0).unwrap(),
+            }
+        };
+        for ms in (0..stance_ms + 60).step_by(5) {
+            let t = touchdown_us + ms * 1000;
+            self.seq = self.seq.wrapping_add(1);
+            out.push(contact(ms < stance_ms, t, self.seq));
+            if ms % 10 == 5 && ms < stance_ms && keep_image(ms) {
+                let px = texture(&mut self.rng, PERIODS[terrain]);
+                let img = ImageRef {
+                    rows: 44,
+                    cols: 44,
+                    bits: 8,
+                    timestamp_us: t as u32,
+                    pixels: &px,
+                };
+                self.seg
+                    .frames(0, self.seq, &img, |f: CanFrame| {
+                        out.push(Stamped {
+                            t_us: t + 1000,
+                            frame: f,
+                        })
+                    })
+                    .unwrap();
+            }
+        }
+        out.sort_by_key(|s| s.t_us);
+        out
+    }
+}
+
+/// Drives the node in lock-step over `frames`, ticking every millisecond; returns each
+/// output with the time it came.
+fn lock_step(node: &mut NodeService, frames: &[Stamped], end_us: u64) -> Vec<(u64, Output)> {
+    let mut said = Vec::new();
+    let mut i = 0;
+    let start = frames.first().map_or(0, |f| f.t_us);
+    for t in (start..end_us).step_by(1000) {
+        while i < frames.len() && frames[i].t_us <= t {
+            node.process(&frames[i], &mut |o| said.push((t, o)));
+            i += 1;
+        }
+        node.tick(t, &mut |o| said.push((t, o)));
+    }
+    said
+}
+
+fn classes(said: &[(u64, Output)]) -> Vec<(u64, TerrainClass)> {
+    said.iter()
+        .filter_map(|&(t, o)| match o {
+            Output::Class { class, .. } => Some((t, class)),
+            Output::Status(_) => None,
+        })
+        .collect()
+}
+
+#[test]
+fn one_decision_per_step_from_the_image_nearest_the_sample_time() {
+    let mut node = NodeService::new(NodeConfig::default(), model()).unwrap();
+    let mut foot = FakeFoot::new();
+    let mut frames = Vec::new();
+    let terrains = [0, 1, 2, 2, 0, 1];
+    for (k, &terrain) in terrains.iter().enumerate() {
+        frames.extend(foot.stance(terrain, 1_000_000 + k as u64 * 400_000, 200, |_| true));
+    }
+    let said = lock_step(&mut node, &frames, 1_000_000 + 7 * 400_000);
+    let got = classes(&said);
+    assert_eq!(got.len(), terrains.len(), "{got:?}");
+    let catalog = TerrainCatalog::paper();
+    for (k, (&(t, tc), &terrain)) in got.iter().zip(&terrains).enumerate() {
+        assert_eq!(tc.step as usize, k + 1);
+        assert_eq!(
+            catalog.describe(tc.terrain),
+            NAMES[terrain],
+            "step {k}: {tc:?}"
+        );
+        assert_eq!(tc.flags & flags::NO_SAMPLE, 0);
+        // Images at 65 and 75 ms are equally near 70 ms: the first decides, on the frame
+        // that completes it (received 1 ms after capture).
+        let td = 1_000_000 + k as u64 * 400_000;
+        assert_eq!(t - td, 66_200, "step {k} decided at {} µs", t - td);
+    }
+}
+
+#[test]
+fn a_frame_lost_after_the_best_one_is_decided_at_the_deadline_not_at_liftoff() {
+    let mut node = NodeService::new(NodeConfig::default(), model()).unwrap();
+    let mut foot = FakeFoot::new();
+    // Images up to 45 ms only: 45 is the nearest to 70 that came; nothing nearer can come
+    // once the foot's clock passes 70 + 25 (+ one 10 ms period for a transfer in flight).
+    let frames = foot.stance(1, 1_000_000, 250, |ms| ms <= 45);
+    let said = lock_step(&mut node, &frames, 1_500_000);
+    let got = classes(&said);
+    assert_eq!(got.len(), 1, "{got:?}");
+    let (t, tc) = got[0];
+    assert_eq!(TerrainCatalog::paper().describe(tc.terrain), "carpet");
+    let after_touchdown_ms = (t - 1_000_000) as f64 / 1000.0;
+    assert!(
+        (105.0..=107.0).contains(&after_touchdown_ms),
+        "decided {after_touchdown_ms} ms after touchdown; liftoff is at 250"
+    );
+}
+
+#[test]
+fn a_stance_without_an_image_is_no_sample_at_liftoff() {
+    let mut node = NodeService::new(NodeConfig::default(), model()).unwrap();
+    let mut foot = FakeFoot::new();
+    let frames = foot.stance(0, 1_000_000, 200, |_| false);
+    let got = classes(&lock_step(&mut node, &frames, 1_400_000));
+    assert_eq!(got.len(), 1, "{got:?}");
+    let (_, tc) = got[0];
+    assert_ne!(tc.flags & flags::NO_SAMPLE, 0);
+    assert_eq!(tc.terrain, messages::TERRAIN_UNKNOWN);
+    assert_eq!(node.counters().no_sample, 1);
+}
+
+#[test]
+fn the_heartbeat_comes_at_status_hz_with_the_model_id() {
+    let cfg = NodeConfig {
+        status_hz: 20.0,
+        ..NodeConfig::default()
+    };
+    let m = model();
+    let id = m.id();
+    let mut node = NodeService::new(cfg, m).unwrap();
+    let said = lock_step(&mut node, &[], 1_000_000);
+    let status: Vec<_> = said
+        .iter()
+        .filter_map(|&(t, o)| match o {
+            Output::Status(s) => Some((t, s)),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(status.len(), 20);
+    for (k, (t, s)) in status.iter().enumerate() {
+        assert_eq!(*t, k as u64 * 50_000);
+        assert_eq!(s.heartbeat as usize, k + 1);
+        assert_eq!(s.state, NodeState::Running);
+        assert_eq!(s.model_id, id as u16);
+    }
+    // The heartbeat survives a clock that jumps back (another bus clock).
+    let mut again = Vec::new();
+    node.tick(10_000, &mut |o| again.push(o));
+    assert!(matches!(again[..], [Output::Status(_)]), "{again:?}");
+}
+
+#[test]
+fn a_model_outside_the_catalog_is_refused_and_a_bad_reload_keeps_the_model() {
+    let mut m = model();
+    m.classes[2].terrain_id = 20;
+    let err = NodeService::new(NodeConfig::default(), m).err().unwrap();
+    assert!(matches!(err, ServiceError::Mismatch(_)), "{err}");
+    assert!(err.to_string().contains("terrains file"), "{err}");
+
+    let m = model();
+    let id = m.id();
+    let mut node = NodeService::new(NodeConfig::default(), m).unwrap();
+    let dir = std::env::temp_dir().join(format!("presrs-service-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let bad = dir.join("bad.json");
+    std::fs::write(&bad, "{ not a model").unwrap();
+    let err = node.reload_model(&bad).err().unwrap();
+    assert!(err.to_string().contains("bad.json"), "{err}");
+    assert_eq!(node.model().map(Model::id), Some(id));
+}
+
+/// The same node on its own threads on a bus: a step's frames in, its TerrainClass out; a
+/// reload through the handle; a last NodeStatus that says Stopping.
+#[test]
+fn started_on_a_bus_it_answers_each_step_and_says_when_it_stops() {
+    let m = model();
+    let dir = std::env::temp_dir().join(format!("presrs-service-bus-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("model.json");
+    m.save(&path).unwrap();
+    let bus = InProcBus::new();
+    let mut robot = bus.endpoint();
+    let running = NodeService::new(NodeConfig::default(), m)
+        .unwrap()
+        .start(BusSource::InProc(bus.clone()))
+        .unwrap();
+    let ids = IdConfig::default();
+    let mut foot = FakeFoot::new();
+    // Waits (in wall time, generously: this checks function, not speed) for a message.
+    let wait_for = |robot: &mut dyn CanBus, want: &dyn Fn(&Message) -> bool| {
+        let end = Instant::now() + Duration::from_secs(20);
+        while Instant::now() < end {
+            if let Ok(Some(st)) = robot.recv(Duration::from_millis(10))
+                && let Ok(Some((_, m))) = messages::decode(&st.frame, &ids)
+                && want(&m)
+            {
+                return Some(m);
+            }
+        }
+        None
+    };
+    let is_status = |m: &Message| matches!(m, Message::NodeStatus(_));
+    assert!(wait_for(&mut robot, &is_status).is_some(), "no heartbeat");
+    for st in foot.stance(2, 1_000_000, 200, |_| true) {
+        robot.send(&st.frame).unwrap();
+    }
+    let class = wait_for(&mut robot, &|m| matches!(m, Message::TerrainClass(_)));
+    let Some(Message::TerrainClass(tc)) = class else {
+        panic!("no TerrainClass for the step");
+    };
+    assert_eq!(TerrainCatalog::paper().describe(tc.terrain), "grass");
+    assert!(running.reload_model(&dir.join("missing.json")).is_err());
+    assert_eq!(running.reload_model(&path).unwrap(), model().id());
+    assert!(running.is_running());
+    let stats = running.stop();
+    assert_eq!((stats.steps, stats.classified), (1, 1), "{stats:?}");
+    assert!(stats.tx_frames >= 2);
+    let mut last = None;
+    while let Ok(Some(st)) = robot.recv(Duration::from_millis(50)) {
+        if let Ok(Some((_, Message::NodeStatus(s)))) = messages::decode(&st.frame, &ids) {
+            last = Some(s.state);
+        }
+    }
+    assert_eq!(last, Some(NodeState::Stopping));
+}
