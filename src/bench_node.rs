@@ -6,7 +6,7 @@
 //! (the frame nearest 70 ms after touchdown) to receiving that step's TerrainClass; and the
 //! node's CPU time and resident memory over the measured window.
 //!
-//! - No `--iface`: the node's own receive/pipeline/send threads ([`crate::node_cmd::live`]) on an
+//! - No `--iface`: the node's own receive/pipeline/send threads ([`node::NodeService::start`]) on an
 //!   in-process bus in this process. CPU counts only those three threads; memory is the whole
 //!   process (node plus load generator), an upper bound for the node.
 //! - `--iface vcan0`: `presrs node` as a child process on that interface; CPU and memory are the
@@ -108,7 +108,7 @@ pub fn run(a: BenchNodeArgs) -> Result<ExitCode> {
         "--seconds {}: allowed (0, 3600]",
         a.seconds
     );
-    let model = crate::demo::load_or_train(a.model.as_deref())?;
+    let model = crate::cli::load_or_train(a.model.as_deref())?;
     anyhow::ensure!(
         model.input_rows == SIDE && model.input_cols == SIDE,
         "the model takes {}x{} images; the benchmark plays the PreSRS's 44x44",

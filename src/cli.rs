@@ -5,11 +5,13 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
+use node::NodeConfig;
 use node::classifier::dataset::{load_dataset, read_image, read_images, write_pgm};
 use node::classifier::train::{TrainOptions, train as train_model};
 use node::classifier::{Classifier, Crop, Kernels, Model, repair as repair_mod};
 use protocol::TerrainCatalog;
 use rand::SeedableRng;
+use sim::runner::Track;
 
 /// `--terrains FILE`: the lab's own terrains beside the paper's twelve (`protocol::terrain`).
 #[derive(clap::Args, Clone, Debug, Default)]
@@ -25,6 +27,51 @@ impl TerrainsArg {
     pub fn catalog(&self) -> Result<TerrainCatalog> {
         Ok(TerrainCatalog::load(self.terrains.as_deref())?)
     }
+}
+
+/// `--track FILE` (the default track without one).
+/// The `--track` file (its terrains named in `catalog`), or the default track (wood, grass,
+/// clay, carpet quarters).
+pub fn load_track(
+    path: Option<&std::path::Path>,
+    catalog: &protocol::TerrainCatalog,
+) -> Result<Track> {
+    match path {
+        Some(p) => {
+            let text = std::fs::read_to_string(p)
+                .with_context(|| format!("reading --track {}", p.display()))?;
+            Ok(Track::from_toml(&text, &p.display().to_string(), catalog)?)
+        }
+        None => Ok(Track::default()),
+    }
+}
+
+/// `--config FILE` of the node (defaults without one).
+pub fn load_node_config(path: Option<&Path>) -> Result<NodeConfig> {
+    let Some(p) = path else {
+        return Ok(NodeConfig::default());
+    };
+    NodeConfig::load(p).context("--config")
+}
+
+/// The model given, or the cached simulator model (trained on first run), saying which.
+pub(crate) fn load_or_train(model: Option<&Path>) -> Result<Model> {
+    let (m, source) = lab::model::load_or_train(model, || {
+        eprintln!("no model given: training one on simulated G1-G3 stances (first run only)...")
+    })
+    .with_context(|| match model {
+        Some(p) => format!("loading --model {}", p.display()),
+        None => "the demo model".into(),
+    })?;
+    match source {
+        lab::model::Source::Given => {}
+        lab::model::Source::Cached(p) => eprintln!("using the cached demo model {}", p.display()),
+        lab::model::Source::Trained(Ok(p)) => eprintln!("cached the model at {}", p.display()),
+        lab::model::Source::Trained(Err(e)) => {
+            eprintln!("could not cache the model ({e}); it will be trained again next time")
+        }
+    }
+    Ok(m)
 }
 
 pub fn train(

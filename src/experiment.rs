@@ -10,18 +10,14 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{Context, Result};
-use node::classifier::Model;
+use lab::score::confusion;
+use lab::simdata::TrainingSet;
+use lab::study::{dataset, train_on};
 use node::classifier::features::FeatureExtractor;
-use node::classifier::image::{Crop, PressureImage};
-use node::classifier::pwe::Classifier;
-use node::classifier::repair;
-use node::classifier::train::{TrainOptions, train};
+use node::classifier::image::Crop;
 use plotters::coord::{CoordTranslate, Shift};
 use plotters::prelude::*;
-use presrs::simdata::TrainingSet;
-use rand::SeedableRng;
-use rand::seq::SliceRandom;
-use sim::dataset::{Kind, Options, generate};
+use sim::dataset::Kind;
 use sim::terrain::Terrain;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -233,76 +229,6 @@ pub fn run(a: ExperimentArgs) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-fn dataset(kind: Kind, n: usize, gait: controller::Gait, seed: u64) -> TrainingSet {
-    let samples = generate(&Options {
-        kind,
-        n: Some(n),
-        gait,
-        damage_pct: 0.0,
-        sensor: sim::DEFAULT_SENSOR,
-        seed,
-    });
-    TrainingSet::from_samples(samples, &kind.terrains())
-}
-
-fn train_on(
-    set: &TrainingSet,
-    crop: Crop,
-    downsample: usize,
-    seed: u64,
-) -> Result<(Model, Vec<usize>)> {
-    train_with(set, crop, downsample, seed, false)
-}
-
-/// [`train_on`], optionally with the paper's load normalisation (intensity scaling).
-fn train_with(
-    set: &TrainingSet,
-    crop: Crop,
-    downsample: usize,
-    seed: u64,
-    normalize_load: bool,
-) -> Result<(Model, Vec<usize>)> {
-    let opts = TrainOptions {
-        crop,
-        downsample,
-        seed,
-        normalize_load,
-        ..Default::default()
-    };
-    let (m, split) = train(&set.labelled(), &set.classes, &opts).context("training")?;
-    Ok((m, split.test))
-}
-
-/// Confusion counts `[actual][detected]` (unknown counted as wrong) of `model` on `idx` of `set`.
-fn confusion(
-    model: &Model,
-    set: &TrainingSet,
-    idx: &[usize],
-    mut alter: impl FnMut(&mut PressureImage),
-    repair: bool,
-) -> Vec<Vec<usize>> {
-    let k = set.classes.len();
-    let mut c = vec![vec![0usize; k + 1]; k];
-    let mut cls = Classifier::new(model.clone());
-    for &i in idx {
-        let mut img = set.images[i].clone();
-        alter(&mut img);
-        let det = cls
-            .classify(&img.pixels, img.rows, img.cols, repair)
-            .ok()
-            .and_then(|d| d.class)
-            .unwrap_or(k);
-        c[set.labels[i]][det] += 1;
-    }
-    c
-}
-
-fn accuracy(c: &[Vec<usize>]) -> f64 {
-    let n: usize = c.iter().flatten().sum();
-    let ok: usize = (0..c.len()).map(|i| c[i][i]).sum();
-    if n == 0 { 0.0 } else { ok as f64 / n as f64 }
-}
-
 fn pct(x: f64) -> String {
     format!("{:.1}%", 100.0 * x)
 }
@@ -321,8 +247,9 @@ fn static_table(ctx: &Ctx) -> Result<String> {
             )
         }
     };
-    let (model, test) = train_on(set, crop, 1, ctx.seed)?;
+    let (model, test) = train_on(set, crop, 1, ctx.seed, false)?;
     let c = confusion(&model, set, &test, |_| {}, false);
+    let (accuracy_c, c) = (c.accuracy(), c.counts);
     let (wr, wc) = model.work_size().unwrap_or((0, 0));
     let mut md = String::from(if ctx.user.is_some() {
         "## Table 1: confusion matrix\n\n"
@@ -354,7 +281,7 @@ fn static_table(ctx: &Ctx) -> Result<String> {
     let _ = writeln!(
         md,
         "\nOverall accuracy: **{}** (paper, on the hardware: 99.7%).\n",
-        pct(accuracy(&c))
+        pct(accuracy_c)
     );
     // Figure 5: a feature vector per terrain.
     let path = ctx.figures.join("fig05-static-features.png");
@@ -404,8 +331,8 @@ fn resolution(ctx: &Ctx) -> Result<String> {
         let set = dataset(kind, n, controller::Gait::g2(), ctx.seed + 1);
         let mut accs = Vec::new();
         for ds in [1, 4] {
-            let (m, test) = train_on(&set, STATIC_CROP, ds, ctx.seed)?;
-            accs.push(accuracy(&confusion(&m, &set, &test, |_| {}, false)));
+            let (m, test) = train_on(&set, STATIC_CROP, ds, ctx.seed, false)?;
+            accs.push(confusion(&m, &set, &test, |_| {}, false).accuracy());
         }
         let _ = writeln!(
             md,
@@ -523,36 +450,9 @@ fn dynamic_features(ctx: &Ctx) -> Result<String> {
 /// Table 5: C_i trained on G_i, tested on every gait; Table 3: speeds.
 fn gaits(ctx: &Ctx) -> Result<String> {
     let n = if ctx.quick { 25 } else { 60 };
-    let gaits = controller::Gait::paper_gaits();
-    let sets: Vec<(TrainingSet, Vec<sim::dataset::Sample>)> = gaits
-        .iter()
-        .map(|g| {
-            let samples = generate(&Options {
-                kind: Kind::Dynamic,
-                n: Some(n),
-                gait: g.clone(),
-                damage_pct: 0.0,
-                sensor: sim::DEFAULT_SENSOR,
-                seed: ctx.seed + 20 + g.id as u64,
-            });
-            (
-                TrainingSet::from_samples(samples.clone(), &Kind::Dynamic.terrains()),
-                samples,
-            )
-        })
-        .collect();
-    let mut acc = vec![vec![0.0; 3]; 3]; // [tested][trained]
-    for (ci, (set, _)) in sets.iter().enumerate() {
-        let (m, test) = train_with(set, FOOT_CROP, 1, ctx.seed, NORMALIZE_DYNAMIC)?;
-        for (gj, (tset, _)) in sets.iter().enumerate() {
-            let idx: Vec<usize> = if gj == ci {
-                test.clone()
-            } else {
-                (0..tset.images.len()).collect()
-            };
-            acc[gj][ci] = accuracy(&confusion(&m, tset, &idx, |_| {}, false));
-        }
-    }
+    let sets = lab::study::per_gait_sets(n, ctx.seed);
+    let train_sets: Vec<&TrainingSet> = sets.iter().map(|(t, _)| t).collect();
+    let acc = lab::study::cross_gait_accuracy(&train_sets, FOOT_CROP, ctx.seed, NORMALIZE_DYNAMIC)?;
     let paper = [
         ["97.6%", "99.3%", "97.8%"],
         ["96.8%", "99.1%", "96.8%"],
@@ -602,12 +502,7 @@ fn gaits(ctx: &Ctx) -> Result<String> {
             .iter()
             .enumerate()
             .map(|(ti, t)| {
-                let v: Vec<f64> = samples
-                    .iter()
-                    .filter(|s| s.terrain == *t && s.speed_m_s > 0.0)
-                    .map(|s| s.speed_m_s)
-                    .collect();
-                let mean = v.iter().sum::<f64>() / v.len().max(1) as f64;
+                let mean = lab::study::mean_speed(samples, *t);
                 format!("{mean:.2} ({:.2})", paper3[gi][ti])
             })
             .collect();
@@ -621,9 +516,7 @@ fn gaits(ctx: &Ctx) -> Result<String> {
     Ok(md)
 }
 
-/// Accuracy against damage: (damage %, [without repair, the paper's filter, the node's
-/// history-based repair]).
-type Curves = Vec<(f64, [f64; 4])>;
+use lab::study::Curves;
 
 const ARMS: [&str; 4] = [
     "without repair",
@@ -632,8 +525,7 @@ const ARMS: [&str; 4] = [
     "history-based repair, model refitted to the dead lines",
 ];
 
-/// Stances in a row before the history repair calls a line dead (the node's default).
-const DEAD_AFTER_STANCES: u32 = 5;
+use lab::study::DEAD_AFTER_STANCES;
 
 fn damage(ctx: &Ctx) -> Result<(String, Curves)> {
     let n = if ctx.quick { 25 } else { 60 };
@@ -653,92 +545,15 @@ fn damage(ctx: &Ctx) -> Result<(String, Curves)> {
     // Without load normalisation: with it, a dead line also lowers the image's total and so
     // brightens every live sensel (0% damage: 89.4% against 94.4%, 50%: 73.3% against 78.7%
     // with the paper's filter, measured with `presrs experiment damage`).
-    let (model, test) = train_on(set, crop, 1, ctx.seed)?;
+    let (model, test) = train_on(set, crop, 1, ctx.seed, false)?;
     let levels: Vec<f64> = if ctx.quick {
         vec![0.0, 20.0, 50.0, 80.0]
     } else {
         (0..=18).map(|i| i as f64 * 5.0).collect()
     };
     let sensors = if ctx.quick { 2 } else { 8 };
-    let k = set.classes.len();
-    let mut cls = Classifier::new(model.clone());
-    let (wr, wc) = cls.work_size();
-    let mut curves = Vec::new();
-    for &d in &levels {
-        let mut correct = [0usize; 4];
-        let mut total = 0usize;
-        for sensor in 0..sensors {
-            // One damaged sensor: a fixed set of dead rows and columns of the 41x38 crop
-            // (eq. 6), walking the test stances in a random order. All three arms see the same
-            // damaged images.
-            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(
-                ctx.seed ^ ((d as u64 + 1) << 8) ^ ((sensor as u64) << 20),
-            );
-            let mut mask = PressureImage::new(wr, wc, 8, vec![1; wr * wc]);
-            if d > 0.0 {
-                repair::damage(&mut mask, d, &mut rng);
-            }
-            let mut order = test.clone();
-            order.shuffle(&mut rng);
-            let mut health = node::health::LineHealth::new(wr, wc);
-            // The refit arm: its own history (the same images, so the same dead lines) and
-            // the model refitted to the dead lines it has learned, as the node does.
-            let mut health_r = node::health::LineHealth::new(wr, wc);
-            let mut adapted: Option<(Classifier, Vec<bool>, Vec<bool>)> = None;
-            for &i in &order {
-                let img = &set.images[i];
-                let truth = set.labels[i];
-                let decide =
-                    |cls: &mut Classifier, arm: usize, health: &mut node::health::LineHealth| {
-                        if cls.prepare(&img.pixels, img.rows, img.cols).is_err() {
-                            return k;
-                        }
-                        for (p, m) in cls.work_mut().iter_mut().zip(&mask.pixels) {
-                            *p *= *m;
-                        }
-                        match arm {
-                            1 => {
-                                cls.repair_work();
-                            }
-                            2 => {
-                                health.observe(cls.work_mut(), DEAD_AFTER_STANCES);
-                                health.repair(cls.work_mut());
-                            }
-                            _ => {}
-                        }
-                        cls.decide().class.unwrap_or(k)
-                    };
-                for (arm, ok) in correct.iter_mut().enumerate().take(3) {
-                    if decide(&mut cls, arm, &mut health) == truth {
-                        *ok += 1;
-                    }
-                }
-                // Arm 3: observe on the model as trained, then decide with the refitted model
-                // when it was fitted for exactly the dead lines known now.
-                decide(&mut cls, 2, &mut health_r);
-                let (dr, dc) = (health_r.dead_rows(), health_r.dead_cols());
-                let stale = adapted.as_ref().is_none_or(|(_, r, c)| r != dr || c != dc);
-                if health_r.any_dead() && stale {
-                    adapted = node::classifier::train::refit(&model, dr, dc)
-                        .ok()
-                        .map(|m| (Classifier::new(m), dr.to_vec(), dc.to_vec()));
-                }
-                let label = match adapted.as_mut() {
-                    Some((a, r, c)) if r == dr && c == dc => {
-                        a.work_mut().copy_from_slice(cls.work_mut());
-                        a.decide().class.unwrap_or(k)
-                    }
-                    _ => cls.decide().class.unwrap_or(k),
-                };
-                if label == truth {
-                    correct[3] += 1;
-                }
-                total += 1;
-            }
-        }
-        let acc = correct.map(|c| c as f64 / total.max(1) as f64);
-        curves.push((d, acc));
-    }
+    let (wr, wc) = model.work_size().unwrap_or((0, 0));
+    let curves = lab::study::damage(&model, set, &test, &levels, sensors, ctx.seed);
     let path = ctx.figures.join("fig16-damage.png");
     let root = BitMapBackend::new(&path, (900, 540)).into_drawing_area();
     root.fill(&WHITE).map_err(pe)?;
@@ -815,21 +630,6 @@ fn damage(ctx: &Ctx) -> Result<(String, Curves)> {
     Ok((md, curves))
 }
 
-/// Largest damage (%) at which accuracy is still >= 90%, interpolated between levels.
-fn damage_at_90(curves: &[(f64, f64)]) -> f64 {
-    let mut last = 0.0;
-    for w in curves.windows(2) {
-        let ((d0, a0), (d1, a1)) = (w[0], w[1]);
-        if a0 >= 0.9 && a1 < 0.9 {
-            return d0 + (d1 - d0) * (a0 - 0.9) / (a0 - a1);
-        }
-        if a1 >= 0.9 {
-            last = d1;
-        }
-    }
-    last
-}
-
 fn lifespan(ctx: &Ctx, curves: &Curves) -> Result<String> {
     // Steps per minute and metres per step of the simulated hopper on G2 (wood).
     let g = controller::Gait::g2();
@@ -859,10 +659,10 @@ fn lifespan(ctx: &Ctx, curves: &Curves) -> Result<String> {
     let m_per_step = (h.x - x0) / steps.max(1) as f64;
     let arm = |k: usize| -> Vec<(f64, f64)> { curves.iter().map(|c| (c.0, c.1[k])).collect() };
     let (d0, d1, d2, d3) = (
-        damage_at_90(&arm(0)),
-        damage_at_90(&arm(1)),
-        damage_at_90(&arm(2)),
-        damage_at_90(&arm(3)),
+        lab::study::damage_at_90(&arm(0)),
+        lab::study::damage_at_90(&arm(1)),
+        lab::study::damage_at_90(&arm(2)),
+        lab::study::damage_at_90(&arm(3)),
     );
     let life = |d: f64| {
         let steps = d / DAMAGE_PCT_PER_STEP;
@@ -901,10 +701,11 @@ fn lifespan(ctx: &Ctx, curves: &Curves) -> Result<String> {
 
 fn adaptation(ctx: &Ctx) -> Result<String> {
     let steps = if ctx.quick { 30 } else { 120 };
-    let model = crate::demo::load_or_train(None)?;
+    let model = crate::cli::load_or_train(None)?;
     let track = sim::runner::Track::default();
     let cfg = controller::ControllerConfig::default();
-    let rows = crate::demo::closed_loop(&track, model, &cfg, steps, ctx.seed, false)?;
+    let lp = lab::LoopParams::with_controller(&cfg, steps, ctx.seed);
+    let rows = lab::closed_loop::run(&track, model, &lp, |_| {})?.rows;
     let terrains = ["wood", "grass", "clay", "carpet"];
     let ti = |s: &str| {
         terrains
@@ -1009,8 +810,8 @@ fn adaptation(ctx: &Ctx) -> Result<String> {
         legend(&mut c, SeriesLabelPosition::UpperRight)?;
     }
     root.present().map_err(pe)?;
-    let correct = rows.iter().filter(|r| r.truth == r.classified).count();
-    let switches = rows.windows(2).filter(|w| w[0].gait != w[1].gait).count();
+    let sum = lab::Summary::of(&rows, &cfg.terrain_gaits);
+    let (correct, switches) = (sum.correct, sum.switches);
     let mut md = String::from("## Gait adaptation on a mixed track\n\n");
     let _ = writeln!(
         md,

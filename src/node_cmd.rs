@@ -8,7 +8,7 @@ use std::time::Duration;
 
 use anyhow::{Context, Result};
 use node::classifier::Model;
-use node::{NodeConfig, NodeService, Output};
+use node::{NodeService, Output};
 use protocol::bus::BusSource;
 use protocol::messages::TerrainClass;
 
@@ -37,15 +37,8 @@ pub struct NodeArgs {
     pub terrains: crate::cli::TerrainsArg,
 }
 
-pub fn load_config(path: Option<&Path>) -> Result<NodeConfig> {
-    let Some(p) = path else {
-        return Ok(NodeConfig::default());
-    };
-    NodeConfig::load(p).context("--config")
-}
-
 pub fn run(a: NodeArgs) -> Result<ExitCode> {
-    let mut cfg = load_config(a.config.as_deref())?;
+    let mut cfg = crate::cli::load_node_config(a.config.as_deref())?;
     if a.terrains.terrains.is_some() {
         cfg.terrains = a.terrains.terrains.clone();
     }

@@ -9,17 +9,14 @@
 
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
-use protocol::bus::CanBus;
-use protocol::ids::MessageKind;
-use protocol::messages::{self, Message};
 use sim::faults::FaultParams;
-use sim::runner::{SimConfig, SimRobot, Track};
+use sim::runner::{SimConfig, Track};
+use sim::service::{RunOptions, SimReport};
 
 use crate::runtime::Signals;
-use protocol::bus::{Backoff, BusSource, after_bus_error, open_with_retry};
+use protocol::bus::BusSource;
 
 #[derive(clap::Args)]
 pub struct SimArgs {
@@ -59,57 +56,9 @@ pub struct SimArgs {
     pub terrains: crate::cli::TerrainsArg,
 }
 
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct StepRecord {
-    pub t_s: f64,
-    pub foot: u8,
-    /// The node's step counter from its TerrainClass.
-    pub step: u16,
-    pub truth: String,
-    pub classified: String,
-    pub confidence_pct: f64,
-    pub damage_pct: f64,
-    /// The gait the leg ran when the TerrainClass arrived.
-    pub gait: u8,
-    pub speed_m_s: f64,
-}
-
-/// The `--track` file (its terrains named in `catalog`), or the default track (wood, grass,
-/// clay, carpet quarters).
-pub fn load_track(
-    path: Option<&std::path::Path>,
-    catalog: &protocol::TerrainCatalog,
-) -> Result<Track> {
-    match path {
-        Some(p) => {
-            let text = std::fs::read_to_string(p)
-                .with_context(|| format!("reading --track {}", p.display()))?;
-            Ok(Track::from_toml(&text, &p.display().to_string(), catalog)?)
-        }
-        None => Ok(Track::default()),
-    }
-}
-
-/// The most robot time one pass of the simulator covers, µs: commands are read between passes.
-const MAX_LAG_US: u64 = 2_000;
-
-/// What one run of the simulator saw: the `--report` file's content.
-#[derive(Debug, serde::Serialize)]
-pub struct SimReport {
-    pub simulated_s: f64,
-    pub wall_s: f64,
-    pub touchdowns: usize,
-    /// Times a simulated hopper fell (and was set back on its feet).
-    pub falls: u64,
-    /// When, robot time (s).
-    pub fall_times_s: Vec<f64>,
-    pub send_errors: u64,
-    pub steps: Vec<StepRecord>,
-}
-
 pub fn run(a: SimArgs) -> Result<ExitCode> {
     let signals = Signals::install()?;
-    let track = load_track(a.track.as_deref(), &a.terrains.catalog()?)?;
+    let track = crate::cli::load_track(a.track.as_deref(), &a.terrains.catalog()?)?;
     let r = run_on(&a, track, BusSource::Iface(a.iface.clone()), &signals)?;
     let n = r.steps.len();
     let correct = r.steps.iter().filter(|s| s.truth == s.classified).count();
@@ -163,102 +112,17 @@ pub fn run_on(
         sensor: a.sensor,
         ..Default::default()
     };
-    let ids = cfg.ids.clone();
-    let catalog = a.terrains.catalog()?;
-    let mut robot = SimRobot::new(cfg, a.seed);
-    let start = Instant::now();
-    let mut records: Vec<StepRecord> = Vec::new();
-    let report =
-        |robot: &SimRobot, records: Vec<StepRecord>, t_us: u64, send_errors: u64| SimReport {
-            simulated_s: t_us as f64 * 1e-6,
-            wall_s: start.elapsed().as_secs_f64(),
-            touchdowns: robot.steps.len(),
-            falls: robot.falls.len() as u64,
-            fall_times_s: robot.falls.iter().map(|&t| t as f64 * 1e-6).collect(),
-            send_errors,
-            steps: records,
-        };
-    let Some(mut bus) = open_sim_bus(&source, signals, &ids) else {
-        return Ok(report(&robot, records, 0, 0));
+    let opts = RunOptions {
+        speed: a.speed,
+        duration_s: a.duration,
+        seed: a.seed,
     };
-    tracing::info!(iface = %source.label(), feet = a.feet, speed = a.speed, gait = %a.gait, "presrs sim running");
-    let end_us = a.duration.map(|d| (d * 1e6) as u64);
-    // Robot time given up because the machine could not keep up (see below).
-    let mut stretched_us = 0u64;
-    let mut out = Vec::with_capacity(128);
-    let mut backoff = Backoff::default();
-    let mut send_errors = 0u64;
-    let mut t_us = 0u64;
-    loop {
-        if signals.stopping() || end_us.is_some_and(|e| t_us >= e) {
-            break;
-        }
-        // Simulated time follows the wall clock; 1 ms steps, sleeping when ahead.
-        let target =
-            ((start.elapsed().as_secs_f64() * a.speed * 1e6) as u64).saturating_sub(stretched_us);
-        if target < t_us + 1000 {
-            std::thread::sleep(Duration::from_micros(300));
-            continue;
-        }
-        // A machine too slow for `--speed` (a debug build, emulation, a loaded CI runner):
-        // robot time slows down rather than jumping ahead to catch up. A jump would run the
-        // leg for tens of ms on one stale command and deliver the foot's frames in bursts; a
-        // real leg never pauses, and neither does its controller's view of it.
-        if target > t_us + MAX_LAG_US {
-            stretched_us += target - (t_us + MAX_LAG_US);
-        }
-        t_us = target.min(t_us + MAX_LAG_US);
-        robot.advance_to(t_us, &mut |f| out.push(f));
-        for f in out.drain(..) {
-            if let Err(e) = bus.send(&f) {
-                send_errors += 1;
-                // A lost frame is what a real foot would cause too; a dead bus is reopened.
-                if send_errors.is_power_of_two() {
-                    tracing::warn!("sim send: {e} ({send_errors} send errors so far)");
-                }
-                if matches!(e, protocol::BusError::Down { .. }) {
-                    after_bus_error("sim", &e, &mut backoff, &signals.stop);
-                    if let Some(b) = open_sim_bus(&source, signals, &ids) {
-                        bus = b;
-                    }
-                    break;
-                }
-            }
-        }
-        while let Ok(Some(st)) = bus.recv(Duration::ZERO) {
-            robot.on_frame(&st.frame);
-            if let Ok(Some((foot, Message::TerrainClass(tc)))) = messages::decode(&st.frame, &ids) {
-                let truth = robot.step_at(foot, t_us).map_or("?", |s| s.terrain.name());
-                let (speed, _) = robot.speed_and_position(foot).unwrap_or((0.0, 0.0));
-                records.push(StepRecord {
-                    t_s: t_us as f64 * 1e-6,
-                    foot,
-                    step: tc.step,
-                    truth: truth.to_string(),
-                    classified: catalog.describe(tc.terrain),
-                    confidence_pct: tc.confidence_pct,
-                    damage_pct: tc.damage_pct,
-                    gait: robot.gait_in_effect(foot).unwrap_or(0),
-                    speed_m_s: speed,
-                });
-            }
-        }
-    }
-    Ok(report(&robot, records, t_us, send_errors))
-}
-
-/// Opens the simulator's bus, passing it only what the simulator reads: the controller's
-/// LegCommand and the node's TerrainClass (to score it).
-fn open_sim_bus(
-    source: &BusSource,
-    signals: &Signals,
-    ids: &protocol::IdConfig,
-) -> Option<Box<dyn CanBus>> {
-    let mut bus = open_with_retry(source, &signals.stop, "sim", &mut || {})?;
-    let kinds = [MessageKind::LegCommand, MessageKind::TerrainClass];
-    if let Err(e) = bus.set_filters(&ids.filters(&kinds)) {
-        // Unfiltered still works; it only costs the simulator time.
-        tracing::warn!("sim: receive filters not set ({e}); reading every frame");
-    }
-    Some(bus)
+    let catalog = a.terrains.catalog()?;
+    Ok(sim::service::run(
+        cfg,
+        &opts,
+        source,
+        &catalog,
+        &signals.stop,
+    ))
 }

@@ -2,11 +2,13 @@
 //!
 //! - [`laws`]: eq. (4), the AER stance leg length, and eq. (5), the flight touchdown angle;
 //! - [`gait`]: gaits `G_i(omega, phi, c, beta_des)`, the paper's G1..G3 as defaults;
-//! - [`machine`]: the state machine that runs the laws and switches gait per terrain.
+//! - [`machine`]: the state machine that runs the laws and switches gait per terrain;
+//! - [`service`]: its loop on a bus, as `presrs controller` runs it.
 
 pub mod gait;
 pub mod laws;
 pub mod machine;
+pub mod service;
 
 pub use gait::Gait;
 pub use machine::{Controller, ControllerConfig};

@@ -388,6 +388,11 @@ impl RunningNode {
         Ok(id)
     }
 
+    /// The terrains the node reports.
+    pub fn catalog(&self) -> &TerrainCatalog {
+        &self.catalog
+    }
+
     /// The counters now.
     pub fn stats(&self) -> NodeStats {
         self.shared.snapshot()

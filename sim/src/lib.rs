@@ -5,6 +5,7 @@ pub mod field;
 pub mod fixed_gait;
 pub mod hopper;
 pub mod runner;
+pub mod service;
 pub mod skin;
 pub mod terrain;
 

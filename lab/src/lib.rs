@@ -1,0 +1,57 @@
+//! # presrs-lab: the closed loop and the scoring, as a library
+//!
+//! What a gait-adaptation experiment needs besides the robot: [`closed_loop::run`] puts the
+//! simulated hopper ([`sim`]), the terrain node ([`node::NodeService`]) and the gait controller
+//! ([`controller::Controller`]) on one in-process bus in lock-step simulated time, and
+//! [`score`] turns its steps into the numbers the paper reports (per-step accuracy, confusion,
+//! steps from a terrain change to its gait, speed per terrain and gait). The demo, the
+//! experiments and the benchmarks all score with these functions, so a number means the same
+//! thing wherever it is printed.
+//!
+//! ```no_run
+//! use presrs_lab::{closed_loop, model, score};
+//!
+//! let catalog = protocol::TerrainCatalog::paper();
+//! let track = sim::runner::Track::from_toml(
+//!     "diameter_m = 2.8\n[[segments]]\nterrain = \"wood\"\nlength_m = 2.0\n\
+//!      [[segments]]\nterrain = \"clay\"\nlength_m = 2.0\n",
+//!     "track.toml",
+//!     &catalog,
+//! )?;
+//! let (model, _) = model::load_or_train(None, || {})?;
+//! let cfg = controller::ControllerConfig::default();
+//! let run = closed_loop::run(&track, model, &closed_loop::LoopParams::with_controller(&cfg, 60, 1), |_| {})?;
+//! let s = score::Summary::of(&run.rows, &cfg.terrain_gaits);
+//! println!("{:.1}% of steps right, switches after {:?} steps", s.accuracy * 100.0, s.steps_to_switch);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+pub mod closed_loop;
+pub mod model;
+pub mod score;
+pub mod simdata;
+pub mod study;
+
+pub use closed_loop::{LoopParams, LoopRun};
+pub use score::{Confusion, Summary};
+pub use sim::service::StepRecord;
+
+/// Why a lab run could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum LabError {
+    /// The in-process bus.
+    #[error("in-process bus: {0}")]
+    Bus(#[from] protocol::BusError),
+    /// The node refused its config or model.
+    #[error(transparent)]
+    Node(#[from] node::ServiceError),
+    /// A terrains file.
+    #[error(transparent)]
+    Catalog(#[from] protocol::terrain::CatalogError),
+    /// Training a model.
+    #[error("training: {0}")]
+    Train(#[from] node::classifier::train::TrainError),
+    /// A model file.
+    #[error(transparent)]
+    Model(#[from] node::classifier::model::ModelError),
+}

@@ -1,0 +1,91 @@
+//! The model the demo, the experiments and the benchmarks use when none is given: trained once
+//! on simulated stances of the three gaits, then cached.
+
+use std::path::{Path, PathBuf};
+
+use node::classifier::train::{TrainOptions, train};
+use node::classifier::{Crop, Model};
+
+use crate::LabError;
+use crate::simdata::TrainingSet;
+
+/// Where the model trained on first run is kept: `$XDG_CACHE_HOME/presrs` (or `~/.cache`),
+/// named by the model format and simulator versions so that either change retrains.
+pub fn cache_path() -> PathBuf {
+    let base = std::env::var_os("XDG_CACHE_HOME")
+        .map(PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))
+        .unwrap_or_else(std::env::temp_dir);
+    base.join("presrs").join(format!(
+        "demo-model-v{}-sim{}.json",
+        node::classifier::model::MODEL_VERSION,
+        sim::SIM_VERSION
+    ))
+}
+
+/// A model for the dynamic terrains from simulator data of all three gaits.
+pub fn sim_model(seed: u64) -> Result<Model, LabError> {
+    let mut samples = Vec::new();
+    for (i, g) in controller::Gait::paper_gaits().into_iter().enumerate() {
+        let opts = sim::dataset::Options {
+            kind: sim::dataset::Kind::Dynamic,
+            n: Some(30),
+            gait: g,
+            damage_pct: 0.0,
+            // The sensor the demo's foot wears (SimConfig's default).
+            sensor: sim::DEFAULT_SENSOR,
+            seed: seed + i as u64,
+        };
+        samples.extend(sim::dataset::generate(&opts));
+    }
+    let set = TrainingSet::from_samples(samples, &sim::dataset::Kind::Dynamic.terrains());
+    // Load-normalised (the paper's intensity scaling): a gait switch or a terrain change
+    // changes the load at 70 ms for a few steps, and the texture should decide, not the load.
+    let opts = TrainOptions {
+        per_class: 45,
+        train: 30,
+        normalize_load: true,
+        crop: Crop {
+            top: 0,
+            bottom: 3,
+            left: 6,
+            right: 0,
+        },
+        seed,
+        ..Default::default()
+    };
+    Ok(train(&set.labelled(), &set.classes, &opts)?.0)
+}
+
+/// Where [`load_or_train`]'s model came from.
+#[derive(Debug)]
+pub enum Source {
+    /// The file given.
+    Given,
+    /// The cache, from an earlier run.
+    Cached(PathBuf),
+    /// Trained now and cached (`Ok(path)`), or trained now and not cached (why).
+    Trained(Result<PathBuf, String>),
+}
+
+/// The model at `path`, or without one the cached simulator model, trained and cached on
+/// first use (`before_training` runs first: training takes a while, say so).
+pub fn load_or_train(
+    path: Option<&Path>,
+    before_training: impl FnOnce(),
+) -> Result<(Model, Source), LabError> {
+    if let Some(p) = path {
+        return Ok((Model::load(p)?, Source::Given));
+    }
+    let cache = cache_path();
+    if let Ok(m) = Model::load(&cache) {
+        return Ok((m, Source::Cached(cache)));
+    }
+    before_training();
+    let m = sim_model(11)?;
+    if let Some(dir) = cache.parent() {
+        let _ = std::fs::create_dir_all(dir);
+    }
+    let saved = m.save(&cache).map(|()| cache).map_err(|e| e.to_string());
+    Ok((m, Source::Trained(saved)))
+}

@@ -1,0 +1,212 @@
+//! Scoring, one implementation for every report: per-step accuracy, the confusion matrix,
+//! steps from a terrain change to its gait, and speed per terrain and gait.
+
+use std::collections::BTreeMap;
+
+use node::classifier::{Classifier, Model, PressureImage};
+
+use crate::simdata::TrainingSet;
+use sim::service::StepRecord;
+
+/// Counts `[actual][detected]` over `k` classes; column `k` counts "unknown" (no class within
+/// the Parzen window), which is never right.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Confusion {
+    /// `counts[actual][detected]`, `detected == k` for unknown.
+    pub counts: Vec<Vec<usize>>,
+}
+
+impl Confusion {
+    /// An empty matrix for `k` classes.
+    pub fn new(k: usize) -> Self {
+        Self {
+            counts: vec![vec![0; k + 1]; k],
+        }
+    }
+
+    /// Counts one decision; `detected` `None` is unknown.
+    pub fn add(&mut self, actual: usize, detected: Option<usize>) {
+        let k = self.counts.len();
+        self.counts[actual][detected.filter(|&d| d < k).unwrap_or(k)] += 1;
+    }
+
+    /// Decisions counted.
+    pub fn total(&self) -> usize {
+        self.counts.iter().flatten().sum()
+    }
+
+    /// Share of decisions on the diagonal (0 when empty).
+    pub fn accuracy(&self) -> f64 {
+        let n = self.total();
+        let ok: usize = (0..self.counts.len()).map(|i| self.counts[i][i]).sum();
+        if n == 0 { 0.0 } else { ok as f64 / n as f64 }
+    }
+
+    /// Share of class `i`'s samples detected as `i` (0 when it has none).
+    pub fn recall(&self, i: usize) -> f64 {
+        let n: usize = self.counts[i].iter().sum();
+        if n == 0 {
+            0.0
+        } else {
+            self.counts[i][i] as f64 / n as f64
+        }
+    }
+}
+
+/// The confusion of `model` on the images `idx` of `set`, each changed by `alter` first (sensor
+/// damage), classified with or without the paper's repair filter.
+pub fn confusion(
+    model: &Model,
+    set: &TrainingSet,
+    idx: &[usize],
+    mut alter: impl FnMut(&mut PressureImage),
+    repair: bool,
+) -> Confusion {
+    let mut c = Confusion::new(set.classes.len());
+    let mut cls = Classifier::new(model.clone());
+    for &i in idx {
+        let mut img = set.images[i].clone();
+        alter(&mut img);
+        let det = cls
+            .classify(&img.pixels, img.rows, img.cols, repair)
+            .ok()
+            .and_then(|d| d.class);
+        c.add(set.labels[i], det);
+    }
+    c
+}
+
+/// A closed-loop run in the numbers the paper reports.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Summary {
+    /// Steps decided.
+    pub steps: usize,
+    /// Steps whose reported terrain was the true one.
+    pub correct: usize,
+    /// `correct / steps` (0 for no steps).
+    pub accuracy: f64,
+    /// Steps whose gait differs from the step before.
+    pub switches: usize,
+    /// For each terrain change whose terrain's gait was reached before the next change: steps
+    /// from the change to the first step in that gait. Terrains without a gait in the table,
+    /// and changes the run ended before resolving, are not counted.
+    pub steps_to_switch: Vec<usize>,
+    /// Mean speed (m/s) and steps, per (terrain, gait).
+    pub speeds: BTreeMap<(String, u8), (f64, usize)>,
+}
+
+impl Summary {
+    /// Scores `rows` against `terrain_gaits` (the controller's table: terrain name -> gait).
+    pub fn of(rows: &[StepRecord], terrain_gaits: &BTreeMap<String, u8>) -> Self {
+        let n = rows.len();
+        let correct = rows.iter().filter(|r| r.truth == r.classified).count();
+        let switches = rows.windows(2).filter(|w| w[0].gait != w[1].gait).count();
+        let mut steps_to_switch = Vec::new();
+        for i in 1..n {
+            if rows[i].truth == rows[i - 1].truth {
+                continue;
+            }
+            let Some(&want) = terrain_gaits.get(&rows[i].truth) else {
+                continue;
+            };
+            let reached = rows[i..]
+                .iter()
+                .take_while(|r| r.truth == rows[i].truth)
+                .position(|r| r.gait == want);
+            if let Some(d) = reached {
+                steps_to_switch.push(d);
+            }
+        }
+        let mut sums: BTreeMap<(String, u8), (f64, usize)> = BTreeMap::new();
+        for r in rows {
+            let e = sums.entry((r.truth.clone(), r.gait)).or_insert((0.0, 0));
+            e.0 += r.speed_m_s;
+            e.1 += 1;
+        }
+        let speeds = sums
+            .into_iter()
+            .map(|(key, (s, k))| (key, (s / k as f64, k)))
+            .collect();
+        Self {
+            steps: n,
+            correct,
+            accuracy: if n > 0 {
+                correct as f64 / n as f64
+            } else {
+                0.0
+            },
+            switches,
+            steps_to_switch,
+            speeds,
+        }
+    }
+
+    /// The largest of [`Summary::steps_to_switch`] (0 when none).
+    pub fn max_steps_to_switch(&self) -> usize {
+        self.steps_to_switch.iter().copied().max().unwrap_or(0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(truth: &str, classified: &str, gait: u8, speed: f64) -> StepRecord {
+        StepRecord {
+            t_s: 0.0,
+            foot: 0,
+            step: 0,
+            damage_pct: 0.0,
+            truth: truth.into(),
+            classified: classified.into(),
+            confidence_pct: 100.0,
+            gait,
+            speed_m_s: speed,
+        }
+    }
+
+    #[test]
+    fn steps_to_switch_counts_from_the_change_to_the_terrains_gait() {
+        let table: BTreeMap<String, u8> =
+            [("wood".into(), 3), ("clay".into(), 1), ("grass".into(), 2)].into();
+        let rows = [
+            row("wood", "wood", 3, 0.7),
+            row("clay", "wood", 3, 0.4),
+            row("clay", "clay", 3, 0.4),
+            row("clay", "clay", 1, 0.3),
+            row("grass", "grass", 1, 0.5),
+            row("grass", "grass", 1, 0.5),
+            // Ends before grass reached G2: not counted.
+            row("sand", "unknown", 1, 0.2),
+        ];
+        let s = Summary::of(&rows, &table);
+        assert_eq!(s.steps_to_switch, vec![2]);
+        assert_eq!(s.max_steps_to_switch(), 2);
+        assert_eq!((s.steps, s.correct, s.switches), (7, 5, 1));
+        assert!((s.accuracy - 5.0 / 7.0).abs() < 1e-12);
+        assert_eq!(s.speeds[&("clay".to_string(), 3)], (0.4, 2));
+        assert_eq!(s.speeds[&("grass".to_string(), 1)], (0.5, 2));
+    }
+
+    #[test]
+    fn a_change_already_in_its_gait_is_zero_steps() {
+        let table: BTreeMap<String, u8> = [("wood".into(), 3), ("carpet".into(), 3)].into();
+        let rows = [row("wood", "wood", 3, 0.7), row("carpet", "carpet", 3, 0.6)];
+        assert_eq!(Summary::of(&rows, &table).steps_to_switch, vec![0]);
+        assert_eq!(Summary::of(&[], &table).accuracy, 0.0);
+    }
+
+    #[test]
+    fn confusion_counts_unknown_as_wrong() {
+        let mut c = Confusion::new(2);
+        c.add(0, Some(0));
+        c.add(0, None);
+        c.add(1, Some(1));
+        c.add(1, Some(0));
+        assert_eq!(c.counts, vec![vec![1, 0, 1], vec![1, 1, 0]]);
+        assert_eq!(c.total(), 4);
+        assert_eq!(c.accuracy(), 0.5);
+        assert_eq!(c.recall(0), 0.5);
+        assert_eq!(Confusion::new(3).accuracy(), 0.0);
+    }
+}
