@@ -134,3 +134,79 @@ impl Faults {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+
+    fn rng() -> rand_chacha::ChaCha8Rng {
+        rand_chacha::ChaCha8Rng::seed_from_u64(5)
+    }
+
+    #[test]
+    fn damage_is_eq_6_the_share_of_sensels_on_dead_lines() {
+        // The paper's foot after 961 steps: 1 row and 2 columns of the 41x38 crop.
+        let mut f = Faults::new(FaultParams::default(), 41, 38, &mut rng());
+        assert_eq!(f.damage_pct(), 0.0);
+        f.kill(true, 3);
+        f.kill(false, 0);
+        f.kill(false, 7);
+        let want = 100.0 * (38 + 2 * 41 - 2) as f64 / (41 * 38) as f64;
+        assert!((f.damage_pct() - want).abs() < 1e-12, "{}", f.damage_pct());
+        assert!((7.0..8.0).contains(&f.damage_pct()));
+    }
+
+    #[test]
+    fn initial_damage_reaches_the_level_and_zeroes_exactly_the_dead_lines() {
+        let p = FaultParams {
+            initial_damage_pct: 30.0,
+            ..Default::default()
+        };
+        let f = Faults::new(p, 44, 44, &mut rng());
+        // Lines are whole: the level is reached, overshooting by at most one line (44 of 1936).
+        assert!((30.0..30.0 + 100.0 * 44.0 / 1936.0).contains(&f.damage_pct()));
+        let mut px = vec![100u16; 44 * 44];
+        f.apply(&mut px, 255, &mut rng());
+        for r in 0..44 {
+            for c in 0..44 {
+                let dead = f.dead_rows[r] || f.dead_cols[c];
+                assert_eq!(px[r * 44 + c] == 0, dead, "({r}, {c})");
+            }
+        }
+    }
+
+    #[test]
+    fn stuck_sensels_read_their_value_and_drift_grows_the_gain() {
+        let p = FaultParams {
+            stuck_pixels: 3,
+            drift_per_hour: 0.02,
+            ..Default::default()
+        };
+        let mut f = Faults::new(p, 44, 44, &mut rng());
+        let mut px = vec![0u16; 44 * 44];
+        f.apply(&mut px, 255, &mut rng());
+        for &(i, v) in &f.stuck {
+            assert_eq!(px[i], v);
+        }
+        f.on_time(3600.0);
+        assert!((f.drift_gain - 1.02).abs() < 1e-12);
+    }
+
+    #[test]
+    fn wear_adds_dead_lines_at_its_rate_and_none_without_one() {
+        let mut none = Faults::new(FaultParams::default(), 44, 44, &mut rng());
+        let mut r = rng();
+        for _ in 0..5000 {
+            none.on_step(&mut r);
+        }
+        assert_eq!(none.damage_pct(), 0.0);
+        let p = FaultParams {
+            dead_lines_per_1000_steps: 1000.0,
+            ..Default::default()
+        };
+        let mut always = Faults::new(p, 44, 44, &mut rng());
+        always.on_step(&mut r);
+        assert!(always.damage_pct() > 0.0);
+    }
+}

@@ -328,3 +328,80 @@ impl Hopper {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fixed_gait::FixedGait;
+    use crate::terrain::Physics;
+
+    /// Events of `secs` of hopping on `physics` with the gait held.
+    fn hop(gait: controller::Gait, physics: Physics, secs: f64) -> (Hopper, Vec<Event>) {
+        let mut h = Hopper::launch(HopperParams::default(), &gait);
+        let mut cmd = FixedGait::new(gait);
+        let ground = physics.ground();
+        let mut events = Vec::new();
+        while h.t < secs {
+            if let Some(e) = h.advance(0.001, ground, &mut cmd) {
+                match e {
+                    Event::Touchdown { beta, .. } => cmd.on_touchdown(beta),
+                    Event::Liftoff { beta, .. } => cmd.on_liftoff(beta),
+                    Event::Fell { .. } => {}
+                }
+                events.push(e);
+            }
+        }
+        (h, events)
+    }
+
+    #[test]
+    fn touchdown_and_liftoff_alternate_and_g2_does_not_fall() {
+        let (h, events) = hop(controller::Gait::g2(), Physics::Wood, 10.0);
+        assert!(
+            !events.iter().any(|e| matches!(e, Event::Fell { .. })),
+            "{events:?}"
+        );
+        let tds = events
+            .iter()
+            .filter(|e| matches!(e, Event::Touchdown { .. }))
+            .count();
+        // The paper's hopper steps about three times a second.
+        assert!((20..=45).contains(&tds), "{tds} touchdowns in 10 s");
+        for w in events.windows(2) {
+            let kinds = (
+                matches!(w[0], Event::Touchdown { .. }),
+                matches!(w[1], Event::Touchdown { .. }),
+            );
+            assert!(kinds.0 != kinds.1, "two of a kind in a row: {w:?}");
+        }
+        // Moving forward.
+        assert!(h.x > 2.0, "x = {}", h.x);
+    }
+
+    #[test]
+    fn the_foot_carries_load_only_in_stance() {
+        let gait = controller::Gait::g2();
+        let mut h = Hopper::launch(HopperParams::default(), &gait);
+        let mut cmd = FixedGait::new(gait);
+        let ground = Physics::Wood.ground();
+        let (mut in_stance, mut in_flight) = (0, 0);
+        while h.t < 3.0 {
+            match h.advance(0.001, ground, &mut cmd) {
+                Some(Event::Touchdown { beta, .. }) => cmd.on_touchdown(beta),
+                Some(Event::Liftoff { beta, .. }) => cmd.on_liftoff(beta),
+                _ => {}
+            }
+            if h.in_stance() {
+                in_stance += 1;
+                assert!(h.foot_load() >= 0.0);
+            } else {
+                in_flight += 1;
+                assert_eq!(h.foot_load(), 0.0, "load in flight at t = {}", h.t);
+            }
+        }
+        assert!(
+            in_stance > 100 && in_flight > 100,
+            "{in_stance} / {in_flight}"
+        );
+    }
+}

@@ -354,3 +354,74 @@ impl Skin {
         self.faults.apply(out, max as u16, rng);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::faults::FaultParams;
+    use rand::SeedableRng;
+
+    fn press(physics: Physics, footprint: Footprint, load_n: f64, seed: u64) -> Vec<u16> {
+        let mut skin = Skin::of_sensor(1, SkinParams::default(), FaultParams::default());
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let contact = skin.contact_on(physics, footprint, &mut rng);
+        let mut out = vec![0u16; 44 * 44];
+        skin.image(&contact, load_n, &mut rng, &mut out);
+        out
+    }
+
+    #[test]
+    fn the_foot_presses_only_inside_its_footprint_and_more_load_reads_higher() {
+        let light = press(Physics::Wood, Footprint::FOOT, 30.0, 1);
+        let heavy = press(Physics::Wood, Footprint::FOOT, 90.0, 1);
+        // Outside the foot (bottom 3 rows, first 6 columns) only the felt's spread and the
+        // noise above threshold read anything: well under 1% of the counts.
+        let outside: u64 = (0..44 * 44)
+            .filter(|i| i / 44 >= 41 || i % 44 < 6)
+            .map(|i| heavy[i] as u64)
+            .sum();
+        let sum = |v: &[u16]| v.iter().map(|&x| x as u64).sum::<u64>();
+        assert!(sum(&light) > 0);
+        assert!(
+            outside * 100 < sum(&heavy),
+            "{outside} of {} outside",
+            sum(&heavy)
+        );
+        assert!(
+            sum(&heavy) > 2 * sum(&light),
+            "{} vs {}",
+            sum(&heavy),
+            sum(&light)
+        );
+        assert!(heavy.iter().all(|&v| v <= 255), "8-bit counts");
+    }
+
+    #[test]
+    fn the_same_seed_renders_the_same_image_and_terrains_differ() {
+        let a = press(Physics::Carpet, Footprint::DIE, 60.0, 3);
+        assert_eq!(a, press(Physics::Carpet, Footprint::DIE, 60.0, 3));
+        assert_ne!(a, press(Physics::Carpet, Footprint::DIE, 60.0, 4));
+        assert_ne!(a, press(Physics::Wood, Footprint::DIE, 60.0, 3));
+    }
+
+    #[test]
+    fn a_sensors_dead_lines_read_zero_in_its_images() {
+        let faults = FaultParams {
+            initial_damage_pct: 20.0,
+            ..Default::default()
+        };
+        let mut skin = Skin::of_sensor(9, SkinParams::default(), faults);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+        let contact = skin.contact_on(Physics::Wood, Footprint::DIE, &mut rng);
+        let mut out = vec![0u16; 44 * 44];
+        skin.image(&contact, 80.0, &mut rng, &mut out);
+        let f = &skin.faults;
+        assert!(f.damage_pct() >= 20.0);
+        for (r, _) in f.dead_rows.iter().enumerate().filter(|(_, d)| **d) {
+            assert!(out[r * 44..(r + 1) * 44].iter().all(|&v| v == 0), "row {r}");
+        }
+        for (c, _) in f.dead_cols.iter().enumerate().filter(|(_, d)| **d) {
+            assert!((0..44).all(|r| out[r * 44 + c] == 0), "col {c}");
+        }
+    }
+}
