@@ -31,12 +31,15 @@ pub struct Gait {
 pub fn default_phi() -> f64 {
     std::f64::consts::FRAC_PI_2
 }
+/// Default leg-length amplitude c of eq. (4), m (fraction of the rest length).
 pub fn default_c() -> f64 {
     0.2
 }
+/// Default mean leg compression zeta_0 of eq. (4).
 pub fn default_zeta0() -> f64 {
     0.15
 }
+/// Default allowed deviation of zeta before the touchdown law corrects.
 pub fn default_zeta_dev() -> f64 {
     0.01
 }

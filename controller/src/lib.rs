@@ -1,3 +1,4 @@
+#![warn(missing_docs)]
 //! # presrs-controller: the hopper's control laws and per-terrain gait switching
 //!
 //! - [`laws`]: eq. (4), the AER stance leg length, and eq. (5), the flight touchdown angle;

@@ -20,15 +20,18 @@ use serde::{Deserialize, Serialize};
 use crate::gait::Gait;
 use crate::laws;
 
+/// The controller's config file: gaits, the terrain -> gait table and the switching policy.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ControllerConfig {
+    /// The gaits the controller may run (default: the paper's G1-G3).
     pub gaits: Vec<Gait>,
     /// Terrain name (the catalog's) -> gait id. A terrain not listed gets the safe gait.
     pub terrain_gaits: BTreeMap<String, u8>,
     /// A terrains file adding a lab's terrains to the paper's (see `protocol::terrain`), for
     /// `terrain_gaits` keys beyond the paper's twelve.
     pub terrains: Option<std::path::PathBuf>,
+    /// The gait at start.
     pub initial_gait: u8,
     /// Gait for unknown terrain and a lost node.
     pub safe_gait: u8,
@@ -184,6 +187,7 @@ impl ControllerConfig {
 pub const FOOT_CLOCK_HOLDOVER_US: u64 = 20_000;
 /// A stance outside these bounds (µs) was not a step of the gait (the paper's: ~140 ms).
 pub const MIN_STANCE_US: u64 = 40_000;
+/// A stance longer than this (µs) is taken for a stuck foot switch.
 pub const MAX_STANCE_US: u64 = 600_000;
 /// Touchdown and liftoff angles stay within this of the gait's beta_des, rad.
 pub const MAX_ANGLE_FROM_DESIRED: f64 = 0.35;
@@ -212,6 +216,7 @@ pub struct Controller {
     next_cmd_us: u64,
     next_status_us: u64,
     seq: u8,
+    /// Gait switches so far.
     pub switches: u64,
     /// Liftoffs after which eq. (5) was restarted from beta_des (an implausible step).
     pub gait_resets: u64,
@@ -257,10 +262,12 @@ impl Controller {
         }
     }
 
+    /// The gait in force.
     pub fn gait(&self) -> &Gait {
         &self.gait
     }
 
+    /// Why the gait in force was chosen.
     pub fn reason(&self) -> GaitReason {
         self.reason
     }
@@ -403,6 +410,7 @@ impl Controller {
         }
     }
 
+    /// The GaitStatus describing the gait in force.
     pub fn status(&self) -> GaitStatus {
         GaitStatus {
             gait: self.gait.id,

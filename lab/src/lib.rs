@@ -1,3 +1,4 @@
+#![warn(missing_docs)]
 //! # presrs-lab: the closed loop and the scoring, as a library
 //!
 //! What a gait-adaptation experiment needs besides the robot: [`closed_loop::run`] puts the

@@ -41,6 +41,7 @@ impl RefitMode {
     }
 }
 
+/// The node's config file (`/etc/presrs/node.toml`); every key has a default.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct NodeConfig {
@@ -50,6 +51,7 @@ pub struct NodeConfig {
     pub debounce_us: u32,
     /// Stance time of the sampled frame, ms (section 7.1: 70).
     pub sample_ms: u32,
+    /// How dead sensor lines are filled.
     pub repair: RepairMode,
     /// Stances in a row a line must stay dead before the history repair fills it.
     pub dead_after_stances: u32,
@@ -58,6 +60,7 @@ pub struct NodeConfig {
     pub refit: RefitMode,
     /// Classify every frame in `window_ms` and sum log-posteriors.
     pub multi_frame: bool,
+    /// The multi-frame window after touchdown, ms.
     pub window_ms: [u32; 2],
     /// Below this confidence the TerrainClass carries LOW_CONFIDENCE.
     pub low_confidence: f64,
@@ -68,6 +71,7 @@ pub struct NodeConfig {
     /// A terrains file adding a lab's terrains to the paper's (`protocol::terrain`): the model's
     /// classes are checked against this catalog at load.
     pub terrains: Option<std::path::PathBuf>,
+    /// The CAN identifiers.
     pub ids: IdConfig,
 }
 

@@ -28,6 +28,7 @@ pub struct LineHealth {
 }
 
 impl LineHealth {
+    /// Health of a `rows` x `cols` working image, all lines alive.
     pub fn new(rows: usize, cols: usize) -> Self {
         Self {
             rows,
@@ -66,14 +67,17 @@ impl LineHealth {
         observe_lines(&self.col_sums, &mut self.col_runs, &mut self.dead_cols, k);
     }
 
+    /// Rows taken for dead.
     pub fn dead_rows(&self) -> &[bool] {
         &self.dead_rows
     }
 
+    /// Columns taken for dead.
     pub fn dead_cols(&self) -> &[bool] {
         &self.dead_cols
     }
 
+    /// Any line taken for dead.
     pub fn any_dead(&self) -> bool {
         self.dead_rows.iter().chain(&self.dead_cols).any(|&d| d)
     }

@@ -1,3 +1,4 @@
+#![warn(missing_docs)]
 //! # presrs-node: terrain classification from a tactile foot
 //!
 //! The [`classifier`] implements the method of Shill et al. 2014 (PreSRS): a pressure image

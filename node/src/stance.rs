@@ -22,11 +22,17 @@ use crate::health::LineHealth;
 /// Counters per stage, for NodeStatus and the logs.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Counters {
+    /// Frames received.
     pub frames: u64,
+    /// Frames with our identifiers that did not decode.
     pub decode_errors: u64,
+    /// Tactile images reassembled.
     pub images: u64,
+    /// Touchdowns.
     pub steps: u64,
+    /// Steps that ended without an image.
     pub no_sample: u64,
+    /// Steps decided from an image.
     pub classified: u64,
     /// Models refitted to a foot's dead lines.
     pub refits: u64,
@@ -261,10 +267,12 @@ pub struct StancePipeline {
     feet: Vec<Foot>,
     /// Receive time of the frame being processed: a decision's latency ends here.
     now_rx_us: u64,
+    /// Counters per stage.
     pub counters: Counters,
 }
 
 impl StancePipeline {
+    /// A pipeline for `cfg`, with `model` installed (or none: every step "no sample").
     pub fn new(cfg: NodeConfig, model: Option<Model>) -> Self {
         let mut p = Self {
             reassembler: Reassembler::new(cfg.reassembly_timeout_us),
@@ -313,14 +321,17 @@ impl StancePipeline {
         }
     }
 
+    /// The installed model.
     pub fn model(&self) -> Option<&Model> {
         self.refitter.model.as_deref()
     }
 
+    /// The CAN identifiers.
     pub fn ids(&self) -> &IdConfig {
         &self.cfg.ids
     }
 
+    /// Tactile reassembly counters.
     pub fn reassembly_stats(&self) -> ReassemblyStats {
         self.reassembler.stats()
     }

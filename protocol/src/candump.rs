@@ -16,14 +16,18 @@ use crate::frame::{CanFrame, Stamped, make_id};
     "candump log line {line}: {msg} (expected `(SECONDS.MICROS) IFACE ID#DATA` or `ID##FLAGSDATA`)"
 )]
 pub struct LogError {
+    /// 1-based line number in the log.
     pub line: usize,
+    /// What is wrong with the line.
     pub msg: String,
 }
 
 /// One record of a log.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct LogRecord {
+    /// The interface column (`can0`).
     pub iface: String,
+    /// The frame with its log timestamp (µs).
     pub stamped: Stamped,
 }
 

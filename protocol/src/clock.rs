@@ -6,6 +6,7 @@ use std::time::Instant;
 
 /// A source of microsecond time. Monotonic: never goes backwards.
 pub trait Clock: Send + Sync {
+    /// Microseconds since the clock's origin.
     fn now_us(&self) -> u64;
 }
 
@@ -17,6 +18,7 @@ pub struct MonotonicClock {
 }
 
 impl MonotonicClock {
+    /// A clock reading 0 now.
     pub fn new() -> Self {
         Self {
             start: Instant::now(),
@@ -55,12 +57,15 @@ impl Clock for MonotonicClock {
 pub struct ManualClock(Arc<AtomicU64>);
 
 impl ManualClock {
+    /// A clock reading `start_us` until moved.
     pub fn new(start_us: u64) -> Self {
         Self(Arc::new(AtomicU64::new(start_us)))
     }
+    /// Moves the clock to `t` (µs); never backwards.
     pub fn set_us(&self, t: u64) {
         self.0.fetch_max(t, Ordering::SeqCst);
     }
+    /// Moves the clock forward by `dt` µs.
     pub fn advance_us(&self, dt: u64) {
         self.0.fetch_add(dt, Ordering::SeqCst);
     }

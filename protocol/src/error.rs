@@ -9,33 +9,56 @@ pub enum ConfigError {
         "{message}: base 0x{base:X} puts its last identifier at 0x{last:X}, above 0x{max:X}; \
          lower the base, or set `extended = true` for 29-bit identifiers"
     )]
+    /// A message kind's identifier range does not fit the identifier width.
     IdOutOfRange {
+        /// The message kind.
         message: &'static str,
+        /// Its base identifier.
         base: u32,
+        /// Its last identifier (base plus the largest foot).
         last: u32,
+        /// The largest identifier of the width (0x7FF or 0x1FFFFFFF).
         max: u32,
     },
     #[error("identifier ranges of {a} and {b} overlap; give one of them another base")]
-    IdOverlap { a: &'static str, b: &'static str },
+    /// Two message kinds' identifier ranges overlap.
+    IdOverlap {
+        /// One kind.
+        a: &'static str,
+        /// The other.
+        b: &'static str,
+    },
 }
 
 /// A frame whose payload does not decode as the message its identifier names.
 #[derive(Debug, Error, Clone, PartialEq, Eq)]
 pub enum DecodeError {
+    /// The payload is shorter than the message.
     #[error("{message} needs at least {need} data bytes, the frame has {got}")]
     TooShort {
+        /// The message kind.
         message: &'static str,
+        /// Bytes the message needs.
         need: usize,
+        /// Bytes the frame has.
         got: usize,
     },
+    /// A field holds a value the message does not define.
     #[error("{message}: field {field} has the invalid value {value}")]
     BadValue {
+        /// The message kind.
         message: &'static str,
+        /// The field.
         field: &'static str,
+        /// The value received.
         value: u32,
     },
     #[error("{message} was sent as a remote frame; it carries data")]
-    Remote { message: &'static str },
+    /// A remote (RTR) frame where data was expected.
+    Remote {
+        /// The message kind.
+        message: &'static str,
+    },
 }
 
 /// A failure of the CAN interface.
@@ -45,8 +68,11 @@ pub enum BusError {
         "cannot open CAN interface `{iface}`: {source}. Is it up? (`ip link show {iface}`; \
          for a virtual bus run `sudo ./vcan-setup.sh {iface}`)"
     )]
+    /// The interface cannot be opened.
     Open {
+        /// The interface.
         iface: String,
+        /// What the OS said.
         source: std::io::Error,
     },
     #[error(
@@ -54,19 +80,34 @@ pub enum BusError {
          (`ip link set {iface} mtu 72`, or for real hardware `ip link set {iface} type can bitrate \
          1000000 dbitrate 5000000 fd on`), or select the classic tactile variant"
     )]
-    FdNotSupported { iface: String },
+    /// The interface carries classic CAN only (MTU 16).
+    FdNotSupported {
+        /// The interface.
+        iface: String,
+    },
     #[error("interface `{iface}`: the transmit queue is full (bus off or no other node acking?)")]
-    TxQueueFull { iface: String },
+    /// The transmit queue is full.
+    TxQueueFull {
+        /// The interface.
+        iface: String,
+    },
+    /// The interface went down or was removed.
     #[error("interface `{iface}` went down or vanished: {source}")]
     Down {
+        /// The interface.
         iface: String,
+        /// What the OS said.
         source: std::io::Error,
     },
+    /// Any other socket error.
     #[error("CAN I/O on `{iface}`: {source}")]
     Io {
+        /// The interface.
         iface: String,
+        /// What the OS said.
         source: std::io::Error,
     },
+    /// Every other endpoint of the in-process bus is gone.
     #[error("the in-process bus has no other endpoint left")]
     Closed,
 }

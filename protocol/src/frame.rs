@@ -77,6 +77,7 @@ impl CanFrame {
         })
     }
 
+    /// The identifier (standard or extended).
     pub fn id(&self) -> Id {
         self.id
     }
@@ -86,30 +87,37 @@ impl CanFrame {
         id_raw(self.id)
     }
 
+    /// A 29-bit identifier.
     pub fn is_extended(&self) -> bool {
         matches!(self.id, Id::Extended(_))
     }
 
+    /// A CAN FD frame.
     pub fn is_fd(&self) -> bool {
         self.fd
     }
 
+    /// CAN FD with bit-rate switch.
     pub fn is_brs(&self) -> bool {
         self.brs
     }
 
+    /// A remote (RTR) frame: no data.
     pub fn is_remote(&self) -> bool {
         self.remote
     }
 
+    /// The data bytes.
     pub fn data(&self) -> &[u8] {
         &self.data[..self.len as usize]
     }
 
+    /// Number of data bytes.
     pub fn len(&self) -> usize {
         self.len as usize
     }
 
+    /// No data bytes.
     pub fn is_empty(&self) -> bool {
         self.len == 0
     }
@@ -196,7 +204,9 @@ impl embedded_can::Frame for CanFrame {
 /// a replay reproduces a live run exactly.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 pub struct Stamped {
+    /// Receive time, µs on the bus's clock (kernel timestamp on SocketCAN, the log's on replay).
     pub t_us: u64,
+    /// The frame.
     pub frame: CanFrame,
 }
 

@@ -16,11 +16,17 @@ pub const MAX_FEET: u8 = 8;
 /// Which message an identifier carries.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub enum MessageKind {
+    /// Controller -> leg set points.
     LegCommand,
+    /// Foot switch state.
     FootContact,
+    /// Leg angle and length.
     LegState,
+    /// Node -> all: the terrain of one step.
     TerrainClass,
+    /// Node heartbeat.
     NodeStatus,
+    /// Controller -> all: the gait in force.
     GaitStatus,
     /// Tactile image segments, CAN FD variant (64-byte frames).
     TactileFrame,
@@ -29,6 +35,7 @@ pub enum MessageKind {
 }
 
 impl MessageKind {
+    /// Every kind, in priority order (lowest identifier first).
     pub const ALL: [MessageKind; 8] = [
         MessageKind::LegCommand,
         MessageKind::FootContact,
@@ -45,6 +52,7 @@ impl MessageKind {
         !matches!(self, MessageKind::NodeStatus | MessageKind::GaitStatus)
     }
 
+    /// The message's name as in the DBC.
     pub fn name(self) -> &'static str {
         match self {
             MessageKind::LegCommand => "LegCommand",
@@ -66,6 +74,7 @@ impl MessageKind {
         }
     }
 
+    /// Sent as CAN FD frames.
     pub fn is_fd(self) -> bool {
         matches!(self, MessageKind::TactileFrame)
     }
@@ -76,14 +85,23 @@ impl MessageKind {
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct IdConfig {
+    /// 29-bit identifiers (CAN 2.0B); default 11-bit.
     pub extended: bool,
+    /// Base identifier of LegCommand (foot 0; foot i adds i).
     pub leg_command: u32,
+    /// Base identifier of FootContact.
     pub foot_contact: u32,
+    /// Base identifier of LegState.
     pub leg_state: u32,
+    /// Base identifier of TerrainClass.
     pub terrain_class: u32,
+    /// Identifier of NodeStatus.
     pub node_status: u32,
+    /// Base identifier of GaitStatus.
     pub gait_status: u32,
+    /// Base identifier of the CAN FD tactile segments.
     pub tactile_frame: u32,
+    /// Base identifier of the classic-CAN tactile segments.
     pub tactile_frame_classic: u32,
 }
 
@@ -160,6 +178,7 @@ impl IdConfig {
         }
     }
 
+    /// The base identifier of `kind` (foot 0's).
     pub fn base(&self, kind: MessageKind) -> u32 {
         match kind {
             MessageKind::LegCommand => self.leg_command,

@@ -1,3 +1,4 @@
+#![warn(missing_docs)]
 //! # presrs-protocol: the CAN protocol of the PreSRS terrain node
 //!
 //! A legged robot's foot carries PreSRS, a 44x44 tactile array sampled at 100 Hz. The foot

@@ -62,8 +62,10 @@ pub const PERCENT_SCALE: f64 = 0.5;
 /// Stance or flight.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum Phase {
+    /// Foot off the ground.
     #[default]
     Flight = 0,
+    /// Foot on the ground.
     Stance = 1,
 }
 
@@ -76,6 +78,7 @@ pub struct LegCommand {
     pub touchdown_angle_rad: f64,
     /// Gait in force (1..=3 for G1..G3; 0 none).
     pub gait: u8,
+    /// Stance or flight.
     pub phase: Phase,
     /// Wrapping counter, one per command.
     pub seq: u8,
@@ -97,7 +100,9 @@ pub struct FootContact {
 pub struct LegState {
     /// Leg angle beta from the vertical (rad), positive with the foot ahead of the hip.
     pub leg_angle_rad: f64,
+    /// Leg length, m.
     pub leg_length_m: f64,
+    /// Sender clock, µs, wrapping.
     pub timestamp_us: u32,
 }
 
@@ -133,17 +138,21 @@ pub struct TerrainClass {
 /// Node state in [`NodeStatus`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum NodeState {
+    /// Loading the model, opening the bus.
     #[default]
     Starting = 0,
+    /// Classifying.
     Running = 1,
     /// Running, but the bus reported errors or the interface is being reopened.
     Degraded = 2,
     /// No usable model loaded.
     NoModel = 3,
+    /// Shutting down: the last status.
     Stopping = 4,
 }
 
 impl NodeState {
+    /// The state with wire value `v`.
     pub fn from_u8(v: u8) -> Option<Self> {
         Some(match v {
             0 => Self::Starting,
@@ -160,12 +169,17 @@ impl NodeState {
 /// monitor takes differences (mod 256) between messages.
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
 pub struct NodeStatus {
+    /// Counts up by one per status (wrapping): a stuck value means a stuck node.
     pub heartbeat: u8,
+    /// The node's state.
     pub state: NodeState,
     /// Low 16 bits of the loaded model's content hash.
     pub model_id: u16,
+    /// Tactile transfers that failed their CRC (saturating).
     pub crc_failures: u8,
+    /// Tactile transfers never completed (saturating).
     pub incomplete_frames: u8,
+    /// Bus errors on receive or send (saturating).
     pub bus_errors: u8,
     /// Largest sensor damage over the feet, 0..=100 %.
     pub damage_pct: f64,
@@ -186,6 +200,7 @@ pub enum GaitReason {
 }
 
 impl GaitReason {
+    /// The reason with wire value `v`.
     pub fn from_u8(v: u8) -> Option<Self> {
         Some(match v {
             0 => Self::Initial,
@@ -204,13 +219,18 @@ pub struct GaitStatus {
     pub gait: u8,
     /// The terrain the gait was chosen for.
     pub terrain: u8,
+    /// Stance frequency omega of eq. (4), rad/s.
     pub omega_rad_s: f64,
+    /// Desired liftoff angle beta_des of eq. (5), rad.
     pub beta_des_rad: f64,
+    /// Why this gait.
     pub reason: GaitReason,
+    /// The foot whose terrain decided it.
     pub foot: u8,
 }
 
 impl LegCommand {
+    /// The 8 data bytes (layout in docs/protocol.md).
     pub fn encode(&self) -> [u8; 8] {
         let mut d = [0u8; 8];
         d[0..2].copy_from_slice(
@@ -223,6 +243,7 @@ impl LegCommand {
         d
     }
 
+    /// Decodes the data bytes; a short payload or an invalid field is an error.
     pub fn decode(d: &[u8]) -> Result<Self, DecodeError> {
         need("LegCommand", d, 7)?;
         let phase = match d[5] {
@@ -247,6 +268,7 @@ impl LegCommand {
 }
 
 impl FootContact {
+    /// The 8 data bytes (layout in docs/protocol.md).
     pub fn encode(&self) -> [u8; 8] {
         let mut d = [0u8; 8];
         d[0] = self.stance as u8;
@@ -255,6 +277,7 @@ impl FootContact {
         d
     }
 
+    /// Decodes the data bytes; a short payload or an invalid field is an error.
     pub fn decode(d: &[u8]) -> Result<Self, DecodeError> {
         need("FootContact", d, 6)?;
         if d[0] > 1 {
@@ -273,6 +296,7 @@ impl FootContact {
 }
 
 impl LegState {
+    /// The 8 data bytes (layout in docs/protocol.md).
     pub fn encode(&self) -> [u8; 8] {
         let mut d = [0u8; 8];
         d[0..2].copy_from_slice(&sat_i16(self.leg_angle_rad / ANGLE_SCALE_RAD).to_le_bytes());
@@ -283,6 +307,7 @@ impl LegState {
         d
     }
 
+    /// Decodes the data bytes; a short payload or an invalid field is an error.
     pub fn decode(d: &[u8]) -> Result<Self, DecodeError> {
         need("LegState", d, 8)?;
         Ok(Self {
@@ -294,6 +319,7 @@ impl LegState {
 }
 
 impl TerrainClass {
+    /// The 8 data bytes (layout in docs/protocol.md).
     pub fn encode(&self) -> [u8; 8] {
         let mut d = [0u8; 8];
         d[0..2].copy_from_slice(&self.step.to_le_bytes());
@@ -305,6 +331,7 @@ impl TerrainClass {
         d
     }
 
+    /// Decodes the data bytes; a short payload or an invalid field is an error.
     pub fn decode(d: &[u8]) -> Result<Self, DecodeError> {
         need("TerrainClass", d, 8)?;
         Ok(Self {
@@ -319,6 +346,7 @@ impl TerrainClass {
 }
 
 impl NodeStatus {
+    /// The 8 data bytes (layout in docs/protocol.md).
     pub fn encode(&self) -> [u8; 8] {
         let mut d = [0u8; 8];
         d[0] = self.heartbeat;
@@ -331,6 +359,7 @@ impl NodeStatus {
         d
     }
 
+    /// Decodes the data bytes; a short payload or an invalid field is an error.
     pub fn decode(d: &[u8]) -> Result<Self, DecodeError> {
         need("NodeStatus", d, 8)?;
         let state = NodeState::from_u8(d[1]).ok_or(DecodeError::BadValue {
@@ -351,6 +380,7 @@ impl NodeStatus {
 }
 
 impl GaitStatus {
+    /// The 8 data bytes (layout in docs/protocol.md).
     pub fn encode(&self) -> [u8; 8] {
         let mut d = [0u8; 8];
         d[0] = self.gait;
@@ -364,6 +394,7 @@ impl GaitStatus {
         d
     }
 
+    /// Decodes the data bytes; a short payload or an invalid field is an error.
     pub fn decode(d: &[u8]) -> Result<Self, DecodeError> {
         need("GaitStatus", d, 8)?;
         let reason = GaitReason::from_u8(d[6]).ok_or(DecodeError::BadValue {
@@ -386,17 +417,24 @@ impl GaitStatus {
 /// [`crate::tactile::Reassembler`] straight from the frame, so nothing is copied.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Message {
+    /// Controller -> leg set points.
     LegCommand(LegCommand),
+    /// Foot switch state.
     FootContact(FootContact),
+    /// Leg angle and length.
     LegState(LegState),
+    /// The terrain of one step.
     TerrainClass(TerrainClass),
+    /// Node heartbeat.
     NodeStatus(NodeStatus),
+    /// The gait in force.
     GaitStatus(GaitStatus),
     /// A tactile segment (FD or classic variant); read the payload from the frame.
     TactileSegment(crate::tactile::Variant),
 }
 
 impl Message {
+    /// The kind, which picks the identifier.
     pub fn kind(&self) -> MessageKind {
         match self {
             Message::LegCommand(_) => MessageKind::LegCommand,

@@ -78,6 +78,7 @@ impl Variant {
     pub fn frames_per_image(self, rows: usize, cols: usize, bits: u8) -> usize {
         self.first_data_index() + self.data_segments(rows * cols * (bits as usize / 8))
     }
+    /// The message kind (and so the identifier) of this variant's segments.
     pub fn message_kind(self) -> MessageKind {
         match self {
             Variant::Fd => MessageKind::TactileFrame,
@@ -95,7 +96,9 @@ impl Variant {
 /// Image geometry and integrity data, as carried by the header segment(s).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub struct Header {
+    /// Rows of sensels.
     pub rows: u8,
+    /// Columns of sensels.
     pub cols: u8,
     /// 8 or 16.
     pub bits: u8,
@@ -125,10 +128,15 @@ impl Header {
 /// A reassembled pressure image.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct TactileImage {
+    /// The foot that sent it.
     pub foot: u8,
+    /// The sender's image counter (wrapping).
     pub seq: u8,
+    /// Rows of sensels.
     pub rows: u8,
+    /// Columns of sensels.
     pub cols: u8,
+    /// Bits per sensel (8 or 16).
     pub bits: u8,
     /// Sender timestamp (µs, wrapping) from the header.
     pub timestamp_us: u32,
@@ -154,9 +162,11 @@ impl Default for TactileImage {
 }
 
 impl TactileImage {
+    /// Number of sensels.
     pub fn len(&self) -> usize {
         self.rows as usize * self.cols as usize
     }
+    /// No sensels.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }
@@ -199,12 +209,18 @@ pub enum SegmentError {
     #[error(
         "image of {rows}x{cols} at {bits} bits does not fit the tactile transfer (at most {MAX_PIXELS} pixels, 8 or 16 bits, {pixels} pixels given)"
     )]
+    /// The image's size, depth or pixel count cannot be sent.
     BadImage {
+        /// Rows given.
         rows: usize,
+        /// Columns given.
         cols: usize,
+        /// Bits given.
         bits: u8,
+        /// Pixels given.
         pixels: usize,
     },
+    /// The tactile identifier does not fit the identifier width.
     #[error("tactile identifier does not fit the configured identifier width")]
     BadId,
 }
@@ -212,23 +228,28 @@ pub enum SegmentError {
 /// A borrowed image to send: geometry, depth, sampling time and row-major pixels.
 #[derive(Clone, Copy, Debug)]
 pub struct ImageRef<'a> {
+    /// Rows of sensels.
     pub rows: usize,
+    /// Columns of sensels.
     pub cols: usize,
     /// 8 or 16.
     pub bits: u8,
     /// Sender clock at sampling, µs (wrapping).
     pub timestamp_us: u32,
+    /// Row-major sensel values.
     pub pixels: &'a [u16],
 }
 
 /// Cuts images into segment frames. Holds no buffers: each frame is built on the stack.
 #[derive(Clone, Debug)]
 pub struct Segmenter {
+    /// CAN FD or classic segments.
     pub variant: Variant,
     ids: IdConfig,
 }
 
 impl Segmenter {
+    /// A segmenter sending `variant` segments on `ids`.
     pub fn new(variant: Variant, ids: IdConfig) -> Self {
         Self { variant, ids }
     }
@@ -444,6 +465,7 @@ impl Reassembler {
         }
     }
 
+    /// Counters since creation.
     pub fn stats(&self) -> ReassemblyStats {
         self.stats
     }

@@ -21,12 +21,16 @@ pub const FRAME_PERIOD_S: f64 = crate::skin::FRAME_PERIOD_US as f64 * 1e-6;
 /// Which experiment.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Kind {
+    /// Presses of the static platform on the paper's twelve surfaces (section 5).
     Static,
+    /// Presses on the four sandpaper grits (section 6).
     Sandpaper,
+    /// Hopper stances on the four dynamic terrains (section 7).
     Dynamic,
 }
 
 impl Kind {
+    /// The surfaces of this experiment.
     pub fn physics(self) -> &'static [Physics] {
         match self {
             Kind::Static => &Physics::STATIC,
@@ -64,27 +68,36 @@ impl Kind {
 /// One generated image with what produced it.
 #[derive(Clone, Debug)]
 pub struct Sample {
+    /// The terrain pressed.
     pub terrain: Terrain,
+    /// Rows of sensels.
     pub rows: usize,
+    /// Columns of sensels.
     pub cols: usize,
+    /// Row-major counts.
     pub pixels: Vec<u16>,
     /// Load on the sensor when the image was taken, N.
     pub load_n: f64,
     /// Dynamic set: stance duration (s) and forward speed (m/s) of the step.
     pub stance_s: f64,
+    /// Forward speed of the step, m/s (dynamic set).
     pub speed_m_s: f64,
 }
 
 /// Options for [`generate`].
 #[derive(Clone, Debug)]
 pub struct Options {
+    /// Which experiment.
     pub kind: Kind,
     /// Images per terrain; `None`: the paper's counts.
     pub n: Option<usize>,
+    /// The gait the hopper runs (dynamic set).
     pub gait: Gait,
+    /// Sensor damage from the start, percent of sensels (eq. 6).
     pub damage_pct: f64,
     /// Serial of the sensor that records the images (see [`Skin::of_sensor`]).
     pub sensor: u64,
+    /// Seed: the same options give the same images.
     pub seed: u64,
 }
 

@@ -19,6 +19,7 @@ pub struct FaultParams {
     pub stuck_pixels: usize,
     /// Sensels with extra noise (standard deviation `noisy_sd` counts).
     pub noisy_pixels: usize,
+    /// Standard deviation of the noisy sensels' extra noise, counts.
     pub noisy_sd: f64,
     /// Gain drift, fraction per hour of sensor time (piezoresistive creep).
     pub drift_per_hour: f64,
@@ -27,18 +28,26 @@ pub struct FaultParams {
 /// The sensor's faults at one moment.
 #[derive(Clone, Debug)]
 pub struct Faults {
+    /// What the faults grow from.
     pub params: FaultParams,
+    /// Rows of sensels.
     pub rows: usize,
+    /// Columns of sensels.
     pub cols: usize,
+    /// Dead rows.
     pub dead_rows: Vec<bool>,
+    /// Dead columns.
     pub dead_cols: Vec<bool>,
+    /// Stuck sensels: index and the value they read.
     pub stuck: Vec<(usize, u16)>,
+    /// Noisy sensels.
     pub noisy: Vec<usize>,
     /// Multiplicative gain from drift.
     pub drift_gain: f64,
 }
 
 impl Faults {
+    /// The faults of a new `rows` x `cols` sensor: stuck and noisy sensels drawn, the initial damage applied.
     pub fn new(params: FaultParams, rows: usize, cols: usize, rng: &mut impl Rng) -> Self {
         let mut f = Self {
             rows,

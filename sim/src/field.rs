@@ -6,13 +6,18 @@ use rand_distr::{Distribution, Normal, StandardNormal};
 /// A row-major field of `rows x cols` cells of `cell_mm` mm.
 #[derive(Clone, Debug)]
 pub struct Field {
+    /// Rows.
     pub rows: usize,
+    /// Columns.
     pub cols: usize,
+    /// Cell size, mm.
     pub cell_mm: f64,
+    /// Row-major values.
     pub v: Vec<f32>,
 }
 
 impl Field {
+    /// A field of zeros.
     pub fn zeros(rows: usize, cols: usize, cell_mm: f64) -> Self {
         Self {
             rows,

@@ -8,6 +8,7 @@ use crate::hopper::LegCommands;
 /// Eq. (4) in stance and eq. (5) at every liftoff, for one gait.
 #[derive(Clone, Debug)]
 pub struct FixedGait {
+    /// The gait held.
     pub gait: Gait,
     /// Touchdown angle for the coming touchdown, rad.
     pub beta_td: f64,
@@ -16,6 +17,7 @@ pub struct FixedGait {
 }
 
 impl FixedGait {
+    /// Commands for `gait`.
     pub fn new(gait: Gait) -> Self {
         let b = gait.beta_des;
         Self {
@@ -33,10 +35,12 @@ impl FixedGait {
         self.beta_td = next.clamp(0.0, 1.0);
     }
 
+    /// At touchdown with the leg at `beta`, rad: the stance law restarts.
     pub fn on_touchdown(&mut self, beta: f64) {
         self.last_beta_td = beta;
     }
 
+    /// Changes the gait from the next stance on.
     pub fn set_gait(&mut self, gait: Gait) {
         self.gait = gait;
     }

@@ -20,6 +20,7 @@
 
 use serde::{Deserialize, Serialize};
 
+/// Gravity, m/s^2.
 pub const G: f64 = 9.81;
 
 /// Mechanical parameters of the hopper.
@@ -62,7 +63,9 @@ pub struct Ground {
 /// Stance or flight, with what the phase needs.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Phase {
+    /// In the air.
     Flight,
+    /// On the ground.
     Stance {
         /// Foot position on the ground, m.
         foot_x: f64,
@@ -76,12 +79,29 @@ pub enum Phase {
 pub enum Event {
     /// The foot touched the ground at `t` (s) with the leg at `beta` (rad, foot ahead) and the
     /// body moving at `vx`, `vy` (m/s).
-    Touchdown { t: f64, beta: f64, vx: f64, vy: f64 },
+    Touchdown {
+        /// Time, s.
+        t: f64,
+        /// Leg angle, rad.
+        beta: f64,
+        /// Forward velocity, m/s.
+        vx: f64,
+        /// Vertical velocity, m/s.
+        vy: f64,
+    },
     /// The foot left the ground at `t` with the leg at `beta` (rad, foot behind: the paper's
     /// beta_LO).
-    Liftoff { t: f64, beta: f64 },
+    Liftoff {
+        /// Time, s.
+        t: f64,
+        /// Leg angle, rad.
+        beta: f64,
+    },
     /// The body touched the ground: the hopper fell.
-    Fell { t: f64 },
+    Fell {
+        /// Time, s.
+        t: f64,
+    },
 }
 
 /// The commands the leg follows.
@@ -97,12 +117,19 @@ pub trait LegCommands {
 /// The hopper's state.
 #[derive(Clone, Debug)]
 pub struct Hopper {
+    /// Mass, leg and spring.
     pub params: HopperParams,
+    /// Time, s.
     pub t: f64,
+    /// Body position along the track, m.
     pub x: f64,
+    /// Body height, m.
     pub y: f64,
+    /// Forward velocity, m/s.
     pub vx: f64,
+    /// Vertical velocity, m/s.
     pub vy: f64,
+    /// Stance or flight.
     pub phase: Phase,
     /// Normal force on the foot at the last step, N (0 in flight).
     pub foot_force: f64,
@@ -138,6 +165,7 @@ impl Hopper {
         Self::new(params, gait.zeta0 + 0.02, v0)
     }
 
+    /// The foot is on the ground.
     pub fn in_stance(&self) -> bool {
         matches!(self.phase, Phase::Stance { .. })
     }

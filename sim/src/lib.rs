@@ -1,3 +1,4 @@
+#![warn(missing_docs)]
 //! # presrs-sim: the simulated hopper and foot
 pub mod dataset;
 pub mod faults;

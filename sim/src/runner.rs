@@ -58,7 +58,9 @@ impl Segment {
 /// The paper's circular track (2.8 m diameter) made of terrain segments.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Track {
+    /// Diameter of the circle, m (the paper's: 2.8).
     pub diameter_m: f64,
+    /// The terrains in order along the track.
     pub segments: Vec<Segment>,
 }
 
@@ -148,6 +150,7 @@ impl Track {
         })
     }
 
+    /// Length of the track's centre line, m.
     pub fn length(&self) -> f64 {
         self.segments.iter().map(|s| s.length_m).sum()
     }
@@ -173,17 +176,22 @@ impl Track {
     }
 }
 
+/// The simulated robot: track, legs, sensors, identifiers.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SimConfig {
+    /// The track it runs on.
     pub track: Track,
     /// The gait held without a controller (G1..G3).
     pub gait: u8,
+    /// Legs, each with its foot sensor (foot ids 0..feet).
     pub feet: u8,
+    /// Sensor faults of every foot.
     pub faults: FaultParams,
     /// Serial of foot 0's sensor; foot `i` wears `sensor + i` (see `Skin::of_sensor`).
     pub sensor: u64,
     /// Commands older than this are ignored and the fixed gait takes over, ms.
     pub command_timeout_ms: u64,
+    /// The CAN identifiers.
     pub ids: IdConfig,
 }
 
@@ -251,12 +259,17 @@ struct Leg {
 /// What the simulator knows about a step (ground truth for the demo and tests).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StepTruth {
+    /// The foot.
     pub foot: u8,
+    /// Touchdown time, µs.
     pub touchdown_us: u64,
+    /// The terrain under the foot.
     pub terrain: Terrain,
+    /// Forward speed of the step, m/s.
     pub speed_m_s: f64,
 }
 
+/// The simulated robot: each leg a hopper with its foot sensor, talking CAN frames. [`SimRobot::advance_to`] moves it in time and emits what it sends; [`SimRobot::on_frame`] hears commands.
 pub struct SimRobot {
     cfg: SimConfig,
     legs: Vec<Leg>,
@@ -274,6 +287,7 @@ pub struct SimRobot {
 const FRAME_US: u64 = FRAME_PERIOD_US;
 
 impl SimRobot {
+    /// A robot for `cfg`; `seed` fixes the terrains' random patches and the sensor noise.
     pub fn new(cfg: SimConfig, seed: u64) -> Self {
         let rng = ChaCha8Rng::seed_from_u64(seed);
         let gait = Gait::by_name(&cfg.gait.to_string()).unwrap_or_else(Gait::g2);
@@ -318,6 +332,7 @@ impl SimRobot {
         }
     }
 
+    /// Simulated time, µs.
     pub fn now_us(&self) -> u64 {
         self.now_us
     }

@@ -29,7 +29,9 @@ pub const FRAME_PERIOD_US: u64 = 10_000;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SkinParams {
+    /// Rows of sensels.
     pub rows: usize,
+    /// Columns of sensels.
     pub cols: usize,
     /// Sensel pitch, mm (TekScan 5051: 1.27).
     pub pitch_mm: f64,
@@ -37,6 +39,7 @@ pub struct SkinParams {
     pub oversample: usize,
     /// Pressure at full scale, kPa (0-138 kPa to 0-255).
     pub full_scale_kpa: f64,
+    /// Bits per sensel.
     pub bits: u8,
     /// Felt compliance as a Winkler stiffness, kPa/mm (3 mm of 99 % void felt).
     pub felt_kpa_mm: f64,
@@ -76,13 +79,20 @@ impl Default for SkinParams {
 pub enum Footprint {
     /// The static platform's die: a square `margin` sensels inside the array's edge (the paper's
     /// die is 5.08 mm smaller than the sensor: 2 sensels each side).
-    Die { margin: usize },
+    Die {
+        /// Sensels between the die's edge and the array's.
+        margin: usize,
+    },
     /// The hopper's elliptical foot base, inscribed in rows `r0..r0+h` and cols `c0..c0+w`
     /// (the paper: 41 x 38 sensels, 52.1 x 48.3 mm).
     Ellipse {
+        /// First row.
         r0: usize,
+        /// First column.
         c0: usize,
+        /// Rows spanned.
         h: usize,
+        /// Columns spanned.
         w: usize,
     },
 }
@@ -96,6 +106,7 @@ impl Footprint {
         h: 41,
         w: 38,
     };
+    /// The static platform's die (section 5): 2 sensels inside each edge.
     pub const DIE: Footprint = Footprint::Die { margin: 2 };
 
     /// Squared normalised distance from the footprint's centre: 0 at the centre, 1 on its edge
@@ -156,8 +167,10 @@ pub struct Contact {
 
 /// One PreSRS sensor: its fixed gain pattern, its faults and its scratch buffers.
 pub struct Skin {
+    /// Geometry and material.
     pub params: SkinParams,
     gain: Vec<f32>,
+    /// Its faults.
     pub faults: Faults,
     pressure: Field,
     scratch: Vec<f32>,
@@ -168,6 +181,7 @@ fn series(a: f64, b: f64) -> f64 {
 }
 
 impl Skin {
+    /// A sensor with `faults`; `rng` draws its gain pattern.
     pub fn new(params: SkinParams, faults: Faults, rng: &mut impl Rng) -> Self {
         let n = params.rows * params.cols;
         let g = normal(1.0, params.gain_sd);

@@ -22,17 +22,29 @@ use crate::hopper::Ground;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Physics {
+    /// Polished aluminium plate.
     Aluminum,
+    /// Loose sand.
     Sand,
+    /// Pine needles.
     PineNeedles,
+    /// Gravel.
     Gravel,
+    /// Sandpaper, grit 220.
     Sandpaper220,
+    /// Sandpaper, grit 150.
     Sandpaper150,
+    /// Sandpaper, grit 100.
     Sandpaper100,
+    /// Sandpaper, grit 60.
     Sandpaper60,
+    /// Wood board.
     Wood,
+    /// Carpet.
     Carpet,
+    /// Clay.
     Clay,
+    /// Grass.
     Grass,
 }
 
@@ -57,6 +69,7 @@ pub struct Surface {
 }
 
 impl Physics {
+    /// Every surface the simulator has.
     pub const ALL: [Physics; 12] = [
         Physics::Aluminum,
         Physics::Sand,

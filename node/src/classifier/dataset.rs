@@ -10,8 +10,11 @@ use super::image::PressureImage;
 #[derive(Clone, Debug, thiserror::Error, PartialEq, Eq)]
 #[error("{path}{}: {msg}", line.map(|l| format!(":{l}")).unwrap_or_default())]
 pub struct ImageError {
+    /// The file.
     pub path: String,
+    /// The line, for text formats.
     pub line: Option<usize>,
+    /// What is wrong.
     pub msg: String,
 }
 
@@ -55,6 +58,7 @@ pub fn read_image(path: &Path) -> Result<PressureImage, ImageError> {
         .ok_or_else(|| err(path, None, "no image in file"))
 }
 
+/// Reads a PGM image (P2 text or P5 binary, 8 or 16 bit).
 pub fn parse_pgm(b: &[u8], path: &Path) -> Result<PressureImage, ImageError> {
     // Header tokens: magic, width, height, maxval; '#' comments to end of line.
     let mut pos = 0;
@@ -177,6 +181,7 @@ pub fn parse_pgm(b: &[u8], path: &Path) -> Result<PressureImage, ImageError> {
     Ok(PressureImage::new(h, w, bits_for(maxval), px))
 }
 
+/// Reads a CSV image: one sensel row per line, comma separated.
 pub fn parse_csv(b: &[u8], path: &Path) -> Result<PressureImage, ImageError> {
     let text = std::str::from_utf8(b).map_err(|_| err(path, None, "not UTF-8 text"))?;
     let mut px = Vec::new();
@@ -225,6 +230,7 @@ pub fn parse_csv(b: &[u8], path: &Path) -> Result<PressureImage, ImageError> {
     Ok(PressureImage::new(rows, cols, bits_for(max), px))
 }
 
+/// Reads a TekScan ASCII export (`.asf`): every frame in the file.
 pub fn parse_asf(b: &[u8], path: &Path) -> Result<Vec<PressureImage>, ImageError> {
     let text = String::from_utf8_lossy(b);
     let mut lines = text
@@ -346,18 +352,24 @@ pub fn write_pgm(img: &PressureImage, path: &Path) -> std::io::Result<()> {
 /// One image of a dataset.
 #[derive(Clone, Debug)]
 pub struct Sample {
+    /// The image's class, an index into [`Dataset::classes`].
     pub class: usize,
+    /// The file it came from.
     pub path: PathBuf,
     /// Frame index within a multi-frame file.
     pub frame: usize,
+    /// The image.
     pub image: PressureImage,
 }
 
+/// A dataset directory as `presrs train` reads it: `DIR/<class>/<images>`.
 #[derive(Clone, Debug, Default)]
 pub struct Dataset {
     /// The dataset's directory.
     pub root: PathBuf,
+    /// Class names: the folder names, sorted.
     pub classes: Vec<String>,
+    /// Every image read.
     pub samples: Vec<Sample>,
     /// Files skipped with `skip_bad`, with why.
     pub bad: Vec<ImageError>,

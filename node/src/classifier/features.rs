@@ -71,10 +71,12 @@ impl FeatureExtractor {
         }
     }
 
+    /// Pixels of the images this extractor takes.
     pub fn n_pixels(&self) -> usize {
         self.n_pixels
     }
 
+    /// Length of the feature vector (N/2 + 1).
     pub fn feature_len(&self) -> usize {
         self.n / 2 + 1
     }

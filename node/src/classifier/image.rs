@@ -7,9 +7,13 @@ use serde::{Deserialize, Serialize};
 /// (44x44 -> 41x38).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Crop {
+    /// Rows removed at the top.
     pub top: usize,
+    /// Rows removed at the bottom.
     pub bottom: usize,
+    /// Columns removed at the left.
     pub left: usize,
+    /// Columns removed at the right.
     pub right: usize,
 }
 
@@ -53,15 +57,20 @@ impl Crop {
 /// taken for damage, never filled by the repair filter.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct PressureImage {
+    /// Rows of sensels.
     pub rows: usize,
+    /// Columns of sensels.
     pub cols: usize,
     /// 8 or 16: the depth to write the image back with.
     pub bits: u8,
+    /// Row-major sensel values.
     pub pixels: Vec<u16>,
+    /// Sensels that are not part of the sensor, if any.
     pub outside: Option<Vec<bool>>,
 }
 
 impl PressureImage {
+    /// An image of `pixels` (`rows * cols`, row-major) at `bits` depth.
     pub fn new(rows: usize, cols: usize, bits: u8, pixels: Vec<u16>) -> Self {
         debug_assert_eq!(pixels.len(), rows * cols);
         Self {
@@ -73,14 +82,17 @@ impl PressureImage {
         }
     }
 
+    /// An 8-bit image of zeros.
     pub fn zeros(rows: usize, cols: usize) -> Self {
         Self::new(rows, cols, 8, vec![0; rows * cols])
     }
 
+    /// The sensel at row `r`, column `c`.
     pub fn get(&self, r: usize, c: usize) -> u16 {
         self.pixels[r * self.cols + c]
     }
 
+    /// Sensel `i` is not part of the sensor.
     pub fn is_outside(&self, i: usize) -> bool {
         self.outside.as_ref().is_some_and(|m| m[i])
     }

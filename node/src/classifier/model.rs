@@ -13,8 +13,10 @@ pub const MODEL_VERSION: u32 = 1;
 /// Most classes a model may have (bounds the per-decision buffers).
 pub const MAX_CLASSES: usize = 16;
 
+/// One class of a model: its name and the terrain id it sends.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct ClassInfo {
+    /// The terrain's catalog name.
     pub name: String,
     /// Terrain id sent in `TerrainClass`.
     pub terrain_id: u8,
@@ -51,14 +53,19 @@ pub enum CatalogMismatch {
     },
 }
 
+/// A trained classifier: crop, FFT length, PCA and the Parzen samples, with each class's terrain.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Model {
+    /// Model file format version ([`MODEL_VERSION`]).
     pub version: u32,
+    /// The classes, in the order of the class indices.
     pub classes: Vec<ClassInfo>,
     /// Size of the images the model takes (before crop).
     pub input_rows: usize,
+    /// Width of the images the model takes (before crop).
     pub input_cols: usize,
+    /// Crop applied before the features.
     pub crop: Crop,
     /// 1 = full resolution.
     pub downsample: usize,
@@ -75,12 +82,15 @@ pub struct Model {
     pub pca_matrix: Vec<f32>,
     /// Stored samples P, m x h row-major (training and validation images, projected).
     pub samples: Vec<f32>,
+    /// Class index of each stored sample.
     pub sample_classes: Vec<usize>,
     /// Gaussian kernel width sigma, chosen on the validation split.
     pub kernel_width: f64,
     /// Log-density below which a decision is "unknown".
     pub unknown_threshold: f64,
+    /// Content hashes of the training images (to keep test images out).
     pub train_hashes: Vec<String>,
+    /// Content hashes of the validation images.
     pub val_hashes: Vec<String>,
     /// The stored samples' images after crop and downsampling, so that the node can refit the
     /// model to its sensor's dead lines (see `train::refit`). Absent in older model files.
@@ -102,26 +112,49 @@ pub struct StoredImages {
 /// A model file that cannot be used.
 #[derive(Debug, thiserror::Error)]
 pub enum ModelError {
+    /// The file cannot be read.
     #[error("cannot read model {path}: {source}")]
     Io {
+        /// The file.
         path: String,
+        /// What the OS said.
         source: std::io::Error,
     },
     #[error("model {path} is not a PreSRS model file (JSON): {msg}")]
-    Parse { path: String, msg: String },
+    /// The file is not a model's JSON.
+    Parse {
+        /// The file.
+        path: String,
+        /// What the parser said.
+        msg: String,
+    },
     #[error(
         "model {path} has format version {found}; this build reads version {MODEL_VERSION}. Retrain it with `presrs train`"
     )]
-    Version { path: String, found: u64 },
+    /// The file has another format version.
+    Version {
+        /// The file.
+        path: String,
+        /// Its version.
+        found: u64,
+    },
     #[error("model {path} is inconsistent: {msg}. Retrain it with `presrs train`")]
-    Invalid { path: String, msg: String },
+    /// The file's fields do not fit together.
+    Invalid {
+        /// The file.
+        path: String,
+        /// What does not fit.
+        msg: String,
+    },
 }
 
 impl Model {
+    /// Length of the feature vector (N/2 + 1).
     pub fn feature_len(&self) -> usize {
         self.n_fft / 2 + 1
     }
 
+    /// Stored samples (training and validation images).
     pub fn n_samples(&self) -> usize {
         self.sample_classes.len()
     }
@@ -270,6 +303,7 @@ impl Model {
         Ok(())
     }
 
+    /// Reads and checks a model file.
     pub fn load(path: &Path) -> Result<Self, ModelError> {
         let p = path.display().to_string();
         let text = std::fs::read_to_string(path).map_err(|source| ModelError::Io {
@@ -279,6 +313,7 @@ impl Model {
         Self::from_json(&text, &p)
     }
 
+    /// Parses and checks a model from its JSON; `path` names it in errors.
     pub fn from_json(text: &str, path: &str) -> Result<Self, ModelError> {
         let v: serde_json::Value = serde_json::from_str(text).map_err(|e| ModelError::Parse {
             path: path.into(),
@@ -308,6 +343,7 @@ impl Model {
         Ok(m)
     }
 
+    /// Writes the model as JSON.
     pub fn save(&self, path: &Path) -> Result<(), ModelError> {
         let text = serde_json::to_string(self).map_err(|e| ModelError::Parse {
             path: path.display().to_string(),

@@ -22,6 +22,7 @@ pub struct Decision {
     pub log_density: f64,
     /// Log posterior per class (first `n_classes` entries).
     pub log_posteriors: [f64; MAX_CLASSES],
+    /// Classes of the model (entries of `log_posteriors` in use).
     pub n_classes: usize,
 }
 
@@ -29,12 +30,17 @@ pub struct Decision {
 #[derive(Debug, thiserror::Error, PartialEq, Eq)]
 #[error("image is {rows}x{cols} but the model takes {want_rows}x{want_cols} images")]
 pub struct SizeMismatch {
+    /// Rows of the image given.
     pub rows: usize,
+    /// Columns of the image given.
     pub cols: usize,
+    /// Rows the model takes.
     pub want_rows: usize,
+    /// Columns the model takes.
     pub want_cols: usize,
 }
 
+/// A model ready to classify: planned FFT and scratch buffers sized once, so that a decision allocates nothing.
 pub struct Classifier {
     model: Model,
     fx: FeatureExtractor,
@@ -135,6 +141,7 @@ impl Classifier {
         }
     }
 
+    /// The model it classifies with.
     pub fn model(&self) -> &Model {
         &self.model
     }

@@ -11,15 +11,22 @@ use super::features::{FeatureExtractor, fft_len};
 use super::image::{Crop, PressureImage};
 use super::model::{ClassInfo, MAX_CLASSES, MODEL_VERSION, Model, StoredImages};
 
+/// How to train: the paper's split and the preprocessing.
 #[derive(Clone, Debug)]
 pub struct TrainOptions {
+    /// Images drawn per class (section 7.2: 20).
     pub per_class: usize,
+    /// Of those, images to train on; the rest validate the kernel width (13 of 20).
     pub train: usize,
+    /// Crop before the features.
     pub crop: Crop,
+    /// Downsampling factor after the crop (1 = full resolution).
     pub downsample: usize,
+    /// Scale each image to the training set's mean total intensity (the paper's intensity scaling).
     pub normalize_load: bool,
     /// PCA dimensions; `None`: the paper's 52, or as many as the samples support.
     pub h: Option<usize>,
+    /// Seed of the random split.
     pub seed: u64,
 }
 
@@ -37,45 +44,73 @@ impl Default for TrainOptions {
     }
 }
 
+/// Why a training request cannot be met.
 #[derive(Debug, thiserror::Error, PartialEq, Eq)]
 pub enum TrainError {
+    /// A class has too few images.
     #[error("class `{class}` has {have} images; training needs at least --per-class {need}")]
     TooFew {
+        /// The class.
         class: String,
+        /// Images it has.
         have: usize,
+        /// Images needed (`per_class`).
         need: usize,
     },
     #[error(
         "--train {train} must be at least 1 and below --per-class {per_class} (the rest validate)"
     )]
-    BadSplit { train: usize, per_class: usize },
+    /// `train` is 0 or not below `per_class`.
+    BadSplit {
+        /// Images to train on.
+        train: usize,
+        /// Images per class.
+        per_class: usize,
+    },
+    /// Too few or too many classes.
     #[error("{0} classes; a model holds 2 to {MAX_CLASSES}")]
     Classes(usize),
     #[error(
         "images of {a} and {b} differ in size; give a --crop that makes them equal, or use one sensor size"
     )]
-    Sizes { a: String, b: String },
+    /// Two images differ in size after the crop.
+    Sizes {
+        /// One image.
+        a: String,
+        /// The other.
+        b: String,
+    },
+    /// The crop removes the whole image.
     #[error("crop {crop:?} leaves nothing of a {rows}x{cols} image")]
     Crop {
+        /// The crop.
         crop: Crop,
+        /// Image rows.
         rows: usize,
+        /// Image columns.
         cols: usize,
     },
+    /// The PCA did not converge.
     #[error("the PCA did not converge (are all images identical?)")]
     Pca,
 }
 
 /// One labelled image.
 pub struct Labelled<'a> {
+    /// The image.
     pub image: &'a PressureImage,
+    /// Its class index.
     pub class: usize,
 }
 
 /// What was used for what, by index into the input.
 #[derive(Clone, Debug, Default)]
 pub struct Split {
+    /// Indices of the training images.
     pub train: Vec<usize>,
+    /// Indices of the validation images.
     pub validation: Vec<usize>,
+    /// Indices of the images left for testing.
     pub test: Vec<usize>,
 }
 
@@ -88,6 +123,7 @@ fn preprocess(img: &PressureImage, o: &TrainOptions) -> Option<PressureImage> {
     })
 }
 
+/// Trains a model on `data` (the paper's section 4 and 7.2): per class `per_class` random images, `train` of them for PCA and the Parzen samples, the rest to choose the kernel width; returns the model and the split.
 pub fn train(
     data: &[Labelled<'_>],
     classes: &[ClassInfo],
@@ -241,9 +277,12 @@ pub enum RefitError {
     #[error(
         "the model file holds no training images (written by an older presrs); retrain it with `presrs train` to let the node adapt to dead sensor lines"
     )]
+    /// The model holds no training images.
     NoImages,
+    /// The masks do not fit the model's working image.
     #[error("the dead-line masks do not match the model's working image size")]
     Size,
+    /// The PCA did not converge.
     #[error("the PCA did not converge on the damaged images")]
     Pca,
 }

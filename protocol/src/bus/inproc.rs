@@ -67,6 +67,7 @@ impl InProcBus {
         }
     }
 
+    /// Frames dropped because a receiver's queue was full.
     pub fn overruns(&self) -> u64 {
         self.shared.overruns.load(Ordering::Relaxed)
     }

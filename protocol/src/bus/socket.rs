@@ -51,6 +51,7 @@ pub fn interface_mtu(iface: &str) -> Option<u32> {
 }
 
 impl SocketCanBus {
+    /// Opens `iface` (`can0`, `vcan0`) with CAN FD frames enabled when the interface carries them.
     pub fn open(iface: &str) -> Result<Self, BusError> {
         let open_err = |source| BusError::Open {
             iface: iface.to_string(),
@@ -75,6 +76,7 @@ impl SocketCanBus {
         })
     }
 
+    /// The interface name.
     pub fn iface(&self) -> &str {
         &self.iface
     }
