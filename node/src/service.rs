@@ -477,6 +477,7 @@ fn pipeline_loop(
     // The node's clock is the bus's (receive timestamps), advanced by the wall clock between
     // frames so that deadlines and the heartbeat still come when the bus is quiet.
     let mut anchor = (0u64, Instant::now());
+    let mut next_tick_us = 0u64;
     let mut last_log = Instant::now();
     let mut last_counters = node.counters();
     let ids = node.ids().clone();
@@ -515,8 +516,13 @@ fn pipeline_loop(
         if stop.load(Ordering::Relaxed) {
             break;
         }
+        // Ticks at most once per millisecond of bus time, not per frame (about 20,000 frames/s
+        // for six feet): deadlines and the heartbeat need no finer grain.
         let now = anchor.0 + anchor.1.elapsed().as_micros() as u64;
-        node.tick(now, &mut emit);
+        if now >= next_tick_us || now + 1_000_000 < next_tick_us {
+            next_tick_us = now + 1000;
+            node.tick(now, &mut emit);
+        }
         // A log line every 10 s: never per frame.
         if last_log.elapsed() >= Duration::from_secs(10) {
             let c = node.counters();
