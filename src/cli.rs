@@ -29,7 +29,6 @@ impl TerrainsArg {
     }
 }
 
-/// `--track FILE` (the default track without one).
 /// The `--track` file (its terrains named in `catalog`), or the default track (wood, grass,
 /// clay, carpet quarters).
 pub fn load_track(
@@ -37,11 +36,7 @@ pub fn load_track(
     catalog: &protocol::TerrainCatalog,
 ) -> Result<Track> {
     match path {
-        Some(p) => {
-            let text = std::fs::read_to_string(p)
-                .with_context(|| format!("reading --track {}", p.display()))?;
-            Ok(Track::from_toml(&text, &p.display().to_string(), catalog)?)
-        }
+        Some(p) => Track::load(p, catalog).context("--track"),
         None => Ok(Track::default()),
     }
 }
@@ -166,8 +161,7 @@ pub fn eval(
         .cloned()
         .collect();
     let k = names.len();
-    let mut confusion = vec![vec![0usize; k]; k]; // [actual][detected]
-    let mut unknown = vec![0usize; k];
+    let mut counts = lab::Confusion::new(k);
     let mut skipped = 0;
     let mut times = Vec::new();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
@@ -193,28 +187,15 @@ pub fn eval(
             .classify(&img.pixels, img.rows, img.cols, repair)
             .with_context(|| s.path.display().to_string())?;
         times.push(t0.elapsed().as_secs_f64() * 1e6);
-        match d.class {
-            Some(det) => confusion[actual][det] += 1,
-            None => unknown[actual] += 1,
-        }
+        counts.add(actual, d.class);
     }
-    let n_tested: usize = times.len();
-    let correct: usize = (0..k).map(|i| confusion[i][i]).sum();
-    let acc = if n_tested > 0 {
-        correct as f64 / n_tested as f64
-    } else {
-        0.0
-    };
-    let per_class: Vec<f64> = (0..k)
-        .map(|i| {
-            let n: usize = confusion[i].iter().sum::<usize>() + unknown[i];
-            if n > 0 {
-                confusion[i][i] as f64 / n as f64
-            } else {
-                0.0
-            }
-        })
-        .collect();
+    let n_tested = counts.total();
+    let correct: usize = (0..k).map(|i| counts.counts[i][i]).sum();
+    let acc = counts.accuracy();
+    let per_class: Vec<f64> = (0..k).map(|i| counts.recall(i)).collect();
+    // `[actual][detected]` over the classes, and each class's unknown column apart.
+    let confusion: Vec<&[usize]> = counts.counts.iter().map(|r| &r[..k]).collect();
+    let unknown: Vec<usize> = counts.counts.iter().map(|r| r[k]).collect();
     times.sort_by(f64::total_cmp);
     let med = percentile(&times, 0.5).unwrap_or(0.0);
     let p99 = percentile(&times, 0.99).unwrap_or(0.0);
@@ -241,31 +222,19 @@ pub fn eval(
             print!(" {n:>12}");
         }
         println!();
-        for det in 0..k {
-            print!("{:>16}", names[det]);
-            for act in 0..k {
-                let n: usize = confusion[act].iter().sum::<usize>() + unknown[act];
+        // One row per detected class, and "unknown" when any image was; shares of each actual
+        // class (a column).
+        let has_unknown = unknown.iter().any(|u| *u > 0);
+        for det in 0..k + usize::from(has_unknown) {
+            print!("{:>16}", names.get(det).map_or("unknown", String::as_str));
+            for row in &counts.counts {
+                let n: usize = row.iter().sum();
                 let p = if n > 0 {
-                    100.0 * confusion[act][det] as f64 / n as f64
+                    100.0 * row[det] as f64 / n as f64
                 } else {
                     0.0
                 };
                 print!(" {p:>11.1}%");
-            }
-            println!();
-        }
-        if unknown.iter().any(|u| *u > 0) {
-            print!("{:>16}", "unknown");
-            for act in 0..k {
-                let n: usize = confusion[act].iter().sum::<usize>() + unknown[act];
-                print!(
-                    " {:>11.1}%",
-                    if n > 0 {
-                        100.0 * unknown[act] as f64 / n as f64
-                    } else {
-                        0.0
-                    }
-                );
             }
             println!();
         }
@@ -336,6 +305,39 @@ pub enum DatasetKind {
     Dynamic,
 }
 
+/// The simulated hopper and its sensor, as `dataset` and `sim` both take them.
+#[derive(clap::Args, Clone, Debug)]
+pub struct FootArgs {
+    /// Hopper gait (the dynamic set's; the one `sim` holds without a controller): G1, G2 or G3.
+    #[arg(long, default_value = "G2")]
+    pub gait: String,
+    /// Sensor damage from the start, percent of sensels on dead rows and columns (eq. 6).
+    #[arg(long, default_value_t = 0.0)]
+    pub damage: f64,
+    /// Serial number of the simulated sensor (`sim`'s foot i wears serial + i): its gain pattern
+    /// and faults. `dataset` and `sim` share the default, so a model trained on one fits the other.
+    #[arg(long, default_value_t = sim::DEFAULT_SENSOR)]
+    pub sensor: u64,
+}
+
+impl FootArgs {
+    /// The gait, and the damage checked.
+    pub fn checked(&self) -> Result<(controller::Gait, f64)> {
+        let gait = controller::Gait::by_name(&self.gait)
+            .with_context(|| format!("--gait {}: expected G1, G2 or G3", self.gait))?;
+        Ok((gait, check_damage(self.damage)?))
+    }
+}
+
+/// `--damage PCT`, a percentage in 0..=100.
+pub fn check_damage(pct: f64) -> Result<f64> {
+    anyhow::ensure!(
+        (0.0..=100.0).contains(&pct),
+        "--damage {pct}: expected a percentage in 0..=100"
+    );
+    Ok(pct)
+}
+
 /// `presrs dataset`.
 #[derive(clap::Args)]
 pub struct DatasetArgs {
@@ -347,16 +349,8 @@ pub struct DatasetArgs {
     /// Images per terrain (default: the paper's counts; Table 4 for dynamic).
     #[arg(long)]
     pub n: Option<usize>,
-    /// Hopper gait for the dynamic set: G1, G2 or G3.
-    #[arg(long, default_value = "G2")]
-    pub gait: String,
-    /// Sensor damage, percent of sensels on dead rows and columns (eq. 6).
-    #[arg(long, default_value_t = 0.0)]
-    pub damage: f64,
-    /// Serial number of the simulated sensor that records the images: its gain pattern and
-    /// faults. Train on the sensor the robot wears (`presrs sim --sensor`, the same default).
-    #[arg(long, default_value_t = sim::DEFAULT_SENSOR)]
-    pub sensor: u64,
+    #[command(flatten)]
+    pub foot: FootArgs,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     // Checked like every command's; the simulator generates the paper's terrains, which every
@@ -368,13 +362,8 @@ pub struct DatasetArgs {
 pub fn dataset(a: &DatasetArgs) -> Result<ExitCode> {
     use sim::dataset::{Kind, Options, generate};
     let catalog = a.terrains.catalog()?;
-    let (out, gait, damage) = (&a.out, a.gait.as_str(), a.damage);
-    let gait = controller::Gait::by_name(gait)
-        .with_context(|| format!("--gait {gait}: expected G1, G2 or G3"))?;
-    anyhow::ensure!(
-        (0.0..=100.0).contains(&damage),
-        "--damage {damage}: expected a percentage in 0..=100"
-    );
+    let out = &a.out;
+    let (gait, damage) = a.foot.checked()?;
     let kind = match a.kind {
         DatasetKind::Static => Kind::Static,
         DatasetKind::Sandpaper => Kind::Sandpaper,
@@ -385,7 +374,7 @@ pub fn dataset(a: &DatasetArgs) -> Result<ExitCode> {
         n: a.n,
         gait,
         damage_pct: damage,
-        sensor: a.sensor,
+        sensor: a.foot.sensor,
         seed: a.seed,
     });
     let mut counts = std::collections::BTreeMap::new();

@@ -53,11 +53,7 @@ pub struct DemoArgs {
 }
 
 pub fn run(a: DemoArgs) -> Result<ExitCode> {
-    anyhow::ensure!(
-        (0.0..=100.0).contains(&a.damage),
-        "--damage {}: expected a percentage in 0..=100",
-        a.damage
-    );
+    crate::cli::check_damage(a.damage)?;
     let catalog = a.terrains.catalog()?;
     let track = crate::cli::load_track(a.track.as_deref(), &catalog)?;
     let model = crate::cli::load_or_train(a.model.as_deref())?;

@@ -631,32 +631,9 @@ fn damage(ctx: &Ctx) -> Result<(String, Curves)> {
 }
 
 fn lifespan(ctx: &Ctx, curves: &Curves) -> Result<String> {
-    // Steps per minute and metres per step of the simulated hopper on G2 (wood).
-    let g = controller::Gait::g2();
-    let mut h = sim::hopper::Hopper::launch(sim::hopper::HopperParams::default(), &g);
-    let mut cmd = sim::fixed_gait::FixedGait::new(g.clone());
-    let ground = sim::terrain::Physics::Wood.ground();
-    let (mut steps, mut t0, mut x0) = (0u32, 0.0, 0.0);
     let horizon = if ctx.quick { 10.0 } else { 30.0 };
-    while h.t < horizon + 5.0 {
-        match h.advance(0.01, ground, &mut cmd) {
-            Some(sim::hopper::Event::Touchdown { t, beta, .. }) => {
-                cmd.on_touchdown(beta);
-                if t >= 5.0 {
-                    if steps == 0 {
-                        t0 = t;
-                        x0 = h.x;
-                    }
-                    steps += 1;
-                }
-            }
-            Some(sim::hopper::Event::Liftoff { beta, .. }) => cmd.on_liftoff(beta),
-            Some(sim::hopper::Event::Fell { .. }) => anyhow::bail!("the G2 hopper fell"),
-            None => {}
-        }
-    }
-    let period_s = (h.t - t0) / (steps.max(2) - 1) as f64;
-    let m_per_step = (h.x - x0) / steps.max(1) as f64;
+    let (period_s, m_per_step) =
+        lab::study::cadence(&controller::Gait::g2(), horizon).context("the G2 hopper fell")?;
     let arm = |k: usize| -> Vec<(f64, f64)> { curves.iter().map(|c| (c.0, c.1[k])).collect() };
     let (d0, d1, d2, d3) = (
         lab::study::damage_at_90(&arm(0)),
@@ -820,7 +797,7 @@ fn adaptation(ctx: &Ctx) -> Result<String> {
          ({}), {switches} gait switches.\n\n![Adaptation](figures/adaptation.png)\n",
         correct,
         rows.len(),
-        pct(correct as f64 / rows.len().max(1) as f64)
+        pct(sum.accuracy)
     );
     Ok(md)
 }

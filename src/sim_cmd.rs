@@ -33,16 +33,8 @@ pub struct SimArgs {
     /// Simulated time per wall-clock time: 1 is real time, 2 twice as fast.
     #[arg(long, default_value_t = 1.0)]
     pub speed: f64,
-    /// Gait held without a controller: G1, G2 or G3.
-    #[arg(long, default_value = "G2")]
-    pub gait: String,
-    /// Sensor damage from the start, percent of sensels on dead lines (eq. 6).
-    #[arg(long, default_value_t = 0.0)]
-    pub damage: f64,
-    /// Serial number of foot 0's sensor (foot i wears serial + i): the same default as
-    /// `presrs dataset --sensor`, so a model trained on that data fits this foot.
-    #[arg(long, default_value_t = sim::DEFAULT_SENSOR)]
-    pub sensor: u64,
+    #[command(flatten)]
+    pub foot: crate::cli::FootArgs,
     /// Stop after this much simulated time, s (default: run until SIGINT/SIGTERM).
     #[arg(long)]
     pub duration: Option<f64>,
@@ -60,8 +52,9 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     let signals = Signals::install()?;
     let track = crate::cli::load_track(a.track.as_deref(), &a.terrains.catalog()?)?;
     let r = run_on(&a, track, BusSource::Iface(a.iface.clone()), &signals)?;
-    let n = r.steps.len();
-    let correct = r.steps.iter().filter(|s| s.truth == s.classified).count();
+    // No gait table: the simulator scores the node, not the controller.
+    let sum = lab::Summary::of(&r.steps, &Default::default());
+    let (n, correct) = (sum.steps, sum.correct);
     eprintln!(
         "presrs sim: {:.1} s simulated in {:.1} s wall; {} touchdowns, {} falls; {n} TerrainClass heard, {correct} correct{}; {} send errors",
         r.simulated_s,
@@ -69,7 +62,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         r.touchdowns,
         r.falls,
         if n > 0 {
-            format!(" ({:.1}%)", 100.0 * correct as f64 / n as f64)
+            format!(" ({:.1}%)", 100.0 * sum.accuracy)
         } else {
             String::new()
         },
@@ -94,22 +87,16 @@ pub fn run_on(
         "--speed {}: expected a positive factor (1 = real time)",
         a.speed
     );
-    anyhow::ensure!(
-        (0.0..=100.0).contains(&a.damage),
-        "--damage {}: expected a percentage in 0..=100",
-        a.damage
-    );
-    let gait = controller::Gait::by_name(&a.gait)
-        .with_context(|| format!("--gait {}: expected G1, G2 or G3", a.gait))?;
+    let (gait, damage) = a.foot.checked()?;
     let cfg = SimConfig {
         track,
         gait: gait.id,
         feet: a.feet.max(1),
         faults: FaultParams {
-            initial_damage_pct: a.damage,
+            initial_damage_pct: damage,
             ..Default::default()
         },
-        sensor: a.sensor,
+        sensor: a.foot.sensor,
         ..Default::default()
     };
     let opts = RunOptions {

@@ -175,11 +175,8 @@ impl ControllerConfig {
 
     /// Reads and validates a config file (see [`ControllerConfig::parse`]).
     pub fn load(path: &std::path::Path) -> Result<Self, ConfigFileError> {
-        let text = std::fs::read_to_string(path).map_err(|e| ConfigFileError::Read {
-            path: path.display().to_string(),
-            reason: e.to_string(),
-        })?;
-        Self::parse(&text, &path.display().to_string())
+        let (text, name) = protocol::config::read_text(path)?;
+        Self::parse(&text, &name)
     }
 }
 

@@ -216,9 +216,46 @@ pub fn mean_speed(samples: &[Sample], terrain: Terrain) -> f64 {
     v.iter().sum::<f64>() / v.len().max(1) as f64
 }
 
+/// Step period (s) and metres per step of the simulated hopper holding `gait` on wood, over
+/// `horizon_s` after 5 s of settling; `None` if it fell.
+pub fn cadence(gait: &controller::Gait, horizon_s: f64) -> Option<(f64, f64)> {
+    use sim::hopper::{Event, Hopper, HopperParams};
+    let mut h = Hopper::launch(HopperParams::default(), gait);
+    let mut cmd = sim::fixed_gait::FixedGait::new(gait.clone());
+    let ground = sim::terrain::Physics::Wood.ground();
+    let (mut steps, mut t0, mut x0) = (0u32, 0.0, 0.0);
+    while h.t < horizon_s + 5.0 {
+        match h.advance(0.01, ground, &mut cmd) {
+            Some(Event::Touchdown { t, beta, .. }) => {
+                cmd.on_touchdown(beta);
+                if t >= 5.0 {
+                    if steps == 0 {
+                        t0 = t;
+                        x0 = h.x;
+                    }
+                    steps += 1;
+                }
+            }
+            Some(Event::Liftoff { beta, .. }) => cmd.on_liftoff(beta),
+            Some(Event::Fell { .. }) => return None,
+            None => {}
+        }
+    }
+    let period_s = (h.t - t0) / (steps.max(2) - 1) as f64;
+    let m_per_step = (h.x - x0) / steps.max(1) as f64;
+    Some((period_s, m_per_step))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn g2_steps_about_three_times_a_second_and_moves_forward() {
+        let (period_s, m_per_step) = cadence(&controller::Gait::g2(), 10.0).unwrap();
+        assert!((0.2..0.5).contains(&period_s), "{period_s} s per step");
+        assert!(m_per_step > 0.05, "{m_per_step} m per step");
+    }
 
     #[test]
     fn damage_at_90_interpolates_the_crossing() {

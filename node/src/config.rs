@@ -111,11 +111,8 @@ impl NodeConfig {
 
     /// Reads and checks a config file.
     pub fn load(path: &std::path::Path) -> Result<Self, ConfigFileError> {
-        let text = std::fs::read_to_string(path).map_err(|e| ConfigFileError::Read {
-            path: path.display().to_string(),
-            reason: e.to_string(),
-        })?;
-        Self::from_toml(&text, &path.display().to_string())
+        let (text, name) = protocol::config::read_text(path)?;
+        Self::from_toml(&text, &name)
     }
 
     /// The catalog the `terrains` key names (the paper's twelve without it).

@@ -77,6 +77,17 @@ pub enum Output {
     Status(NodeStatus),
 }
 
+impl Output {
+    /// The frame that carries this on `ids`: TerrainClass on its foot's id, NodeStatus on
+    /// the node's.
+    pub fn to_frame(&self, ids: &IdConfig) -> Option<CanFrame> {
+        match *self {
+            Output::Class { foot, class } => Message::TerrainClass(class).to_frame(ids, foot),
+            Output::Status(s) => Message::NodeStatus(s).to_frame(ids, 0),
+        }
+    }
+}
+
 /// The counters a running node shares between its threads, written without locks.
 #[derive(Debug, Default)]
 struct Shared {
@@ -264,10 +275,7 @@ impl NodeService {
 
     /// The frame that carries `out` on the node's ids.
     pub fn frame(&self, out: &Output) -> Option<CanFrame> {
-        match *out {
-            Output::Class { foot, class } => self.pipeline.to_frame(foot, &class),
-            Output::Status(s) => Message::NodeStatus(s).to_frame(self.ids(), 0),
-        }
+        out.to_frame(self.ids())
     }
 
     /// The CAN ids the node listens and talks on.
@@ -482,11 +490,7 @@ fn pipeline_loop(
     let mut last_counters = node.counters();
     let ids = node.ids().clone();
     let mut emit = |o: Output| {
-        let frame = match o {
-            Output::Class { foot, class } => Message::TerrainClass(class).to_frame(&ids, foot),
-            Output::Status(s) => Message::NodeStatus(s).to_frame(&ids, 0),
-        };
-        if let Some(f) = frame
+        if let Some(f) = o.to_frame(&ids)
             && to_send.try_send(f).is_err()
         {
             sh.tx_dropped.fetch_add(1, Ordering::Relaxed);

@@ -8,7 +8,7 @@
 
 use protocol::messages::{self, FootContact, Message, TerrainClass, flags};
 use protocol::tactile::{Reassembler, ReassemblyStats};
-use protocol::{CanFrame, IdConfig, Stamped};
+use protocol::{IdConfig, Stamped};
 
 use std::sync::Arc;
 
@@ -585,11 +585,6 @@ impl StancePipeline {
             .saturating_sub(f.best_rx_us)
             .min(u32::MAX as u64) as u32;
         out(foot, tc);
-    }
-
-    /// The frame that carries a decided TerrainClass.
-    pub fn to_frame(&self, foot: u8, tc: &TerrainClass) -> Option<CanFrame> {
-        Message::TerrainClass(*tc).to_frame(&self.cfg.ids, foot)
     }
 }
 

@@ -109,13 +109,22 @@ pub fn parse<T: DeserializeOwned>(text: &str, path: &str) -> Result<T, ConfigFil
     })
 }
 
+/// A config file's text and its name for errors; a file that cannot be read is
+/// [`ConfigFileError::Read`].
+pub fn read_text(path: &Path) -> Result<(String, String), ConfigFileError> {
+    let name = path.display().to_string();
+    match std::fs::read_to_string(path) {
+        Ok(text) => Ok((text, name)),
+        Err(e) => Err(ConfigFileError::Read {
+            path: name,
+            reason: e.to_string(),
+        }),
+    }
+}
+
 /// Reads and parses a config file (see [`parse`]).
 pub fn read<T: DeserializeOwned>(path: &Path) -> Result<T, ConfigFileError> {
-    let name = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| ConfigFileError::Read {
-        path: name.clone(),
-        reason: e.to_string(),
-    })?;
+    let (text, name) = read_text(path)?;
     parse(&text, &name)
 }
 

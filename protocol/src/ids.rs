@@ -135,11 +135,7 @@ impl IdConfig {
         struct Json {
             ids: Option<serde_json::Value>,
         }
-        let name = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| ConfigFileError::Read {
-            path: name.clone(),
-            reason: e.to_string(),
-        })?;
+        let (text, name) = crate::config::read_text(path)?;
         let parse_error = |reason: String| ConfigFileError::Parse {
             path: name.clone(),
             reason: format!("[ids]: {reason}"),

@@ -104,6 +104,12 @@ impl Default for Track {
 }
 
 impl Track {
+    /// Reads and checks a track file (see [`Track::from_toml`]).
+    pub fn load(path: &std::path::Path, catalog: &TerrainCatalog) -> Result<Self, ConfigFileError> {
+        let (text, name) = protocol::config::read_text(path)?;
+        Self::from_toml(&text, &name, catalog)
+    }
+
     /// Parses a TOML track file (`path` names it in errors) and checks it: every terrain a name
     /// in `catalog` that the simulator can simulate, every length positive.
     pub fn from_toml(
