@@ -490,8 +490,11 @@ impl StancePipeline {
     ///
     /// The deadline is in the foot's time: the sample time plus the best frame's distance from
     /// it (a later frame can only be further), plus one frame period for the transfer of a
-    /// frame already captured. The foot's time is its last frame's timestamp advanced by the
-    /// receiver time since, so the decision replays exactly from a log's timestamps.
+    /// frame already captured. The foot's time is the newest timestamp heard from it (a
+    /// FootContact or an image), never extrapolated with the receiver's clock: robot time may
+    /// run slower than the receiver's (the simulator under emulation runs at 0.35), and an
+    /// extrapolated foot clock could pass the deadline before a nearer frame arrived. A foot that falls silent
+    /// is decided at liftoff, as before.
     pub fn tick(&mut self, now_rx_us: u64, out: &mut impl FnMut(u8, TerrainClass)) {
         let sample_us = self.cfg.sample_ms * 1000;
         let w1 = self.cfg.window_ms[1] * 1000;
@@ -501,8 +504,7 @@ impl StancePipeline {
             if !f.state || f.decided || now_rx_us < rx {
                 continue;
             }
-            let foot_now = ts.wrapping_add((now_rx_us - rx).min(u32::MAX as u64 / 2) as u32);
-            let dt = foot_now.wrapping_sub(f.touchdown_us);
+            let dt = ts.wrapping_sub(f.touchdown_us);
             if dt > 10_000_000 {
                 continue;
             }
