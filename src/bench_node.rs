@@ -14,29 +14,18 @@
 //!
 //! The figures go to a report (`--json`), not to a timed test: the machines are noisy.
 
-use std::collections::HashMap;
 use std::path::PathBuf;
 use std::process::{Child, Command, ExitCode, Stdio};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
-use crossbeam_channel::{Receiver, Sender, unbounded};
+use lab::load::{self, FRAME_US, Feet, SIDE, Tally, WARMUP_US, memory_mb, task_cpu_ns};
+use lab::score::percentile;
 use node::NodeConfig;
-use protocol::bus::{CanBus, InProcBus};
-use protocol::ids::IdConfig;
-use protocol::ids::MessageKind;
-use protocol::messages::{self, FootContact, Message, flags};
-use protocol::tactile::{ImageRef, Segmenter, Variant};
-
-use crate::cli::percentile;
-use protocol::bus::BusSource;
-
-const FRAME_US: u64 = 10_000;
-const STEP_US: u64 = 300_000;
-const STANCE_US: u64 = 150_000;
-const SAMPLE_US: u64 = 70_000;
-const WARMUP_US: u64 = 1_000_000;
-const SIDE: usize = 44;
+use protocol::bus::{BusSource, CanBus, InProcBus};
+use protocol::ids::{IdConfig, MessageKind};
+use protocol::messages::{self, Message};
+use protocol::tactile::Variant;
 
 #[derive(clap::Args)]
 pub struct BenchNodeArgs {
@@ -61,48 +50,7 @@ pub struct BenchNodeArgs {
     pub json: bool,
 }
 
-/// One foot's schedule: touchdown, liftoff and frame times on the foot clock (µs from start).
-struct Foot {
-    id: u8,
-    td: u64,
-    lo: u64,
-    frame: u64,
-    /// This foot's frame grid: frames at `offset + k * FRAME_US`.
-    offset: u64,
-    in_stance: bool,
-    step: u16,
-    contact_seq: u8,
-    image_seq: u8,
-    /// Time of this stance's sampled frame, and the image shown in this stance.
-    sampled: Option<u64>,
-    image: usize,
-}
-
-/// Sampled frame of (foot, step) sent at this instant; its true terrain id.
-struct Sent {
-    foot: u8,
-    step: u16,
-    at: Instant,
-    terrain: u8,
-    measured: bool,
-}
-
-#[derive(Default)]
-struct Tally {
-    steps: u64,
-    decisions: u64,
-    classified: u64,
-    correct: u64,
-    latencies_us: Vec<f64>,
-}
-
 pub fn run(a: BenchNodeArgs) -> Result<ExitCode> {
-    anyhow::ensure!(
-        (1..=protocol::ids::MAX_FEET).contains(&a.feet),
-        "--feet {}: allowed 1..={}",
-        a.feet,
-        protocol::ids::MAX_FEET
-    );
     anyhow::ensure!(
         a.seconds > 0.0 && a.seconds <= 3600.0,
         "--seconds {}: allowed (0, 3600]",
@@ -115,8 +63,8 @@ pub fn run(a: BenchNodeArgs) -> Result<ExitCode> {
         model.input_rows,
         model.input_cols
     );
-    let images = image_pool()?;
     let ids = IdConfig::default();
+    let feet = Feet::new(a.feet, load::image_pool(), ids.clone()).context("--feet")?;
     let cfg = NodeConfig {
         feet: a.feet,
         ..NodeConfig::default()
@@ -129,18 +77,17 @@ pub fn run(a: BenchNodeArgs) -> Result<ExitCode> {
             let node = node::NodeService::new(cfg.clone(), model)?
                 .start(BusSource::InProc(bus.clone()))?;
             let cpu = || task_cpu_ns("self", Some(&["receive", "pipeline", "send"]));
-            let result = measure(
+            let result = load::measure(
                 &mut bus.endpoint(),
                 &mut bus.endpoint(),
                 &ids,
-                a.feet,
-                &images,
+                feet,
                 total_us,
                 &cpu,
             );
             let stats = node.stop();
-            let (m, cpu_ns) = result?;
-            let mem = memory("self");
+            let m = result?;
+            let mem = memory_mb("self");
             let extra = serde_json::json!({
                 "node_rx_frames": stats.rx_frames,
                 "node_rx_dropped": stats.rx_dropped,
@@ -151,7 +98,6 @@ pub fn run(a: BenchNodeArgs) -> Result<ExitCode> {
                 "inproc",
                 "whole process: node threads and load generator",
                 &m,
-                cpu_ns,
                 mem,
                 extra,
             )
@@ -182,41 +128,22 @@ pub fn run(a: BenchNodeArgs) -> Result<ExitCode> {
             let result = wait_for_status(&mut rx, &ids, &mut child).and_then(|()| {
                 let pid = child.id().to_string();
                 let cpu = || task_cpu_ns(&pid, None);
-                measure(&mut tx, &mut rx, &ids, a.feet, &images, total_us, &cpu)
+                Ok(load::measure(&mut tx, &mut rx, &ids, feet, total_us, &cpu)?)
             });
-            let mem = memory(&child.id().to_string());
+            let mem = memory_mb(&child.id().to_string());
             stop_child(&mut child);
             let _ = std::fs::remove_dir_all(&dir);
-            let (m, cpu_ns) = result?;
+            let m = result?;
             report(
                 &a,
                 iface,
                 "the presrs node process",
                 &m,
-                cpu_ns,
                 mem,
                 serde_json::json!({}),
             )
         }
     }
-}
-
-/// Eight G2 stance images per dynamic terrain, and their terrain ids.
-fn image_pool() -> Result<Vec<(u8, Vec<u16>)>> {
-    let samples = sim::dataset::generate(&sim::dataset::Options {
-        kind: sim::dataset::Kind::Dynamic,
-        n: Some(8),
-        gait: controller::Gait::g2(),
-        damage_pct: 0.0,
-        sensor: sim::DEFAULT_SENSOR,
-        seed: 99,
-    });
-    anyhow::ensure!(!samples.is_empty(), "the simulator gave no images");
-    Ok(samples
-        .into_iter()
-        .filter(|s| s.rows == SIDE && s.cols == SIDE)
-        .map(|s| (s.terrain.id(), s.pixels))
-        .collect())
 }
 
 fn wait_for_status(rx: &mut dyn CanBus, ids: &IdConfig, child: &mut Child) -> Result<()> {
@@ -250,254 +177,17 @@ fn stop_child(child: &mut Child) {
     let _ = child.wait();
 }
 
-/// Plays the feet for `total_us` of real time and tallies the steps measured after warm-up.
-/// Returns the tally and the node's CPU time over the measured window (ns).
-fn measure(
-    tx: &mut dyn CanBus,
-    rx: &mut dyn CanBus,
-    ids: &IdConfig,
-    feet: u8,
-    images: &[(u8, Vec<u16>)],
-    total_us: u64,
-    cpu_ns: &dyn Fn() -> Option<u64>,
-) -> Result<(Tally, Option<u64>)> {
-    let (sent_tx, sent_rx) = unbounded::<Sent>();
-    let done = std::sync::atomic::AtomicBool::new(false);
-    std::thread::scope(|s| {
-        let listener = s.spawn(|| listen(rx, ids, &sent_rx, &done));
-        let played = play(tx, ids, feet, images, total_us, &sent_tx, cpu_ns);
-        // The last decisions arrive within a few ms; then stop listening.
-        std::thread::sleep(Duration::from_millis(300));
-        done.store(true, std::sync::atomic::Ordering::Relaxed);
-        let tally = listener
-            .join()
-            .map_err(|_| anyhow::anyhow!("the listener thread panicked"))?;
-        let (steps, cpu) = played?;
-        Ok((Tally { steps, ..tally }, cpu))
-    })
-}
-
-/// The load generator. Returns the steps whose sampled frame fell in the measured window and the
-/// node's CPU time over that window.
-fn play(
-    bus: &mut dyn CanBus,
-    ids: &IdConfig,
-    feet: u8,
-    images: &[(u8, Vec<u16>)],
-    total_us: u64,
-    sent: &Sender<Sent>,
-    cpu_ns: &dyn Fn() -> Option<u64>,
-) -> Result<(u64, Option<u64>)> {
-    let seg = Segmenter::new(Variant::Fd, ids.clone());
-    let blank = vec![0u16; SIDE * SIDE];
-    let n = feet as u64;
-    let mut feet: Vec<Foot> = (0..feet)
-        .map(|f| {
-            let f64_ = f as u64;
-            Foot {
-                id: f,
-                // Touchdowns spread over the step period, 3.3 ms off the frame grid (no ties).
-                td: 200_000 + f64_ * STEP_US / n + 3_300,
-                lo: u64::MAX,
-                frame: 1_000 + f64_ * FRAME_US / n,
-                offset: 1_000 + f64_ * FRAME_US / n,
-                in_stance: false,
-                step: 0,
-                contact_seq: 0,
-                image_seq: 0,
-                sampled: None,
-                image: f as usize,
-            }
-        })
-        .collect();
-    let start = Instant::now();
-    let mut steps = 0u64;
-    let mut cpu_start = None;
-    let mut send_errors = 0u64;
-    let mut send = |bus: &mut dyn CanBus, f: &protocol::CanFrame| {
-        // A full socket buffer (ENOBUFS) is retried briefly rather than lost.
-        for _ in 0..50 {
-            if bus.send(f).is_ok() {
-                return;
-            }
-            std::thread::sleep(Duration::from_micros(100));
-        }
-        send_errors += 1;
-    };
-    while let Some((i, t)) = feet
-        .iter()
-        .enumerate()
-        .map(|(i, f)| (i, f.td.min(f.lo).min(f.frame)))
-        .min_by_key(|&(_, t)| t)
-    {
-        if t >= total_us {
-            break;
-        }
-        if cpu_start.is_none() && t >= WARMUP_US {
-            cpu_start = Some(cpu_ns());
-        }
-        let due = start + Duration::from_micros(t);
-        let now = Instant::now();
-        if due > now {
-            std::thread::sleep(due - now);
-        }
-        let f = &mut feet[i];
-        if t == f.td || t == f.lo {
-            let touchdown = t == f.td;
-            if touchdown {
-                f.in_stance = true;
-                f.step = f.step.wrapping_add(1);
-                f.lo = t + STANCE_US;
-                f.td = t + STEP_US;
-                f.image = (f.image + 7) % images.len();
-                // The frame nearest 70 ms after touchdown, on this foot's frame grid.
-                let k = ((t + SAMPLE_US - f.offset) as f64 / FRAME_US as f64).round() as u64;
-                f.sampled = Some(f.offset + k * FRAME_US);
-            } else {
-                f.in_stance = false;
-                f.lo = u64::MAX;
-            }
-            f.contact_seq = f.contact_seq.wrapping_add(1);
-            let m = Message::FootContact(FootContact {
-                stance: touchdown,
-                seq: f.contact_seq,
-                timestamp_us: t as u32,
-            });
-            if let Some(frame) = m.to_frame(ids, f.id) {
-                send(bus, &frame);
-            }
-            continue;
-        }
-        // A tactile frame.
-        f.frame += FRAME_US;
-        f.image_seq = f.image_seq.wrapping_add(1);
-        let (terrain, pixels) = if f.in_stance {
-            (images[f.image].0, images[f.image].1.as_slice())
-        } else {
-            (0, blank.as_slice())
-        };
-        let img = ImageRef {
-            rows: SIDE,
-            cols: SIDE,
-            bits: 8,
-            timestamp_us: t as u32,
-            pixels,
-        };
-        seg.frames(f.id, f.image_seq, &img, |fr| send(bus, &fr))?;
-        if f.sampled == Some(t) {
-            let measured = t >= WARMUP_US + SAMPLE_US;
-            steps += u64::from(measured);
-            let _ = sent.send(Sent {
-                foot: f.id,
-                step: f.step,
-                at: Instant::now(),
-                terrain,
-                measured,
-            });
-        }
-    }
-    if send_errors > 0 {
-        tracing::warn!(send_errors, "frames the load generator could not send");
-    }
-    let cpu = match (cpu_start.flatten(), cpu_ns()) {
-        (Some(a), Some(b)) => Some(b.saturating_sub(a)),
-        _ => None,
-    };
-    Ok((steps, cpu))
-}
-
-/// Receives TerrainClass and matches each to its sampled frame.
-fn listen(
-    bus: &mut dyn CanBus,
-    ids: &IdConfig,
-    sent: &Receiver<Sent>,
-    done: &std::sync::atomic::AtomicBool,
-) -> Tally {
-    let mut t = Tally::default();
-    let mut pending: HashMap<(u8, u16), (Instant, u8, bool)> = HashMap::new();
-    while !done.load(std::sync::atomic::Ordering::Relaxed) {
-        let got = bus.recv(Duration::from_millis(5));
-        let now = Instant::now();
-        for s in sent.try_iter() {
-            pending.insert((s.foot, s.step), (s.at, s.terrain, s.measured));
-        }
-        let Ok(Some(st)) = got else { continue };
-        let Ok(Some((foot, Message::TerrainClass(tc)))) = messages::decode(&st.frame, ids) else {
-            continue;
-        };
-        let Some((at, terrain, measured)) = pending.remove(&(foot, tc.step)) else {
-            continue;
-        };
-        if !measured {
-            continue;
-        }
-        t.decisions += 1;
-        if tc.flags & flags::NO_SAMPLE == 0 {
-            t.classified += 1;
-            t.correct += u64::from(tc.terrain == terrain);
-            t.latencies_us
-                .push(now.saturating_duration_since(at).as_secs_f64() * 1e6);
-        }
-    }
-    t
-}
-
-/// CPU time (ns) of a process's threads, all or those named in `names`: from schedstat, or
-/// from stat's utime+stime (10 ms ticks) where schedstat is missing.
-fn task_cpu_ns(pid: &str, names: Option<&[&str]>) -> Option<u64> {
-    let dir = std::fs::read_dir(format!("/proc/{pid}/task")).ok()?;
-    let mut total = 0u64;
-    for e in dir.flatten() {
-        let p = e.path();
-        if let Some(names) = names {
-            let comm = std::fs::read_to_string(p.join("comm")).unwrap_or_default();
-            if !names.contains(&comm.trim()) {
-                continue;
-            }
-        }
-        if let Some(ns) = std::fs::read_to_string(p.join("schedstat"))
-            .ok()
-            .and_then(|s| s.split_whitespace().next()?.parse::<u64>().ok())
-        {
-            total += ns;
-            continue;
-        }
-        let stat = std::fs::read_to_string(p.join("stat")).ok()?;
-        // Fields after the ")" of comm: state is field 3, utime 14, stime 15.
-        let rest = stat.rsplit_once(')')?.1;
-        let f: Vec<&str> = rest.split_whitespace().collect();
-        let ticks = f.get(11)?.parse::<u64>().ok()? + f.get(12)?.parse::<u64>().ok()?;
-        total += ticks * 10_000_000;
-    }
-    Some(total)
-}
-
-/// VmRSS and VmHWM of a process, MB.
-fn memory(pid: &str) -> (Option<f64>, Option<f64>) {
-    let Ok(s) = std::fs::read_to_string(format!("/proc/{pid}/status")) else {
-        return (None, None);
-    };
-    let field = |k: &str| {
-        s.lines()
-            .find(|l| l.starts_with(k))
-            .and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
-            .map(|kb| kb / 1024.0)
-    };
-    (field("VmRSS:"), field("VmHWM:"))
-}
-
 fn report(
     a: &BenchNodeArgs,
     bus: &str,
     memory_scope: &str,
     t: &Tally,
-    cpu_ns: Option<u64>,
     (rss, hwm): (Option<f64>, Option<f64>),
     extra: serde_json::Value,
 ) -> Result<ExitCode> {
     let mut lat = t.latencies_us.clone();
     lat.sort_by(f64::total_cmp);
-    let cpu_pct = cpu_ns.map(|ns| ns as f64 * 1e-9 / a.seconds * 100.0);
+    let cpu_pct = t.cpu_ns.map(|ns| ns as f64 * 1e-9 / a.seconds * 100.0);
     let frames_per_image = Variant::Fd.frames_per_image(SIDE, SIDE, 8);
     let j = serde_json::json!({
         "bus": bus,
@@ -507,6 +197,7 @@ fn report(
         "tactile_hz_per_foot": 1e6 / FRAME_US as f64,
         "can_frames_per_s": a.feet as f64 * (1e6 / FRAME_US as f64) * frames_per_image as f64,
         "steps": t.steps,
+        "load_send_errors": t.send_errors,
         "terrain_class": t.decisions,
         "classified": t.classified,
         "accuracy": if t.classified > 0 { t.correct as f64 / t.classified as f64 } else { 0.0 },

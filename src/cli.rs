@@ -5,12 +5,12 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
+use lab::score::percentile;
 use node::NodeConfig;
 use node::classifier::dataset::{load_dataset, read_image, read_images, write_pgm};
 use node::classifier::train::{TrainOptions, train as train_model};
 use node::classifier::{Classifier, Crop, Kernels, Model, repair as repair_mod};
 use protocol::TerrainCatalog;
-use rand::SeedableRng;
 use sim::runner::Track;
 
 /// `--terrains FILE`: the lab's own terrains beside the paper's twelve (`protocol::terrain`).
@@ -69,15 +69,49 @@ pub(crate) fn load_or_train(model: Option<&Path>) -> Result<Model> {
     Ok(m)
 }
 
-pub fn train(
-    data: &Path,
-    out: &Path,
-    opts: &TrainOptions,
-    skip_bad: bool,
-    terrains: &TerrainsArg,
-) -> Result<ExitCode> {
-    let catalog = terrains.catalog()?;
-    let ds = load_dataset(data, skip_bad)?;
+/// `presrs train`.
+#[derive(clap::Args)]
+pub struct TrainArgs {
+    #[arg(long)]
+    pub data: PathBuf,
+    #[arg(long)]
+    pub out: PathBuf,
+    #[arg(long, default_value_t = 20)]
+    pub per_class: usize,
+    #[arg(long, default_value_t = 13)]
+    pub train: usize,
+    /// Rows/columns removed: top,bottom,left,right (the paper: 2,2,2,2 static; 0,3,6,0 foot).
+    #[arg(long, default_value = "0,0,0,0")]
+    pub crop: node::classifier::Crop,
+    #[arg(long, default_value_t = 1)]
+    pub downsample: usize,
+    #[arg(long)]
+    pub normalize_load: bool,
+    /// PCA dimensions (default: 52, or as many as the samples support).
+    #[arg(long)]
+    pub dims: Option<usize>,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Skip unreadable files (counted) instead of stopping.
+    #[arg(long)]
+    pub skip_bad: bool,
+    #[command(flatten)]
+    pub terrains: TerrainsArg,
+}
+
+pub fn train(a: &TrainArgs) -> Result<ExitCode> {
+    let (data, out) = (&a.data, &a.out);
+    let opts = TrainOptions {
+        per_class: a.per_class,
+        train: a.train,
+        crop: a.crop,
+        downsample: a.downsample,
+        normalize_load: a.normalize_load,
+        h: a.dims,
+        seed: a.seed,
+    };
+    let catalog = a.terrains.catalog()?;
+    let ds = load_dataset(data, a.skip_bad)?;
     if !ds.bad.is_empty() {
         eprintln!(
             "skipped {} bad files (--skip-bad); first: {}",
@@ -92,7 +126,7 @@ pub fn train(
         bail!("{}: no images found", data.display());
     }
     let t0 = Instant::now();
-    let (model, split) = train_model(&labelled, classes, opts)?;
+    let (model, split) = train_model(&labelled, classes, &opts)?;
     let took = t0.elapsed();
     model.save(out)?;
     println!(
@@ -107,12 +141,6 @@ pub fn train(
         out.display()
     );
     Ok(ExitCode::SUCCESS)
-}
-
-/// The `q` quantile (nearest rank) of an ascending slice; `None` when it is empty.
-pub(crate) fn percentile(sorted: &[f64], q: f64) -> Option<f64> {
-    let i = ((sorted.len().checked_sub(1)?) as f64 * q).round() as usize;
-    sorted.get(i).copied()
 }
 
 /// How `presrs eval` tests a model.
@@ -154,41 +182,18 @@ pub fn eval(
     model.check_catalog(&terrains.catalog()?)?;
     let ds = load_dataset(data, skip_bad)?;
     let names: Vec<String> = model.classes.iter().map(|c| c.name.clone()).collect();
-    let used: std::collections::HashSet<String> = model
-        .train_hashes
-        .iter()
-        .chain(&model.val_hashes)
-        .cloned()
-        .collect();
+    let spec = lab::score::EvalSpec {
+        damage_pct: damage,
+        repair,
+        seed,
+        kernels,
+    };
+    let lab::score::Evaluation {
+        confusion: counts,
+        skipped,
+        classify_us: times,
+    } = lab::score::evaluate(model, &ds, &spec)?;
     let k = names.len();
-    let mut counts = lab::Confusion::new(k);
-    let mut skipped = 0;
-    let mut times = Vec::new();
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let mut c = Classifier::with_kernels(model, kernels);
-    for s in &ds.samples {
-        let Some(actual) = names.iter().position(|n| *n == ds.classes[s.class]) else {
-            bail!(
-                "class `{}` of {} is not in the model (it knows {names:?})",
-                ds.classes[s.class],
-                data.display()
-            );
-        };
-        if used.contains(&s.image.content_hash()) {
-            skipped += 1;
-            continue;
-        }
-        let mut img = s.image.clone();
-        if let Some(p) = damage {
-            repair_mod::damage(&mut img, p, &mut rng);
-        }
-        let t0 = Instant::now();
-        let d = c
-            .classify(&img.pixels, img.rows, img.cols, repair)
-            .with_context(|| s.path.display().to_string())?;
-        times.push(t0.elapsed().as_secs_f64() * 1e6);
-        counts.add(actual, d.class);
-    }
     let n_tested = counts.total();
     let correct: usize = (0..k).map(|i| counts.counts[i][i]).sum();
     let acc = counts.accuracy();
@@ -196,7 +201,6 @@ pub fn eval(
     // `[actual][detected]` over the classes, and each class's unknown column apart.
     let confusion: Vec<&[usize]> = counts.counts.iter().map(|r| &r[..k]).collect();
     let unknown: Vec<usize> = counts.counts.iter().map(|r| r[k]).collect();
-    times.sort_by(f64::total_cmp);
     let med = percentile(&times, 0.5).unwrap_or(0.0);
     let p99 = percentile(&times, 0.99).unwrap_or(0.0);
     if json {
@@ -377,7 +381,6 @@ pub fn dataset(a: &DatasetArgs) -> Result<ExitCode> {
         sensor: a.foot.sensor,
         seed: a.seed,
     });
-    let mut counts = std::collections::BTreeMap::new();
     for s in &samples {
         anyhow::ensure!(
             catalog.by_id(s.terrain.id()) == Some(s.terrain),
@@ -385,39 +388,17 @@ pub fn dataset(a: &DatasetArgs) -> Result<ExitCode> {
             s.terrain,
             s.terrain.id()
         );
-        let dir = out.join(s.terrain.name());
-        std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-        let k = counts.entry(s.terrain.name()).or_insert(0usize);
-        let img = node::classifier::PressureImage::new(s.rows, s.cols, 8, s.pixels.clone());
-        let path = dir.join(format!("{:04}.pgm", *k));
-        node::classifier::dataset::write_pgm(&img, &path)
-            .with_context(|| format!("writing {}", path.display()))?;
-        *k += 1;
     }
-    for t in kind.terrains() {
-        let of: Vec<&sim::dataset::Sample> = samples.iter().filter(|s| s.terrain == t).collect();
-        if of.is_empty() {
-            continue;
-        }
-        let mean = |f: &dyn Fn(&sim::dataset::Sample) -> f64| {
-            of.iter().map(|s| f(s)).sum::<f64>() / of.len() as f64
-        };
+    lab::simdata::write_images(&samples, out)?;
+    for (t, n, [load, stance_s, speed]) in lab::simdata::means(&samples, &kind.terrains()) {
         if kind == Kind::Dynamic {
             println!(
-                "{}: {} images; load at the sample {:.1} N, stance {:.0} ms, speed {:.2} m/s (means)",
+                "{}: {n} images; load at the sample {load:.1} N, stance {:.0} ms, speed {speed:.2} m/s (means)",
                 t.name(),
-                of.len(),
-                mean(&|s| s.load_n),
-                mean(&|s| s.stance_s * 1e3),
-                mean(&|s| s.speed_m_s)
+                stance_s * 1e3,
             );
         } else {
-            println!(
-                "{}: {} images, load {:.1} N",
-                t.name(),
-                of.len(),
-                mean(&|s| s.load_n)
-            );
+            println!("{}: {n} images, load {load:.1} N", t.name());
         }
     }
     println!("wrote {} images to {}", samples.len(), out.display());

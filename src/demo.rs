@@ -8,8 +8,6 @@ use std::process::ExitCode;
 use anyhow::{Context, Result};
 use controller::ControllerConfig;
 use lab::{LoopParams, StepRecord, Summary};
-use node::NodeConfig;
-use node::classifier::Model;
 use sim::runner::Track;
 
 #[derive(clap::Args)]
@@ -72,23 +70,36 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
         ),
         None => None,
     };
-    let (rows, falls) = if a.realtime {
-        closed_loop_realtime(&track, model, node_cfg, &ctrl_cfg, &a)?
-    } else {
-        let ctrl = if fixed.is_some() {
+    let lp = LoopParams {
+        node: node_cfg,
+        controller: if fixed.is_some() {
             None
         } else {
             Some(&ctrl_cfg)
-        };
-        let lp = LoopParams {
-            node: node_cfg,
-            controller: ctrl,
-            fixed_gait: fixed,
-            damage_pct: a.damage,
-            steps: a.steps,
-            seed: a.seed,
-        };
-        let show = !a.json;
+        },
+        fixed_gait: fixed,
+        damage_pct: a.damage,
+        steps: a.steps,
+        seed: a.seed,
+    };
+    let show = !a.json;
+    let (rows, falls) = if a.realtime {
+        if show {
+            eprintln!(
+                "running simulator, node and controller in real time for {:.0} s...",
+                a.steps as f64 * 0.4 + 1.0
+            );
+        }
+        let (run, switches) = lab::closed_loop::run_realtime(&track, model, &lp)?;
+        if show {
+            run.rows.iter().for_each(print_row);
+            println!(
+                "(controller: {switches} gait switches; {} falls)",
+                run.falls
+            );
+        }
+        (run.rows, run.falls)
+    } else {
         let run = lab::closed_loop::run(&track, model, &lp, |row| {
             if show {
                 print_row(row)
@@ -101,74 +112,6 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
 
 /// The closed loop on the wall clock: `presrs sim`, `presrs node` and `presrs controller`'s own
 /// loops on one in-process bus, each on its own thread. Returns the step rows and the falls.
-fn closed_loop_realtime(
-    track: &Track,
-    model: Model,
-    node_cfg: NodeConfig,
-    ctrl_cfg: &ControllerConfig,
-    a: &DemoArgs,
-) -> Result<(Vec<StepRecord>, u64)> {
-    use crate::runtime::Signals;
-    use protocol::bus::BusSource;
-    let (steps, seed, show) = (a.steps, a.seed, !a.json);
-    let bus = protocol::bus::InProcBus::new();
-    let signals = Signals::manual();
-    let node = node::NodeService::new(node_cfg, model)?.start(BusSource::InProc(bus.clone()))?;
-    let controller = {
-        let (cfg, src, sig) = (
-            ctrl_cfg.clone(),
-            BusSource::InProc(bus.clone()),
-            signals.clone(),
-        );
-        std::thread::Builder::new()
-            .name("controller".into())
-            .spawn(move || controller::service::run(cfg, src, 1.0, &sig.stop))?
-    };
-    // About 0.35 s per step: run long enough for `steps` TerrainClass.
-    let opts = sim::service::RunOptions {
-        speed: 1.0,
-        duration_s: Some(steps as f64 * 0.4 + 1.0),
-        seed,
-    };
-    let mut sim_cfg = sim::runner::SimConfig {
-        track: track.clone(),
-        ..Default::default()
-    };
-    sim_cfg.faults.initial_damage_pct = a.damage;
-    if show {
-        eprintln!(
-            "running simulator, node and controller in real time for {:.0} s...",
-            opts.duration_s.unwrap_or(0.0)
-        );
-    }
-    let catalog = node.catalog().clone();
-    let report = sim::service::run(
-        sim_cfg,
-        &opts,
-        BusSource::InProc(bus),
-        &catalog,
-        &signals.stop,
-    );
-    signals
-        .stop
-        .store(true, std::sync::atomic::Ordering::Relaxed);
-    let switches = controller
-        .join()
-        .map_err(|_| anyhow::anyhow!("the controller thread panicked"))??;
-    node.stop();
-    let rows: Vec<StepRecord> = report.steps.into_iter().take(steps).collect();
-    if show {
-        for row in &rows {
-            print_row(row);
-        }
-        println!(
-            "(controller: {switches} gait switches; {} falls)",
-            report.falls
-        );
-    }
-    Ok((rows, report.falls))
-}
-
 fn print_row(row: &StepRecord) {
     println!(
         "t {:7.2} s  step {:4}  true {:<8} classified {:<8} {:5.1}%  gait G{}  {:.2} m/s",

@@ -52,33 +52,7 @@ enum Cmd {
     /// 100 Hz (in-process, or `presrs node` on `--iface`).
     BenchNode(bench_node::BenchNodeArgs),
     /// Train a terrain classifier on DIR/<class>/<images> (the paper's 13/7 split per class).
-    Train {
-        #[arg(long)]
-        data: PathBuf,
-        #[arg(long)]
-        out: PathBuf,
-        #[arg(long, default_value_t = 20)]
-        per_class: usize,
-        #[arg(long, default_value_t = 13)]
-        train: usize,
-        /// Rows/columns removed: top,bottom,left,right (the paper: 2,2,2,2 static; 0,3,6,0 foot).
-        #[arg(long, default_value = "0,0,0,0")]
-        crop: node::classifier::Crop,
-        #[arg(long, default_value_t = 1)]
-        downsample: usize,
-        #[arg(long)]
-        normalize_load: bool,
-        /// PCA dimensions (default: 52, or as many as the samples support).
-        #[arg(long)]
-        dims: Option<usize>,
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// Skip unreadable files (counted) instead of stopping.
-        #[arg(long)]
-        skip_bad: bool,
-        #[command(flatten)]
-        terrains: cli::TerrainsArg,
-    },
+    Train(cli::TrainArgs),
     /// Evaluate a model on a dataset: confusion matrix (detected vs actual, %) and accuracy.
     Eval {
         #[arg(long)]
@@ -139,30 +113,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Cmd::Sim(a) => sim_cmd::run(a),
         Cmd::Demo(args) => demo::run(args),
         Cmd::BenchNode(args) => bench_node::run(args),
-        Cmd::Train {
-            data,
-            out,
-            per_class,
-            train,
-            crop,
-            downsample,
-            normalize_load,
-            dims,
-            seed,
-            skip_bad,
-            terrains,
-        } => {
-            let opts = node::classifier::train::TrainOptions {
-                per_class,
-                train,
-                crop,
-                downsample,
-                normalize_load,
-                h: dims,
-                seed,
-            };
-            cli::train(&data, &out, &opts, skip_bad, &terrains)
-        }
+        Cmd::Train(a) => cli::train(&a),
         Cmd::Eval {
             model,
             data,

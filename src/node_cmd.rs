@@ -90,25 +90,18 @@ fn replay(mut node: NodeService, log: &Path, json: bool) -> Result<ExitCode> {
     let records = protocol::candump::read_log(std::io::BufReader::new(file))
         .with_context(|| format!("reading {}", log.display()))?;
     let catalog = node.catalog().clone();
-    let mut t_us = 0;
-    let print = |t_us: u64, o: Output| {
+    node.replay(records.iter().map(|r| &r.stamped), &mut |t_us, o| {
         if let Output::Class { foot, class } = o {
             print_class(t_us, foot, &class, json, &catalog);
         }
-    };
-    for r in &records {
-        t_us = r.stamped.t_us;
-        node.tick(t_us, &mut |o| print(t_us, o));
-        node.process(&r.stamped, &mut |o| print(t_us, o));
-    }
+    });
+    let span = |r: Option<&protocol::candump::LogRecord>| r.map_or(0, |r| r.stamped.t_us);
     let c = node.counters();
     let r = node.reassembly_stats();
     eprintln!(
         "replayed {} frames ({:.1} s): {} steps, {} classified, {} without a sample; {} images, {} CRC failures, {} incomplete, {} undecodable frames",
         records.len(),
-        records
-            .first()
-            .map_or(0.0, |f| t_us.saturating_sub(f.stamped.t_us) as f64 * 1e-6),
+        span(records.last()).saturating_sub(span(records.first())) as f64 * 1e-6,
         c.steps,
         c.classified,
         c.no_sample,

@@ -28,14 +28,6 @@ impl Signals {
         Ok(s)
     }
 
-    /// Flags no signal sets: a caller in this process (the node benchmark) stops the threads.
-    pub fn manual() -> Self {
-        Self {
-            stop: Arc::new(AtomicBool::new(false)),
-            reload: Arc::new(AtomicBool::new(false)),
-        }
-    }
-
     pub fn stopping(&self) -> bool {
         self.stop.load(Ordering::Relaxed)
     }

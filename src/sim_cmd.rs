@@ -12,8 +12,8 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result};
 use sim::faults::FaultParams;
-use sim::runner::{SimConfig, Track};
-use sim::service::{RunOptions, SimReport};
+use sim::runner::SimConfig;
+use sim::service::RunOptions;
 
 use crate::runtime::Signals;
 use protocol::bus::BusSource;
@@ -50,38 +50,8 @@ pub struct SimArgs {
 
 pub fn run(a: SimArgs) -> Result<ExitCode> {
     let signals = Signals::install()?;
-    let track = crate::cli::load_track(a.track.as_deref(), &a.terrains.catalog()?)?;
-    let r = run_on(&a, track, BusSource::Iface(a.iface.clone()), &signals)?;
-    // No gait table: the simulator scores the node, not the controller.
-    let sum = lab::Summary::of(&r.steps, &Default::default());
-    let (n, correct) = (sum.steps, sum.correct);
-    eprintln!(
-        "presrs sim: {:.1} s simulated in {:.1} s wall; {} touchdowns, {} falls; {n} TerrainClass heard, {correct} correct{}; {} send errors",
-        r.simulated_s,
-        r.wall_s,
-        r.touchdowns,
-        r.falls,
-        if n > 0 {
-            format!(" ({:.1}%)", 100.0 * sum.accuracy)
-        } else {
-            String::new()
-        },
-        r.send_errors
-    );
-    if let Some(p) = &a.report {
-        std::fs::write(p, serde_json::to_string_pretty(&r)?)
-            .with_context(|| format!("writing --report {}", p.display()))?;
-    }
-    Ok(ExitCode::SUCCESS)
-}
-
-/// The simulator on any bus until `--duration` or `signals` stop it.
-pub fn run_on(
-    a: &SimArgs,
-    track: Track,
-    source: BusSource,
-    signals: &Signals,
-) -> Result<SimReport> {
+    let catalog = a.terrains.catalog()?;
+    let track = crate::cli::load_track(a.track.as_deref(), &catalog)?;
     anyhow::ensure!(
         a.speed > 0.0 && a.speed.is_finite(),
         "--speed {}: expected a positive factor (1 = real time)",
@@ -104,12 +74,27 @@ pub fn run_on(
         duration_s: a.duration,
         seed: a.seed,
     };
-    let catalog = a.terrains.catalog()?;
-    Ok(sim::service::run(
-        cfg,
-        &opts,
-        source,
-        &catalog,
-        &signals.stop,
-    ))
+    let source = BusSource::Iface(a.iface.clone());
+    let r = sim::service::run(cfg, &opts, source, &catalog, &signals.stop);
+    // No gait table: the simulator scores the node, not the controller.
+    let sum = lab::Summary::of(&r.steps, &Default::default());
+    let (n, correct) = (sum.steps, sum.correct);
+    eprintln!(
+        "presrs sim: {:.1} s simulated in {:.1} s wall; {} touchdowns, {} falls; {n} TerrainClass heard, {correct} correct{}; {} send errors",
+        r.simulated_s,
+        r.wall_s,
+        r.touchdowns,
+        r.falls,
+        if n > 0 {
+            format!(" ({:.1}%)", 100.0 * sum.accuracy)
+        } else {
+            String::new()
+        },
+        r.send_errors
+    );
+    if let Some(p) = &a.report {
+        std::fs::write(p, serde_json::to_string_pretty(&r)?)
+            .with_context(|| format!("writing --report {}", p.display()))?;
+    }
+    Ok(ExitCode::SUCCESS)
 }

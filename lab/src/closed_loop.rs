@@ -148,3 +148,54 @@ pub fn run(
         falls: robot.falls.len() as u64,
     })
 }
+
+/// [`run`] in real time, as the processes run on a robot: the node's threads
+/// ([`NodeService::start`]), the controller's bus loop ([`controller::service::run`]) on a
+/// thread of its own and the simulator's ([`sim::service::run`]) on this one, all on one
+/// in-process bus with the wall clock. Runs `p.steps * 0.4 + 1` seconds and returns the first
+/// `p.steps` steps and the controller's gait switches. `p.controller` is required (`None`
+/// means the default config).
+pub fn run_realtime(
+    track: &Track,
+    model: Model,
+    p: &LoopParams,
+) -> Result<(LoopRun, u64), LabError> {
+    use protocol::bus::BusSource;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let bus = InProcBus::new();
+    let stop = Arc::new(AtomicBool::new(false));
+    let node = NodeService::new(p.node.clone(), model)?.start(BusSource::InProc(bus.clone()))?;
+    let controller = {
+        let cfg = p.controller.cloned().unwrap_or_default();
+        let (src, stop) = (BusSource::InProc(bus.clone()), stop.clone());
+        std::thread::Builder::new()
+            .name("controller".into())
+            .spawn(move || controller::service::run(cfg, src, 1.0, &stop))
+            .map_err(LabError::Thread)?
+    };
+    let opts = sim::service::RunOptions {
+        speed: 1.0,
+        duration_s: Some(p.steps as f64 * 0.4 + 1.0),
+        seed: p.seed,
+    };
+    let mut sim_cfg = SimConfig {
+        track: track.clone(),
+        ..Default::default()
+    };
+    sim_cfg.faults.initial_damage_pct = p.damage_pct;
+    let catalog = node.catalog().clone();
+    let report = sim::service::run(sim_cfg, &opts, BusSource::InProc(bus), &catalog, &stop);
+    stop.store(true, Ordering::Relaxed);
+    let switches = controller
+        .join()
+        .map_err(|_| LabError::Panicked("controller"))??;
+    node.stop();
+    let rows = report.steps.into_iter().take(p.steps).collect();
+    Ok((
+        LoopRun {
+            rows,
+            falls: report.falls,
+        },
+        switches,
+    ))
+}

@@ -9,6 +9,12 @@
 //! experiments and the benchmarks all score with these functions, so a number means the same
 //! thing wherever it is printed.
 //!
+//! Also here: [`study`] (the damage study, the per-gait tables, speeds: data, not text),
+//! [`model`] (the simulator model the demo caches), [`load`] (the load `presrs bench-node`
+//! plays: feet at 100 Hz on a known schedule, and `/proc` CPU and memory readers) and, with the
+//! default `report` feature, [`report`] (the paper's experiments as Markdown and PNG figures,
+//! on the simulator or on a lab's own dataset).
+//!
 //! ```no_run
 //! use presrs_lab::{closed_loop, model, score};
 //!
@@ -28,7 +34,10 @@
 //! ```
 
 pub mod closed_loop;
+pub mod load;
 pub mod model;
+#[cfg(feature = "report")]
+pub mod report;
 pub mod score;
 pub mod simdata;
 pub mod study;
@@ -55,4 +64,10 @@ pub enum LabError {
     /// A model file.
     #[error(transparent)]
     Model(#[from] node::classifier::model::ModelError),
+    /// A thread could not be started.
+    #[error("starting a thread: {0}")]
+    Thread(std::io::Error),
+    /// A thread of the loop panicked.
+    #[error("the {0} thread panicked")]
+    Panicked(&'static str),
 }

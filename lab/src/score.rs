@@ -210,3 +210,121 @@ mod tests {
         assert_eq!(Confusion::new(3).accuracy(), 0.0);
     }
 }
+
+/// The value at quantile `q` of sorted values (nearest rank); `None` when empty.
+pub fn percentile(sorted: &[f64], q: f64) -> Option<f64> {
+    let i = ((sorted.len().checked_sub(1)?) as f64 * q).round() as usize;
+    sorted.get(i).copied()
+}
+
+#[cfg(test)]
+mod percentile_tests {
+    use super::percentile;
+
+    #[test]
+    fn percentile_is_nearest_rank() {
+        assert_eq!(percentile(&[], 0.5), None);
+        assert_eq!(percentile(&[1.0, 2.0, 3.0], 0.5), Some(2.0));
+        assert_eq!(percentile(&[1.0, 2.0, 3.0, 4.0], 0.99), Some(4.0));
+    }
+}
+
+/// How [`evaluate`] tests a model.
+#[derive(Clone, Copy, Debug)]
+pub struct EvalSpec {
+    /// Simulated sensor damage per image, percent (eq. 6).
+    pub damage_pct: Option<f64>,
+    /// The paper's repair filter before classifying.
+    pub repair: bool,
+    /// Seed of the damage.
+    pub seed: u64,
+    /// Which SIMD kernels classify.
+    pub kernels: node::classifier::Kernels,
+}
+
+/// What [`evaluate`] measured.
+#[derive(Clone, Debug)]
+pub struct Evaluation {
+    /// Actual against detected, over the model's classes (plus unknown).
+    pub confusion: Confusion,
+    /// Images left out: the model was trained or validated on them.
+    pub skipped: usize,
+    /// Time per classification, µs, ascending.
+    pub classify_us: Vec<f64>,
+}
+
+/// Why [`evaluate`] stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum EvalError {
+    /// A class folder the model has no class for.
+    #[error("class `{class}` of {dir} is not in the model (it knows {knows:?})")]
+    UnknownClass {
+        /// The folder name.
+        class: String,
+        /// The dataset.
+        dir: String,
+        /// The model's classes.
+        knows: Vec<String>,
+    },
+    /// An image the model cannot take.
+    #[error("{path}: {source}")]
+    Image {
+        /// The image file.
+        path: String,
+        /// Why.
+        source: node::classifier::pwe::SizeMismatch,
+    },
+}
+
+/// Classifies every image of `ds` the model was neither trained nor validated on (matched by
+/// content hash), each damaged per `spec`, timing each classification.
+pub fn evaluate(
+    model: Model,
+    ds: &node::classifier::dataset::Dataset,
+    spec: &EvalSpec,
+) -> Result<Evaluation, EvalError> {
+    use rand::SeedableRng;
+    let names: Vec<String> = model.classes.iter().map(|c| c.name.clone()).collect();
+    let used: std::collections::HashSet<String> = model
+        .train_hashes
+        .iter()
+        .chain(&model.val_hashes)
+        .cloned()
+        .collect();
+    let mut confusion = Confusion::new(names.len());
+    let (mut skipped, mut times) = (0, Vec::new());
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(spec.seed);
+    let mut c = Classifier::with_kernels(model, spec.kernels);
+    for s in &ds.samples {
+        let Some(actual) = names.iter().position(|n| *n == ds.classes[s.class]) else {
+            return Err(EvalError::UnknownClass {
+                class: ds.classes[s.class].clone(),
+                dir: ds.root.display().to_string(),
+                knows: names,
+            });
+        };
+        if used.contains(&s.image.content_hash()) {
+            skipped += 1;
+            continue;
+        }
+        let mut img = s.image.clone();
+        if let Some(p) = spec.damage_pct {
+            node::classifier::repair::damage(&mut img, p, &mut rng);
+        }
+        let t0 = std::time::Instant::now();
+        let d = c
+            .classify(&img.pixels, img.rows, img.cols, spec.repair)
+            .map_err(|source| EvalError::Image {
+                path: s.path.display().to_string(),
+                source,
+            })?;
+        times.push(t0.elapsed().as_secs_f64() * 1e6);
+        confusion.add(actual, d.class);
+    }
+    times.sort_by(f64::total_cmp);
+    Ok(Evaluation {
+        confusion,
+        skipped,
+        classify_us: times,
+    })
+}

@@ -90,3 +90,46 @@ impl TrainingSet {
             .collect()
     }
 }
+
+/// Writes `samples` as `out/<terrain>/<NNNN>.pgm` (numbered per terrain, in order), the layout
+/// `presrs train` reads. Returns the files written.
+pub fn write_images(samples: &[Sample], out: &std::path::Path) -> Result<usize, WriteError> {
+    let mut counts = std::collections::BTreeMap::new();
+    for s in samples {
+        let dir = out.join(s.terrain.name());
+        std::fs::create_dir_all(&dir).map_err(|e| WriteError(dir.display().to_string(), e))?;
+        let k = counts.entry(s.terrain.name()).or_insert(0usize);
+        let img = PressureImage::new(s.rows, s.cols, 8, s.pixels.clone());
+        let path = dir.join(format!("{:04}.pgm", *k));
+        node::classifier::dataset::write_pgm(&img, &path)
+            .map_err(|e| WriteError(path.display().to_string(), e))?;
+        *k += 1;
+    }
+    Ok(samples.len())
+}
+
+/// A file or folder [`write_images`] could not write.
+#[derive(Debug, thiserror::Error)]
+#[error("writing {0}: {1}")]
+pub struct WriteError(pub String, #[source] pub std::io::Error);
+
+/// Per terrain of `samples` (in the order given): its samples' count and mean load (N), stance
+/// (s) and forward speed (m/s).
+pub fn means(samples: &[Sample], terrains: &[Terrain]) -> Vec<(Terrain, usize, [f64; 3])> {
+    terrains
+        .iter()
+        .filter_map(|&t| {
+            let of: Vec<&Sample> = samples.iter().filter(|s| s.terrain == t).collect();
+            let n = of.len() as f64;
+            let mean = |f: fn(&Sample) -> f64| of.iter().map(|s| f(s)).sum::<f64>() / n;
+            (!of.is_empty()).then(|| {
+                let m = [
+                    mean(|s| s.load_n),
+                    mean(|s| s.stance_s),
+                    mean(|s| s.speed_m_s),
+                ];
+                (t, of.len(), m)
+            })
+        })
+        .collect()
+}

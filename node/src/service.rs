@@ -219,6 +219,21 @@ impl NodeService {
             .on_frame(frame, &mut |foot, class| out(Output::Class { foot, class }));
     }
 
+    /// A recorded run on its own clock: each frame's time ticks the node before the frame is
+    /// processed, as a live node's clock would have, so a replay decides as the robot did.
+    /// `out` hears each output with the time it came at.
+    pub fn replay<'a>(
+        &mut self,
+        frames: impl IntoIterator<Item = &'a Stamped>,
+        out: &mut impl FnMut(u64, Output),
+    ) {
+        for f in frames {
+            let t = f.t_us;
+            self.tick(t, &mut |o| out(t, o));
+            self.process(f, &mut |o| out(t, o));
+        }
+    }
+
     /// Everything due by `now_us` (the clock of [`Stamped::t_us`]): steps whose sample deadline
     /// has passed with no nearer frame possible, and NodeStatus when a status period is up.
     pub fn tick(&mut self, now_us: u64, out: &mut impl FnMut(Output)) {

@@ -321,3 +321,29 @@ fn started_on_a_bus_it_answers_each_step_and_says_when_it_stops() {
     }
     assert_eq!(last, Some(NodeState::Stopping));
 }
+
+#[test]
+fn a_replay_decides_each_step_as_the_log_clock_says() {
+    let mut foot = FakeFoot::new();
+    let mut frames = Vec::new();
+    let terrains = [2, 0, 1];
+    for (k, &terrain) in terrains.iter().enumerate() {
+        frames.extend(foot.stance(terrain, 1_000_000 + k as u64 * 400_000, 200, |_| true));
+    }
+    let mut node = NodeService::new(NodeConfig::default(), model()).unwrap();
+    let mut said = Vec::new();
+    node.replay(&frames, &mut |t, o| said.push((t, o)));
+    let got = classes(&said);
+    assert_eq!(got.len(), terrains.len(), "{got:?}");
+    let catalog = TerrainCatalog::paper();
+    for (k, (&(t, tc), &terrain)) in got.iter().zip(&terrains).enumerate() {
+        assert_eq!(
+            catalog.describe(tc.terrain),
+            NAMES[terrain],
+            "step {k}: {tc:?}"
+        );
+        // Only frame times tick a replay: the step is decided at the very frame that completes
+        // the nearest image (captured at 65 ms, received 1 ms later), not on a tick grid.
+        assert_eq!(t - (1_000_000 + k as u64 * 400_000), 66_000, "step {k}");
+    }
+}

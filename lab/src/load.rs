@@ -1,0 +1,486 @@
+//! The load `presrs bench-node` puts on a node: feet at 100 Hz on a known schedule.
+//!
+//! [`Feet`] plays `n` feet on the foot clock: a step every 300 ms (150 ms stance), a CAN FD
+//! tactile image every 10 ms per foot, the stance images being the simulator's skin images of
+//! G2 stances on the four dynamic terrains ([`image_pool`]). The schedule is fixed (touchdowns
+//! spread over the step period, 3.3 ms off the frame grid so that no frame ties two sample
+//! times), so the benchmark knows which frame the node must pick for each step
+//! ([`Sampled`]) and can time the decision from that frame's last segment. The simulated
+//! hopper is not run: its physics would cost CPU in the benchmarking process and make the
+//! step times differ between runs.
+//!
+//! [`measure`] plays the schedule in real time on one bus handle and matches the node's
+//! TerrainClass on another; [`task_cpu_ns`] and [`memory_mb`] read a process's CPU time and
+//! resident memory from `/proc`.
+
+use std::collections::HashMap;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use protocol::CanFrame;
+use protocol::bus::CanBus;
+use protocol::ids::IdConfig;
+use protocol::messages::{self, FootContact, Message, flags};
+use protocol::tactile::{ImageRef, SegmentError, Segmenter, Variant};
+
+/// Frame period of the PreSRS (100 Hz), µs.
+pub const FRAME_US: u64 = 10_000;
+/// Step period of the load, µs.
+pub const STEP_US: u64 = 300_000;
+/// Stance duration of the load, µs.
+pub const STANCE_US: u64 = 150_000;
+/// The paper's sample time after touchdown, µs.
+pub const SAMPLE_US: u64 = 70_000;
+/// Time played before measuring (the node's threads and caches settle), µs.
+pub const WARMUP_US: u64 = 1_000_000;
+/// Image side: the PreSRS's 44x44.
+pub const SIDE: usize = 44;
+
+/// Eight G2 stance images per dynamic terrain from the simulator's skin, with their terrain ids.
+pub fn image_pool() -> Vec<(u8, Vec<u16>)> {
+    sim::dataset::generate(&sim::dataset::Options {
+        kind: sim::dataset::Kind::Dynamic,
+        n: Some(8),
+        gait: controller::Gait::g2(),
+        damage_pct: 0.0,
+        sensor: sim::DEFAULT_SENSOR,
+        seed: 99,
+    })
+    .into_iter()
+    .filter(|s| s.rows == SIDE && s.cols == SIDE)
+    .map(|s| (s.terrain.id(), s.pixels))
+    .collect()
+}
+
+/// One foot's schedule: touchdown, liftoff and frame times on the foot clock (µs from start).
+struct Foot {
+    id: u8,
+    td: u64,
+    lo: u64,
+    frame: u64,
+    /// This foot's frame grid: frames at `offset + k * FRAME_US`.
+    offset: u64,
+    in_stance: bool,
+    step: u16,
+    contact_seq: u8,
+    image_seq: u8,
+    /// Time of this stance's sampled frame, and the image shown in this stance.
+    sampled: Option<u64>,
+    image: usize,
+}
+
+/// The frame the node should classify for a step: sent whole by the event that returned it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Sampled {
+    /// The foot.
+    pub foot: u8,
+    /// The step (the TerrainClass's step counter).
+    pub step: u16,
+    /// The frame's time on the foot clock, µs.
+    pub t_us: u64,
+    /// The true terrain id of the stance.
+    pub terrain: u8,
+}
+
+/// Why the load could not be played.
+#[derive(Debug, thiserror::Error)]
+pub enum LoadError {
+    /// No images to show.
+    #[error("the load needs at least one 44x44 stance image")]
+    NoImages,
+    /// Feet outside 1..=MAX_FEET.
+    #[error("{0} feet: allowed 1..={max}", max = protocol::ids::MAX_FEET)]
+    Feet(u8),
+    /// An image could not be segmented.
+    #[error(transparent)]
+    Segment(#[from] SegmentError),
+    /// The listening bus handle failed.
+    #[error("bus: {0}")]
+    Bus(#[from] protocol::BusError),
+    /// The listener thread panicked.
+    #[error("the listener thread panicked")]
+    Listener,
+}
+
+/// `n` feet on the fixed schedule, in time order.
+pub struct Feet {
+    feet: Vec<Foot>,
+    images: Vec<(u8, Vec<u16>)>,
+    blank: Vec<u16>,
+    seg: Segmenter,
+    ids: IdConfig,
+}
+
+impl Feet {
+    /// `n` feet (1..=[`protocol::ids::MAX_FEET`]) showing `images` (44x44, with terrain ids).
+    pub fn new(n: u8, images: Vec<(u8, Vec<u16>)>, ids: IdConfig) -> Result<Self, LoadError> {
+        if !(1..=protocol::ids::MAX_FEET).contains(&n) {
+            return Err(LoadError::Feet(n));
+        }
+        if images.is_empty() || images.iter().any(|(_, p)| p.len() != SIDE * SIDE) {
+            return Err(LoadError::NoImages);
+        }
+        let k = n as u64;
+        let feet = (0..n)
+            .map(|f| {
+                let i = f as u64;
+                Foot {
+                    id: f,
+                    td: 200_000 + i * STEP_US / k + 3_300,
+                    lo: u64::MAX,
+                    frame: 1_000 + i * FRAME_US / k,
+                    offset: 1_000 + i * FRAME_US / k,
+                    in_stance: false,
+                    step: 0,
+                    contact_seq: 0,
+                    image_seq: 0,
+                    sampled: None,
+                    image: f as usize,
+                }
+            })
+            .collect();
+        Ok(Self {
+            feet,
+            images,
+            blank: vec![0; SIDE * SIDE],
+            seg: Segmenter::new(Variant::Fd, ids.clone()),
+            ids,
+        })
+    }
+
+    /// The next event's time on the foot clock, µs.
+    pub fn next_us(&self) -> u64 {
+        self.feet
+            .iter()
+            .map(|f| f.td.min(f.lo).min(f.frame))
+            .min()
+            .unwrap_or(u64::MAX)
+    }
+
+    /// Emits the next event's frames (a FootContact, or an image's segments) and says whether
+    /// that image was its stance's sampled frame.
+    pub fn emit(&mut self, out: &mut dyn FnMut(CanFrame)) -> Result<Option<Sampled>, LoadError> {
+        let t = self.next_us();
+        let Some(f) = self
+            .feet
+            .iter_mut()
+            .find(|f| f.td.min(f.lo).min(f.frame) == t)
+        else {
+            return Ok(None);
+        };
+        if t == f.td || t == f.lo {
+            let touchdown = t == f.td;
+            if touchdown {
+                f.in_stance = true;
+                f.step = f.step.wrapping_add(1);
+                f.lo = t + STANCE_US;
+                f.td = t + STEP_US;
+                f.image = (f.image + 7) % self.images.len();
+                // The frame nearest 70 ms after touchdown, on this foot's frame grid.
+                let k = ((t + SAMPLE_US - f.offset) as f64 / FRAME_US as f64).round() as u64;
+                f.sampled = Some(f.offset + k * FRAME_US);
+            } else {
+                f.in_stance = false;
+                f.lo = u64::MAX;
+            }
+            f.contact_seq = f.contact_seq.wrapping_add(1);
+            let m = Message::FootContact(FootContact {
+                stance: touchdown,
+                seq: f.contact_seq,
+                timestamp_us: t as u32,
+            });
+            if let Some(frame) = m.to_frame(&self.ids, f.id) {
+                out(frame);
+            }
+            return Ok(None);
+        }
+        f.frame += FRAME_US;
+        f.image_seq = f.image_seq.wrapping_add(1);
+        let (terrain, pixels) = if f.in_stance {
+            let (id, px) = &self.images[f.image];
+            (*id, px.as_slice())
+        } else {
+            (0, self.blank.as_slice())
+        };
+        let img = ImageRef {
+            rows: SIDE,
+            cols: SIDE,
+            bits: 8,
+            timestamp_us: t as u32,
+            pixels,
+        };
+        self.seg.frames(f.id, f.image_seq, &img, out)?;
+        Ok((f.sampled == Some(t)).then_some(Sampled {
+            foot: f.id,
+            step: f.step,
+            t_us: t,
+            terrain,
+        }))
+    }
+}
+
+/// What a measured run saw.
+#[derive(Clone, Debug, Default)]
+pub struct Tally {
+    /// Steps whose sampled frame was sent in the measured window.
+    pub steps: u64,
+    /// TerrainClass messages matched to those steps.
+    pub decisions: u64,
+    /// Of those, classified (not "no sample").
+    pub classified: u64,
+    /// Of those, the true terrain.
+    pub correct: u64,
+    /// Per classified step: the sampled frame's last segment sent -> TerrainClass received, µs.
+    pub latencies_us: Vec<f64>,
+    /// Frames the load could not send after retrying (a full socket buffer).
+    pub send_errors: u64,
+    /// The node's CPU time over the measured window, ns (when `cpu_ns` could read it).
+    pub cpu_ns: Option<u64>,
+}
+
+/// Plays `feet` in real time for `total_us` on `tx` and matches each step's TerrainClass heard
+/// on `rx`; `cpu_ns` reads the node's CPU time (at the start and end of the measured window).
+pub fn measure(
+    tx: &mut dyn CanBus,
+    rx: &mut dyn CanBus,
+    ids: &IdConfig,
+    mut feet: Feet,
+    total_us: u64,
+    cpu_ns: &dyn Fn() -> Option<u64>,
+) -> Result<Tally, LoadError> {
+    let (sent_tx, sent_rx) = mpsc::channel::<(Sampled, Instant, bool)>();
+    let done = AtomicBool::new(false);
+    std::thread::scope(|s| {
+        let stop = &done;
+        let listener = s.spawn(move || listen(rx, ids, &sent_rx, stop));
+        let start = Instant::now();
+        let (mut steps, mut send_errors, mut cpu_start) = (0u64, 0u64, None);
+        let mut played = Ok(());
+        while feet.next_us() < total_us {
+            let t = feet.next_us();
+            if cpu_start.is_none() && t >= WARMUP_US {
+                cpu_start = Some(cpu_ns());
+            }
+            let due = start + Duration::from_micros(t);
+            let now = Instant::now();
+            if due > now {
+                std::thread::sleep(due - now);
+            }
+            let sampled = feet.emit(&mut |f| {
+                // A full socket buffer (ENOBUFS) is retried briefly rather than lost.
+                for _ in 0..50 {
+                    if tx.send(&f).is_ok() {
+                        return;
+                    }
+                    std::thread::sleep(Duration::from_micros(100));
+                }
+                send_errors += 1;
+            });
+            match sampled {
+                Ok(Some(sm)) => {
+                    let measured = sm.t_us >= WARMUP_US + SAMPLE_US;
+                    steps += u64::from(measured);
+                    let _ = sent_tx.send((sm, Instant::now(), measured));
+                }
+                Ok(None) => {}
+                Err(e) => {
+                    played = Err(e);
+                    break;
+                }
+            }
+        }
+        let cpu = match (cpu_start.flatten(), cpu_ns()) {
+            (Some(a), Some(b)) => Some(b.saturating_sub(a)),
+            _ => None,
+        };
+        // The last decisions arrive within a few ms; then stop listening.
+        std::thread::sleep(Duration::from_millis(300));
+        done.store(true, Ordering::Relaxed);
+        let heard = listener.join().map_err(|_| LoadError::Listener)?;
+        played?;
+        Ok(Tally {
+            steps,
+            send_errors,
+            cpu_ns: cpu,
+            ..heard?
+        })
+    })
+}
+
+/// Receives TerrainClass and matches each to its sampled frame.
+fn listen(
+    bus: &mut dyn CanBus,
+    ids: &IdConfig,
+    sent: &mpsc::Receiver<(Sampled, Instant, bool)>,
+    done: &AtomicBool,
+) -> Result<Tally, LoadError> {
+    let mut t = Tally::default();
+    let mut pending: HashMap<(u8, u16), (Instant, u8, bool)> = HashMap::new();
+    while !done.load(Ordering::Relaxed) {
+        let got = bus.recv(Duration::from_millis(5))?;
+        let now = Instant::now();
+        for (s, at, measured) in sent.try_iter() {
+            pending.insert((s.foot, s.step), (at, s.terrain, measured));
+        }
+        let Some(st) = got else { continue };
+        let Ok(Some((foot, Message::TerrainClass(tc)))) = messages::decode(&st.frame, ids) else {
+            continue;
+        };
+        let Some((at, terrain, measured)) = pending.remove(&(foot, tc.step)) else {
+            continue;
+        };
+        if !measured {
+            continue;
+        }
+        t.decisions += 1;
+        if tc.flags & flags::NO_SAMPLE == 0 {
+            t.classified += 1;
+            t.correct += u64::from(tc.terrain == terrain);
+            t.latencies_us
+                .push(now.saturating_duration_since(at).as_secs_f64() * 1e6);
+        }
+    }
+    Ok(t)
+}
+
+/// CPU time (ns) of a process's threads (`pid` or "self"), all or those named in `names`: from
+/// schedstat, or from stat's utime+stime (10 ms ticks) where schedstat is missing.
+pub fn task_cpu_ns(pid: &str, names: Option<&[&str]>) -> Option<u64> {
+    let dir = std::fs::read_dir(format!("/proc/{pid}/task")).ok()?;
+    let mut total = 0u64;
+    for e in dir.flatten() {
+        let p = e.path();
+        if let Some(names) = names {
+            let comm = std::fs::read_to_string(p.join("comm")).unwrap_or_default();
+            if !names.contains(&comm.trim()) {
+                continue;
+            }
+        }
+        if let Some(ns) = std::fs::read_to_string(p.join("schedstat"))
+            .ok()
+            .and_then(|s| s.split_whitespace().next()?.parse::<u64>().ok())
+        {
+            total += ns;
+            continue;
+        }
+        let stat = std::fs::read_to_string(p.join("stat")).ok()?;
+        // Fields after the ")" of comm: state is field 3, utime 14, stime 15.
+        let rest = stat.rsplit_once(')')?.1;
+        let f: Vec<&str> = rest.split_whitespace().collect();
+        let ticks = f.get(11)?.parse::<u64>().ok()? + f.get(12)?.parse::<u64>().ok()?;
+        total += ticks * 10_000_000;
+    }
+    Some(total)
+}
+
+/// VmRSS and VmHWM (peak) of a process (`pid` or "self"), MB.
+pub fn memory_mb(pid: &str) -> (Option<f64>, Option<f64>) {
+    let Ok(s) = std::fs::read_to_string(format!("/proc/{pid}/status")) else {
+        return (None, None);
+    };
+    let field = |k: &str| {
+        s.lines()
+            .find(|l| l.starts_with(k))
+            .and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
+            .map(|kb| kb / 1024.0)
+    };
+    (field("VmRSS:"), field("VmHWM:"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use protocol::ids::MessageKind;
+    use protocol::tactile::Reassembler;
+
+    fn pool() -> Vec<(u8, Vec<u16>)> {
+        (0..4u8)
+            .map(|k| (k, vec![10 + k as u16; SIDE * SIDE]))
+            .collect()
+    }
+
+    #[test]
+    fn feet_play_100_hz_with_one_sampled_frame_per_stance_nearest_70_ms() {
+        let ids = IdConfig::default();
+        let mut feet = Feet::new(3, pool(), ids.clone()).unwrap();
+        let mut frames = Vec::new();
+        let mut sampled = Vec::new();
+        let mut last = 0;
+        while feet.next_us() < 2_000_000 {
+            let t = feet.next_us();
+            assert!(t >= last, "events in time order");
+            last = t;
+            if let Some(s) = feet.emit(&mut |f| frames.push(f)).unwrap() {
+                sampled.push(s);
+            }
+        }
+        let (mut contacts, mut images, mut touchdown) = ([0u32; 3], [0u32; 3], [None; 3]);
+        let mut reasm = Reassembler::new(100_000);
+        for f in &frames {
+            match ids.lookup(f.raw_id(), f.is_extended()) {
+                Some((MessageKind::FootContact, foot)) => {
+                    let Ok(Some((_, Message::FootContact(c)))) = messages::decode(f, &ids) else {
+                        panic!("a FootContact that does not decode");
+                    };
+                    contacts[foot as usize] += 1;
+                    if c.stance {
+                        touchdown[foot as usize] = Some(c.timestamp_us as u64);
+                    }
+                }
+                Some((MessageKind::TactileFrame, foot)) => {
+                    if let Some(img) = reasm.push(Variant::Fd, foot, f.data(), 0) {
+                        assert_eq!((img.rows, img.cols), (SIDE as u8, SIDE as u8));
+                        images[foot as usize] += 1;
+                    }
+                }
+                other => panic!("unexpected frame {other:?}"),
+            }
+        }
+        for foot in 0..3 {
+            // 2 s at 100 Hz; touchdowns from 0.2 s every 0.3 s, each with a liftoff.
+            assert!((199..=200).contains(&images[foot]), "{images:?}");
+            let td0 = 200_000 + foot as u64 * STEP_US / 3 + 3_300;
+            let tds: Vec<u64> = (0..)
+                .map(|k| td0 + k * STEP_US)
+                .take_while(|&t| t < 2_000_000)
+                .collect();
+            let lifts = tds.iter().filter(|&&t| t + STANCE_US < 2_000_000).count();
+            assert_eq!(contacts[foot] as usize, tds.len() + lifts, "{contacts:?}");
+            assert!(touchdown[foot].is_some());
+            let steps: Vec<&Sampled> = sampled.iter().filter(|s| s.foot as usize == foot).collect();
+            assert_eq!(steps.len(), tds.len());
+            for (k, s) in steps.iter().enumerate() {
+                assert_eq!(s.step as usize, k + 1);
+                let td = 200_000 + foot as u64 * STEP_US / 3 + 3_300 + k as u64 * STEP_US;
+                let off = (s.t_us as i64 - (td + SAMPLE_US) as i64).abs();
+                assert!(
+                    off <= FRAME_US as i64 / 2,
+                    "foot {foot} step {k}: {off} µs off"
+                );
+                assert!(s.terrain < 4);
+            }
+        }
+    }
+
+    #[test]
+    fn feet_refuse_no_images_and_too_many_feet() {
+        let ids = IdConfig::default();
+        assert!(matches!(
+            Feet::new(3, Vec::new(), ids.clone()),
+            Err(LoadError::NoImages)
+        ));
+        assert!(matches!(
+            Feet::new(3, vec![(0, vec![0; 9])], ids.clone()),
+            Err(LoadError::NoImages)
+        ));
+        assert!(matches!(
+            Feet::new(0, pool(), ids.clone()),
+            Err(LoadError::Feet(0))
+        ));
+        assert!(matches!(
+            Feet::new(200, pool(), ids),
+            Err(LoadError::Feet(200))
+        ));
+    }
+}
