@@ -65,7 +65,7 @@ pub enum Source {
     /// The cache, from an earlier run.
     Cached(PathBuf),
     /// Trained now and cached (`Ok(path)`), or trained now and not cached (why).
-    Trained(Result<PathBuf, String>),
+    Trained(Result<PathBuf, node::classifier::model::ModelError>),
 }
 
 /// The model at `path`, or without one the cached simulator model, trained and cached on
@@ -86,6 +86,6 @@ pub fn load_or_train(
     if let Some(dir) = cache.parent() {
         let _ = std::fs::create_dir_all(dir);
     }
-    let saved = m.save(&cache).map(|()| cache).map_err(|e| e.to_string());
+    let saved = m.save(&cache).map(|()| cache);
     Ok((m, Source::Trained(saved)))
 }

@@ -347,3 +347,72 @@ fn a_replay_decides_each_step_as_the_log_clock_says() {
         assert_eq!(t - (1_000_000 + k as u64 * 400_000), 66_000, "step {k}");
     }
 }
+
+/// A classic-CAN foot at the spec's worst case (docs/protocol.md): one image per step, the
+/// sampled one, its 391 frames 135 µs apart (a 1 Mbit/s bus at full load, worst stuffing).
+fn classic_worst_case_steps(cfg: NodeConfig) -> Vec<(u64, TerrainClass)> {
+    let ids = IdConfig::default();
+    let seg = Segmenter::new(Variant::Classic, ids.clone());
+    let mut rng = rand::rngs::StdRng::seed_from_u64(3);
+    let mut frames = Vec::new();
+    for (k, &terrain) in [0usize, 1, 2, 1].iter().enumerate() {
+        let td = 1_000_000 + k as u64 * 400_000;
+        // FootContact at 100 Hz, as the spec has it (edges fall on the 10 ms grid here).
+        for ms in (0..400u64).step_by(10) {
+            let t = td + ms * 1000;
+            let m = Message::FootContact(FootContact {
+                stance: ms < 200,
+                seq: (k * 40 + ms as usize / 10) as u8,
+                timestamp_us: t as u32,
+            });
+            frames.push(Stamped {
+                t_us: t + 200,
+                frame: m.to_frame(&ids, 0).unwrap(),
+            });
+        }
+        let px = texture(&mut rng, PERIODS[terrain]);
+        let capture = td + 70_000;
+        let img = ImageRef {
+            rows: 44,
+            cols: 44,
+            bits: 8,
+            timestamp_us: capture as u32,
+            pixels: &px,
+        };
+        let mut n = 0u64;
+        seg.frames(0, k as u8, &img, |f: CanFrame| {
+            n += 1;
+            frames.push(Stamped {
+                t_us: capture + n * 135,
+                frame: f,
+            })
+        })
+        .unwrap();
+        assert_eq!(n, 391);
+    }
+    frames.sort_by_key(|s| s.t_us);
+    let mut node = NodeService::new(cfg, model()).unwrap();
+    let mut said = Vec::new();
+    node.replay(&frames, &mut |t, o| said.push((t, o)));
+    classes(&said)
+}
+
+#[test]
+fn a_classic_foot_at_the_spec_worst_case_is_classified_with_the_default_timeout() {
+    let got = classic_worst_case_steps(NodeConfig::default());
+    let catalog = TerrainCatalog::paper();
+    let names: Vec<String> = got
+        .iter()
+        .map(|(_, tc)| catalog.describe(tc.terrain))
+        .collect();
+    assert_eq!(names, [NAMES[0], NAMES[1], NAMES[2], NAMES[1]], "{got:?}");
+    // The old 50 ms default dropped every such image: the test can tell the two apart.
+    let short = classic_worst_case_steps(NodeConfig {
+        reassembly_timeout_us: 50_000,
+        ..NodeConfig::default()
+    });
+    assert!(
+        short.iter().all(|(_, tc)| tc.flags & flags::NO_SAMPLE != 0),
+        "{short:?}"
+    );
+}

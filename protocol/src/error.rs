@@ -53,6 +53,22 @@ pub enum DecodeError {
         /// The value received.
         value: u32,
     },
+    /// A fixed-layout message at another length than the DBC's, or as CAN FD where the DBC
+    /// says classic: a sender that does not follow the layout, whatever the bytes say.
+    #[error(
+        "{message} must be a classic CAN frame of {want} data bytes (the DBC's size); got {got} bytes{}",
+        if *fd { " as CAN FD" } else { "" }
+    )]
+    WrongLength {
+        /// The message kind.
+        message: &'static str,
+        /// The DBC's length.
+        want: usize,
+        /// Bytes the frame has.
+        got: usize,
+        /// The frame was CAN FD.
+        fd: bool,
+    },
     #[error("{message} was sent as a remote frame; it carries data")]
     /// A remote (RTR) frame where data was expected.
     Remote {

@@ -479,6 +479,19 @@ pub fn decode(frame: &CanFrame, ids: &IdConfig) -> Result<Option<(u8, Message)>,
         });
     }
     let d = frame.data();
+    let tactile = matches!(
+        kind,
+        MessageKind::TactileFrame | MessageKind::TactileFrameClassic
+    );
+    // Tactile segments' lengths are the reassembler's to judge (and count).
+    if !tactile && (d.len() != kind.dlc() || frame.is_fd() != kind.is_fd()) {
+        return Err(DecodeError::WrongLength {
+            message: kind.name(),
+            want: kind.dlc(),
+            got: d.len(),
+            fd: frame.is_fd(),
+        });
+    }
     let msg = match kind {
         MessageKind::LegCommand => Message::LegCommand(LegCommand::decode(d)?),
         MessageKind::FootContact => Message::FootContact(FootContact::decode(d)?),
@@ -506,6 +519,42 @@ mod tests {
             assert_eq!(gf, foot);
         }
         got
+    }
+
+    #[test]
+    fn fixed_layout_messages_are_taken_only_at_their_dbc_length_as_classic_frames() {
+        let ids = IdConfig::default();
+        let m = Message::FootContact(FootContact {
+            stance: true,
+            seq: 3,
+            timestamp_us: 1234,
+        });
+        let good = m.to_frame(&ids, 2).unwrap();
+        assert_eq!(good.data().len(), 8);
+        assert!(matches!(
+            decode(&good, &ids),
+            Ok(Some((2, Message::FootContact(_))))
+        ));
+        for n in [0, 6, 7] {
+            let f = CanFrame::classic(good.id(), &good.data()[..n]).unwrap();
+            assert_eq!(
+                decode(&f, &ids),
+                Err(DecodeError::WrongLength {
+                    message: "FootContact",
+                    want: 8,
+                    got: n,
+                    fd: false
+                }),
+                "{n} bytes"
+            );
+        }
+        for n in [8, 12, 64] {
+            let mut data = [0u8; 64];
+            data[..8].copy_from_slice(good.data());
+            let f = CanFrame::fd(good.id(), &data[..n], true).unwrap();
+            let e = decode(&f, &ids).unwrap_err();
+            assert!(e.to_string().contains("as CAN FD"), "{n} bytes: {e}");
+        }
     }
 
     #[test]
@@ -593,7 +642,8 @@ mod tests {
         let short = CanFrame::classic(id, &[1, 2]).unwrap();
         let e = decode(&short, &ids).unwrap_err();
         assert!(
-            e.to_string().contains("FootContact needs at least 6"),
+            e.to_string()
+                .contains("FootContact must be a classic CAN frame of 8 data bytes"),
             "{e}"
         );
         let bad = CanFrame::classic(id, &[7, 0, 0, 0, 0, 0, 0, 0]).unwrap();
