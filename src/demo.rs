@@ -87,7 +87,7 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
         if show {
             eprintln!(
                 "running simulator, node and controller in real time for {:.0} s...",
-                a.steps as f64 * 0.4 + 1.0
+                lab::closed_loop::realtime_seconds(a.steps)
             );
         }
         let (run, switches) = lab::closed_loop::run_realtime(&track, model, &lp)?;

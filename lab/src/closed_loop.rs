@@ -149,10 +149,15 @@ pub fn run(
     })
 }
 
+/// How long [`run_realtime`] runs for `steps` steps, s: 0.4 s per step plus 1 s to start.
+pub fn realtime_seconds(steps: usize) -> f64 {
+    steps as f64 * 0.4 + 1.0
+}
+
 /// [`run`] in real time, as the processes run on a robot: the node's threads
 /// ([`NodeService::start`]), the controller's bus loop ([`controller::service::run`]) on a
 /// thread of its own and the simulator's ([`sim::service::run`]) on this one, all on one
-/// in-process bus with the wall clock. Runs `p.steps * 0.4 + 1` seconds and returns the first
+/// in-process bus with the wall clock. Runs [`realtime_seconds`] and returns the first
 /// `p.steps` steps and the controller's gait switches. `p.controller` is required (`None`
 /// means the default config).
 pub fn run_realtime(
@@ -175,7 +180,7 @@ pub fn run_realtime(
     };
     let opts = sim::service::RunOptions {
         speed: 1.0,
-        duration_s: Some(p.steps as f64 * 0.4 + 1.0),
+        duration_s: Some(realtime_seconds(p.steps)),
         seed: p.seed,
     };
     let mut sim_cfg = SimConfig {

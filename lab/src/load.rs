@@ -249,7 +249,7 @@ pub fn measure(
     total_us: u64,
     cpu_ns: &dyn Fn() -> Option<u64>,
 ) -> Result<Tally, LoadError> {
-    let (sent_tx, sent_rx) = mpsc::channel::<(Sampled, Instant, bool)>();
+    let (sent_tx, sent_rx) = mpsc::channel::<(Sampled, Instant)>();
     let done = AtomicBool::new(false);
     std::thread::scope(|s| {
         let stop = &done;
@@ -257,8 +257,11 @@ pub fn measure(
         let start = Instant::now();
         let (mut steps, mut send_errors, mut cpu_start) = (0u64, 0u64, None);
         let mut played = Ok(());
-        while feet.next_us() < total_us {
+        loop {
             let t = feet.next_us();
+            if t >= total_us {
+                break;
+            }
             if cpu_start.is_none() && t >= WARMUP_US {
                 cpu_start = Some(cpu_ns());
             }
@@ -279,9 +282,8 @@ pub fn measure(
             });
             match sampled {
                 Ok(Some(sm)) => {
-                    let measured = sm.t_us >= WARMUP_US + SAMPLE_US;
-                    steps += u64::from(measured);
-                    let _ = sent_tx.send((sm, Instant::now(), measured));
+                    steps += u64::from(measured(&sm));
+                    let _ = sent_tx.send((sm, Instant::now()));
                 }
                 Ok(None) => {}
                 Err(e) => {
@@ -308,11 +310,16 @@ pub fn measure(
     })
 }
 
+/// A step counts when its sampled frame comes after the warm-up.
+fn measured(s: &Sampled) -> bool {
+    s.t_us >= WARMUP_US + SAMPLE_US
+}
+
 /// Receives TerrainClass and matches each to its sampled frame.
 fn listen(
     bus: &mut dyn CanBus,
     ids: &IdConfig,
-    sent: &mpsc::Receiver<(Sampled, Instant, bool)>,
+    sent: &mpsc::Receiver<(Sampled, Instant)>,
     done: &AtomicBool,
 ) -> Result<Tally, LoadError> {
     let mut t = Tally::default();
@@ -320,8 +327,8 @@ fn listen(
     while !done.load(Ordering::Relaxed) {
         let got = bus.recv(Duration::from_millis(5))?;
         let now = Instant::now();
-        for (s, at, measured) in sent.try_iter() {
-            pending.insert((s.foot, s.step), (at, s.terrain, measured));
+        for (s, at) in sent.try_iter() {
+            pending.insert((s.foot, s.step), (at, s.terrain, measured(&s)));
         }
         let Some(st) = got else { continue };
         let Ok(Some((foot, Message::TerrainClass(tc)))) = messages::decode(&st.frame, ids) else {

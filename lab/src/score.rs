@@ -147,6 +147,12 @@ impl Summary {
     }
 }
 
+/// The value at quantile `q` of sorted values (nearest rank); `None` when empty.
+pub fn percentile(sorted: &[f64], q: f64) -> Option<f64> {
+    let i = ((sorted.len().checked_sub(1)?) as f64 * q).round() as usize;
+    sorted.get(i).copied()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -209,17 +215,6 @@ mod tests {
         assert_eq!(c.recall(0), 0.5);
         assert_eq!(Confusion::new(3).accuracy(), 0.0);
     }
-}
-
-/// The value at quantile `q` of sorted values (nearest rank); `None` when empty.
-pub fn percentile(sorted: &[f64], q: f64) -> Option<f64> {
-    let i = ((sorted.len().checked_sub(1)?) as f64 * q).round() as usize;
-    sorted.get(i).copied()
-}
-
-#[cfg(test)]
-mod percentile_tests {
-    use super::percentile;
 
     #[test]
     fn percentile_is_nearest_rank() {

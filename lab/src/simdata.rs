@@ -92,8 +92,8 @@ impl TrainingSet {
 }
 
 /// Writes `samples` as `out/<terrain>/<NNNN>.pgm` (numbered per terrain, in order), the layout
-/// `presrs train` reads. Returns the files written.
-pub fn write_images(samples: &[Sample], out: &std::path::Path) -> Result<usize, WriteError> {
+/// `presrs train` reads.
+pub fn write_images(samples: &[Sample], out: &std::path::Path) -> Result<(), WriteError> {
     let mut counts = std::collections::BTreeMap::new();
     for s in samples {
         let dir = out.join(s.terrain.name());
@@ -105,7 +105,7 @@ pub fn write_images(samples: &[Sample], out: &std::path::Path) -> Result<usize, 
             .map_err(|e| WriteError(path.display().to_string(), e))?;
         *k += 1;
     }
-    Ok(samples.len())
+    Ok(())
 }
 
 /// A file or folder [`write_images`] could not write.

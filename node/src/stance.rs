@@ -493,8 +493,8 @@ impl StancePipeline {
     /// frame already captured. The foot's time is the newest timestamp heard from it (a
     /// FootContact or an image), never extrapolated with the receiver's clock: robot time may
     /// run slower than the receiver's (the simulator under emulation runs at 0.35), and an
-    /// extrapolated foot clock could pass the deadline before a nearer frame arrived. A foot that falls silent
-    /// is decided at liftoff, as before.
+    /// extrapolated foot clock could pass the deadline before a nearer frame arrived. So the
+    /// deadline only moves with frames; a foot that falls silent is decided at liftoff.
     pub fn tick(&mut self, now_rx_us: u64, out: &mut impl FnMut(u8, TerrainClass)) {
         let sample_us = self.cfg.sample_ms * 1000;
         let w1 = self.cfg.window_ms[1] * 1000;
