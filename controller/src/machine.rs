@@ -188,6 +188,9 @@ pub const MIN_STANCE_US: u64 = 40_000;
 pub const MAX_STANCE_US: u64 = 600_000;
 /// Touchdown and liftoff angles stay within this of the gait's beta_des, rad.
 pub const MAX_ANGLE_FROM_DESIRED: f64 = 0.35;
+/// After a gait switch eq. (5) aims at the new beta_des in steps of at most this, rad per
+/// liftoff: G1 -> G3 (0.30 rad) takes 6 steps, about as many as the speed takes to follow.
+pub const BETA_DES_STEP: f64 = 0.05;
 
 /// The controller.
 pub struct Controller {
@@ -206,6 +209,8 @@ pub struct Controller {
     /// The foot's clock: its latest timestamp (unwrapped to 64 bits) and our time when it came.
     foot_clock: Option<(u64, u64)>,
     leg_angle: f64,
+    /// The beta_des eq. (5) aims at: the gait's, reached in steps after a switch.
+    beta_des: f64,
     beta_td: f64,
     next_beta_td: f64,
     candidate: (u8, u32),
@@ -245,6 +250,7 @@ impl Controller {
             touchdown_us: 0,
             foot_clock: None,
             leg_angle: 0.0,
+            beta_des: b,
             beta_td: b,
             next_beta_td: b,
             candidate: (TERRAIN_UNKNOWN, 0),
@@ -348,21 +354,22 @@ impl Controller {
                 } else {
                     let beta_lo = laws::liftoff_angle_from_signed(self.leg_angle);
                     let g = &self.gait;
+                    let step = BETA_DES_STEP;
+                    self.beta_des += (g.beta_des - self.beta_des).clamp(-step, step);
+                    let b = self.beta_des;
                     let stance_us = t.saturating_sub(self.touchdown_us);
                     // Eq. (5) assumes the step was a step. After a stumble or a fall (a stance
                     // far too short or long, the leg swept far from the gait's angle) it would
                     // carry the bad angle into the next touchdown and the next fall: start the
                     // gait afresh instead.
                     let plausible = (MIN_STANCE_US..=MAX_STANCE_US).contains(&stance_us)
-                        && (beta_lo - g.beta_des).abs() <= MAX_ANGLE_FROM_DESIRED;
+                        && (beta_lo - b).abs() <= MAX_ANGLE_FROM_DESIRED;
                     self.next_beta_td = if plausible {
-                        laws::next_touchdown_angle(beta_lo, self.beta_td, g.c, g.beta_des).clamp(
-                            g.beta_des - MAX_ANGLE_FROM_DESIRED,
-                            g.beta_des + MAX_ANGLE_FROM_DESIRED,
-                        )
+                        laws::next_touchdown_angle(beta_lo, self.beta_td, g.c, b)
+                            .clamp(b - MAX_ANGLE_FROM_DESIRED, b + MAX_ANGLE_FROM_DESIRED)
                     } else {
                         self.gait_resets += 1;
-                        g.beta_des
+                        b
                     };
                     self.apply_pending(out);
                 }
@@ -402,7 +409,9 @@ impl Controller {
             self.switches += 1;
             // The touchdown angle is not reset: eq. (5) walks it to the new beta_des over the
             // next steps, which keeps the hopper on its feet (a jump of 0.3 rad at low speed
-            // throws it backwards).
+            // throws it backwards). Its target moves by BETA_DES_STEP per step too: aiming at
+            // the new beta_des at once still let a G1 -> G3 switch at G1's speed (or the safe
+            // gait at G3's) topple the simulated hopper after 2 of 40 node outages.
             out(Message::GaitStatus(self.status()));
         }
     }
@@ -519,6 +528,49 @@ mod tests {
             out.push(m)
         });
         assert_eq!(c.gait().id, 3);
+    }
+
+    #[test]
+    fn after_a_switch_eq5_aims_at_the_new_beta_des_in_steps() {
+        let mut c = Controller::new(ControllerConfig::default(), &TerrainCatalog::paper());
+        let mut out = Vec::new();
+        let hb = Message::NodeStatus(NodeStatus::default());
+        let wood = protocol::Terrain::WOOD.id();
+        let ls = |angle: f64, foot_us: u64| {
+            Message::LegState(protocol::messages::LegState {
+                leg_angle_rad: angle,
+                leg_length_m: 0.14,
+                timestamp_us: foot_us as u32,
+            })
+        };
+        let mut aims = Vec::new();
+        let mut t = 0;
+        for _ in 0..6 {
+            t += 200_000;
+            c.on_message(0, &hb, t, &mut |m| out.push(m));
+            c.on_message(0, &contact(true, t), t, &mut |m| out.push(m));
+            c.on_message(0, &tc(wood, 90.0), t + 70_000, &mut |m| out.push(m));
+            // A symmetric stance about the angle aimed at.
+            c.on_message(0, &ls(-c.beta_des, t + 150_000), t + 150_000, &mut |m| {
+                out.push(m)
+            });
+            c.on_message(0, &contact(false, t + 150_000), t + 150_000, &mut |m| {
+                out.push(m)
+            });
+            aims.push((c.gait().id, (c.beta_des * 100.0).round() / 100.0));
+        }
+        // G2 (0.42) until the second wood step's liftoff, then G3 (0.57) in 0.05 rad steps.
+        assert_eq!(
+            aims,
+            [
+                (2, 0.42),
+                (3, 0.42),
+                (3, 0.47),
+                (3, 0.52),
+                (3, 0.57),
+                (3, 0.57)
+            ]
+        );
     }
 
     #[test]

@@ -1,6 +1,7 @@
 //! The simulated robot on a bus: the hopper on a circular track of terrains, its foot switch
 //! (with bounce), its leg state and its PreSRS images, obeying `LegCommand` when a controller
-//! sends them and holding a fixed gait when none does.
+//! sends them and running the gait's laws itself when none does (the start gait, then the last
+//! gait a controller's `GaitStatus` named).
 //!
 //! [`SimRobot::advance_to`] moves simulated time forward and emits the frames the robot sends in
 //! that time, in order; the caller decides whether time runs in real time (a CAN process) or as
@@ -187,7 +188,7 @@ impl Track {
 pub struct SimConfig {
     /// The track it runs on.
     pub track: Track,
-    /// The gait held without a controller (G1..G3).
+    /// The gait held until a controller names another (G1..G3).
     pub gait: u8,
     /// Legs, each with its foot sensor (foot ids 0..feet).
     pub feet: u8,
@@ -195,7 +196,7 @@ pub struct SimConfig {
     pub faults: FaultParams,
     /// Serial of foot 0's sensor; foot `i` wears `sensor + i` (see `Skin::of_sensor`).
     pub sensor: u64,
-    /// Commands older than this are ignored and the fixed gait takes over, ms.
+    /// Commands older than this are ignored and the leg's own laws take over, ms.
     pub command_timeout_ms: u64,
     /// The CAN identifiers.
     pub ids: IdConfig,
@@ -215,7 +216,7 @@ impl Default for SimConfig {
     }
 }
 
-/// The leg's commands: the controller's when fresh, the fixed gait's otherwise.
+/// The leg's commands: the controller's when fresh, its own laws' otherwise.
 struct Commands {
     fixed: FixedGait,
     last: Option<(LegCommand, u64)>,
@@ -359,11 +360,32 @@ impl SimRobot {
 
     /// A frame from a controller.
     pub fn on_frame(&mut self, frame: &CanFrame) {
-        if let Ok(Some((foot, Message::LegCommand(c)))) =
-            protocol::messages::decode(frame, &self.cfg.ids)
-            && let Some(l) = self.legs.get_mut(foot as usize)
-        {
-            l.cmd.last = Some((c, self.now_us));
+        match protocol::messages::decode(frame, &self.cfg.ids) {
+            Ok(Some((foot, Message::LegCommand(c)))) => {
+                if let Some(l) = self.legs.get_mut(foot as usize) {
+                    l.cmd.last = Some((c, self.now_us));
+                }
+            }
+            Ok(Some((_, Message::GaitStatus(s)))) => {
+                // The leg's own laws follow the controller's gait (lab gaits included), so
+                // that a pause in its commands or a relaunch after a fall continues the gait
+                // the controller runs. With the simulator's start gait instead, the speed of
+                // one gait met the touchdown angle of another: G3's 0.57 rad at G2's launch
+                // speed threw the hopper back, G1's 0.27 rad let it pitch forward, and after a
+                // forced fall on wood, carpet or clay the hopper fell again every 0.35-0.48 s
+                // for the rest of the run (in-process; one vcan run fell 55 times this way).
+                if let Some(l) = self.legs.get_mut(s.foot as usize) {
+                    let f = &mut l.cmd.fixed;
+                    if (f.gait.id, f.gait.omega, f.gait.beta_des)
+                        != (s.gait, s.omega_rad_s, s.beta_des_rad)
+                    {
+                        let mut g = f.gait.clone();
+                        (g.id, g.omega, g.beta_des) = (s.gait, s.omega_rad_s, s.beta_des_rad);
+                        f.set_gait(g);
+                    }
+                }
+            }
+            _ => {}
         }
     }
 
@@ -438,7 +460,8 @@ impl SimRobot {
                     send_leg_state(ids, foot as u8, -beta, len, ev_us, emit);
                 }
                 Some(Event::Fell { .. }) => {
-                    // Pick the hopper up and restart it where it fell (a lab would).
+                    // Pick the hopper up and restart it where it fell, into the gait it runs
+                    // (a lab would).
                     let x = leg.hopper.x;
                     leg.hopper = Hopper::launch(HopperParams::default(), &leg.cmd.fixed.gait);
                     leg.hopper.x = x;
