@@ -83,8 +83,9 @@ pub struct TrainArgs {
     /// Rows/columns removed: top,bottom,left,right (the paper: 2,2,2,2 static; 0,3,6,0 foot).
     #[arg(long, default_value = "0,0,0,0")]
     pub crop: node::classifier::Crop,
-    #[arg(long, default_value_t = 1)]
-    pub downsample: usize,
+    /// Keep every k-th row and column (1 = full resolution, at most 8).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=8))]
+    pub downsample: u8,
     #[arg(long)]
     pub normalize_load: bool,
     /// PCA dimensions (default: 52, or as many as the samples support).
@@ -105,7 +106,7 @@ pub fn train(a: &TrainArgs) -> Result<ExitCode> {
         per_class: a.per_class,
         train: a.train,
         crop: a.crop,
-        downsample: a.downsample,
+        downsample: a.downsample as usize,
         normalize_load: a.normalize_load,
         h: a.dims,
         seed: a.seed,
@@ -261,7 +262,12 @@ pub fn classify(model_path: &Path, files: &[PathBuf], terrains: &TerrainsArg) ->
             let d = c
                 .classify(&img.pixels, img.rows, img.cols, false)
                 .with_context(|| f.display().to_string())?;
-            let name = d.class.map(|k| names[k].as_str()).unwrap_or("unknown");
+            // An image without contact says so: it is no terrain, whatever it lies nearest.
+            let name = match d.class {
+                _ if !d.contact => "unknown (no contact)",
+                Some(k) => names[k].as_str(),
+                None => "unknown",
+            };
             let frame = if i > 0 {
                 format!("#{i}")
             } else {

@@ -134,6 +134,22 @@ impl NodeConfig {
         if self.debounce_us > 50_000 {
             return Err(Invalid::range("debounce_us", self.debounce_us, "0..=50000"));
         }
+        if !(1..=1000).contains(&self.dead_after_stances) {
+            return Err(Invalid::range(
+                "dead_after_stances",
+                self.dead_after_stances,
+                "1..=1000",
+            ));
+        }
+        if self.window_ms[1] > 1000 {
+            return Err(Invalid::new(
+                "window_ms",
+                format!(
+                    "window_ms = {:?}: the end must be at most 1000",
+                    self.window_ms
+                ),
+            ));
+        }
         if !(10..=500).contains(&self.sample_ms) {
             return Err(Invalid::range("sample_ms", self.sample_ms, "10..=500"));
         }

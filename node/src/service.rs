@@ -259,10 +259,12 @@ impl NodeService {
         let clamp = |v: u64| v.min(255) as u8;
         NodeStatus {
             heartbeat: self.heartbeat,
-            state: if stopping {
-                NodeState::Stopping
-            } else {
-                NodeState::from_u8(self.shared.state.load(Ordering::Relaxed)).unwrap_or_default()
+            state: match NodeState::from_u8(self.shared.state.load(Ordering::Relaxed)) {
+                _ if stopping => NodeState::Stopping,
+                Some(NodeState::Running) if self.pipeline.wrong_image_size() => {
+                    NodeState::WrongImageSize
+                }
+                s => s.unwrap_or_default(),
             },
             model_id: self.shared.model_id.load(Ordering::Relaxed) as u16,
             crc_failures: clamp(r.crc_failures),

@@ -15,7 +15,7 @@ use std::sync::Arc;
 use crossbeam_channel::{Receiver, Sender};
 
 use crate::classifier::train::{RefitError, refit};
-use crate::classifier::{Classifier, Model, model::MAX_CLASSES};
+use crate::classifier::{Classifier, Model};
 use crate::config::{NodeConfig, RefitMode, RepairMode};
 use crate::health::LineHealth;
 
@@ -34,6 +34,10 @@ pub struct Counters {
     pub no_sample: u64,
     /// Steps decided from an image.
     pub classified: u64,
+    /// Steps whose sampled image showed no foot on the ground (flag NO_CONTACT).
+    pub no_contact: u64,
+    /// Images skipped because their size is not the model's (said once per size in the log).
+    pub wrong_size: u64,
     /// Models refitted to a foot's dead lines.
     pub refits: u64,
 }
@@ -97,9 +101,11 @@ struct Foot {
     best_err: Option<u32>,
     best_rx_us: u64,
     best: Vec<u16>,
-    /// Multi-frame: summed log-posteriors and frames used.
-    sum_lp: [f64; MAX_CLASSES],
+    /// Multi-frame: summed log-posteriors (one per class of the model) and frames used.
+    sum_lp: Vec<f64>,
     used: u32,
+    /// An image of this stance was looked at and showed no contact.
+    no_contact: bool,
     /// A line of this stance's frames was filled.
     repaired: bool,
     health: LineHealth,
@@ -117,7 +123,7 @@ struct Foot {
 }
 
 impl Foot {
-    fn new(input: usize, rows: usize, cols: usize) -> Self {
+    fn new(input: usize, rows: usize, cols: usize, classes: usize) -> Self {
         Self {
             raw: false,
             raw_since: 0,
@@ -129,8 +135,9 @@ impl Foot {
             best_err: None,
             best_rx_us: 0,
             best: vec![0; input],
-            sum_lp: [0.0; MAX_CLASSES],
+            sum_lp: vec![0.0; classes],
             used: 0,
+            no_contact: false,
             repaired: false,
             health: LineHealth::new(rows, cols),
             adapted: None,
@@ -267,6 +274,10 @@ pub struct StancePipeline {
     feet: Vec<Foot>,
     /// Receive time of the frame being processed: a decision's latency ends here.
     now_rx_us: u64,
+    /// The last image size said not to fit the model (said once per size).
+    said_size: Option<(u8, u8)>,
+    /// Per foot: its latest image was of a size the model does not take.
+    wrong_size_now: Vec<bool>,
     /// Counters per stage.
     pub counters: Counters,
 }
@@ -280,6 +291,8 @@ impl StancePipeline {
             refitter: Refitter::default(),
             feet: Vec::new(),
             now_rx_us: 0,
+            said_size: None,
+            wrong_size_now: Vec::new(),
             counters: Counters::default(),
             cfg,
         };
@@ -296,6 +309,7 @@ impl StancePipeline {
     pub fn set_model(&mut self, model: Option<Model>) {
         let (rows, cols) = model.as_ref().and_then(|m| m.work_size()).unwrap_or((1, 1));
         let input = model.as_ref().map_or(1, |m| m.input_rows * m.input_cols);
+        let classes = model.as_ref().map_or(0, |m| m.classes.len());
         let model = model.map(Arc::new);
         self.classifier = model.as_ref().map(|m| {
             // The images are for refits (the shared copy has them); the classifier needs none.
@@ -306,9 +320,16 @@ impl StancePipeline {
         self.refitter.generation += 1;
         self.refitter.unavailable = false;
         self.refitter.model = model;
-        self.feet
-            .resize_with(self.cfg.feet as usize, || Foot::new(input, rows, cols));
+        self.feet.resize_with(self.cfg.feet as usize, || {
+            Foot::new(input, rows, cols, classes)
+        });
+        self.wrong_size_now = vec![false; self.feet.len()];
+        self.said_size = None;
         for f in &mut self.feet {
+            if f.sum_lp.len() != classes {
+                f.sum_lp = vec![0.0; classes];
+                f.used = 0;
+            }
             if f.best.len() != input {
                 f.best = vec![0; input];
                 f.best_err = None;
@@ -319,6 +340,11 @@ impl StancePipeline {
             f.adapted = None;
             f.asked = None;
         }
+    }
+
+    /// A foot's latest image was of a size the model does not take (NodeStatus says so).
+    pub fn wrong_image_size(&self) -> bool {
+        self.wrong_size_now.iter().any(|&w| w)
     }
 
     /// The installed model.
@@ -397,8 +423,9 @@ impl StancePipeline {
             f.touchdown_us = f.raw_since;
             f.decided = false;
             f.best_err = None;
-            f.sum_lp = [0.0; MAX_CLASSES];
+            f.sum_lp.fill(0.0);
             f.used = 0;
+            f.no_contact = false;
             f.repaired = false;
             f.step = f.step.wrapping_add(1);
             self.counters.steps += 1;
@@ -432,12 +459,36 @@ impl StancePipeline {
         if dt > 10_000_000 {
             return; // an image from before the touchdown
         }
+        if !f.raw && ts.wrapping_sub(f.raw_since) < 10_000_000 {
+            // Sampled after a liftoff edge that the debounce has not confirmed yet: outside the
+            // stance unless the edge was bounce, and then the next images are inside again.
+            return;
+        }
         let Some(cls) = self.classifier.as_mut() else {
             return;
         };
         let m = cls.model();
         let (rows, cols) = (img.rows as usize, img.cols as usize);
-        if rows != m.input_rows || cols != m.input_cols {
+        let wrong = rows != m.input_rows || cols != m.input_cols;
+        if let Some(w) = self.wrong_size_now.get_mut(foot as usize) {
+            *w = wrong;
+        }
+        if wrong {
+            self.counters.wrong_size += 1;
+            if self.said_size != Some((img.rows, img.cols)) {
+                self.said_size = Some((img.rows, img.cols));
+                tracing::warn!(
+                    foot,
+                    rows,
+                    cols,
+                    model_rows = m.input_rows,
+                    model_cols = m.input_cols,
+                    "the foot's images are {rows}x{cols} but the model takes {}x{} images: \
+                     its steps are not classified (train a model on this foot's images)",
+                    m.input_rows,
+                    m.input_cols
+                );
+            }
             return;
         }
         if multi {
@@ -446,22 +497,27 @@ impl StancePipeline {
                 f.best_rx_us = rx_us;
                 // The stance history learns from one frame per stance, not every frame.
                 let observe = f.used == 0;
-                if let Some((d, repaired)) = classify(
+                let mut sum_lp = std::mem::take(&mut f.sum_lp);
+                let decided = classify(
                     cls,
                     foot,
                     f,
                     rows,
                     cols,
                     observe,
+                    Some(&mut sum_lp),
                     &self.cfg,
                     &mut self.refitter,
                     &mut self.counters,
-                ) {
-                    f.repaired |= repaired;
-                    for k in 0..d.n_classes {
-                        f.sum_lp[k] += d.log_posteriors[k];
+                );
+                f.sum_lp = sum_lp;
+                match decided {
+                    Some((d, repaired)) if d.contact => {
+                        f.repaired |= repaired;
+                        f.used += 1;
                     }
-                    f.used += 1;
+                    Some(_) => f.no_contact = true,
+                    None => {}
                 }
             }
             if dt >= w1 {
@@ -548,31 +604,41 @@ impl StancePipeline {
             Some(cls) if !cfg.multi_frame && f.best_err.is_some() => {
                 let m = cls.model();
                 let (rows, cols) = (m.input_rows, m.input_cols);
-                if let Some((d, repaired)) = classify(
+                match classify(
                     cls,
                     foot,
                     f,
                     rows,
                     cols,
                     true,
+                    None,
                     cfg,
                     &mut self.refitter,
                     &mut self.counters,
                 ) {
-                    f.repaired = repaired;
-                    tc.terrain = d.terrain_id;
-                    tc.confidence_pct = d.confidence * 100.0;
-                    if d.class.is_none() {
-                        tc.flags |= flags::LOW_CONFIDENCE;
+                    Some((d, _)) if !d.contact => f.no_contact = true,
+                    Some((d, repaired)) => {
+                        f.repaired = repaired;
+                        tc.terrain = d.terrain_id;
+                        tc.confidence_pct = d.confidence * 100.0;
+                        if d.class.is_none() {
+                            tc.flags |= flags::LOW_CONFIDENCE;
+                        }
                     }
+                    None => {}
                 }
             }
-            _ => {
-                tc.flags |= flags::NO_SAMPLE;
-                self.counters.no_sample += 1;
-            }
+            _ => {}
         }
-        if tc.flags & flags::NO_SAMPLE == 0 {
+        let sampled = f.used > 0 || (!cfg.multi_frame && f.best_err.is_some());
+        if f.no_contact && f.used == 0 {
+            tc.flags |= flags::NO_CONTACT;
+            self.counters.no_contact += 1;
+        } else if !sampled || self.classifier.is_none() {
+            tc.flags |= flags::NO_SAMPLE;
+            self.counters.no_sample += 1;
+        }
+        if tc.flags & (flags::NO_SAMPLE | flags::NO_CONTACT) == 0 {
             self.counters.classified += 1;
             if tc.confidence_pct < cfg.low_confidence * 100.0 {
                 tc.flags |= flags::LOW_CONFIDENCE;
@@ -582,17 +648,24 @@ impl StancePipeline {
             }
         }
         tc.damage_pct = f.health.damage_pct();
-        tc.latency_us = self
-            .now_rx_us
-            .saturating_sub(f.best_rx_us)
-            .min(u32::MAX as u64) as u32;
+        // From the receipt of the sampled frame to now, saturated as the CAN field is; 0 when
+        // no frame was sampled (flag NO_SAMPLE), so that a log and the bus say the same.
+        tc.latency_us = if tc.flags & flags::NO_SAMPLE != 0 {
+            0
+        } else {
+            self.now_rx_us
+                .saturating_sub(f.best_rx_us)
+                .min(messages::LATENCY_MAX_US as u64) as u32
+        };
         out(foot, tc);
     }
 }
 
 /// Crop, repair and decision for one frame (the foot's `best`). Returns the decision and
 /// whether any line was filled; `observe` feeds the frame to the stance history (once per
-/// stance). With history repair, a model refitted to the foot's current dead lines decides.
+/// stance); `sum_lp` gets the decision's log posteriors added (multi-frame). With history
+/// repair, a model refitted to the foot's current dead lines decides. An image without contact
+/// is neither learned from nor repaired.
 #[allow(clippy::too_many_arguments)]
 fn classify(
     cls: &mut Classifier,
@@ -601,11 +674,22 @@ fn classify(
     rows: usize,
     cols: usize,
     observe: bool,
+    sum_lp: Option<&mut Vec<f64>>,
     cfg: &NodeConfig,
     refitter: &mut Refitter,
     counters: &mut Counters,
 ) -> Option<(crate::classifier::Decision, bool)> {
     cls.prepare(&f.best, rows, cols).ok()?;
+    if !cls.in_contact() {
+        return Some((cls.decide(), false));
+    }
+    let add = |sum_lp: Option<&mut Vec<f64>>, lp: &[f64]| {
+        if let Some(s) = sum_lp {
+            for (a, b) in s.iter_mut().zip(lp) {
+                *a += b;
+            }
+        }
+    };
     let repaired = match cfg.repair {
         RepairMode::None => false,
         RepairMode::PerImage => cls.repair_work() > 0,
@@ -617,10 +701,14 @@ fn classify(
             if let Some(a) = f.adapted.as_mut().filter(|a| a.fits(&f.health)) {
                 a.cls.work_mut().copy_from_slice(cls.work_mut());
                 let repaired = f.health.repair(a.cls.work_mut()) > 0;
-                return Some((a.cls.decide(), repaired));
+                let d = a.cls.decide();
+                add(sum_lp, a.cls.log_posteriors());
+                return Some((d, repaired));
             }
             f.health.repair(cls.work_mut()) > 0
         }
     };
-    Some((cls.decide(), repaired))
+    let d = cls.decide();
+    add(sum_lp, cls.log_posteriors());
+    Some((d, repaired))
 }

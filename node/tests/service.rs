@@ -92,6 +92,19 @@ impl FakeFoot {
         stance_ms: u64,
         keep_image: impl Fn(u64) -> bool,
     ) -> Vec<Stamped> {
+        self.step(touchdown_us, stance_ms, |ms, rng| {
+            (ms < stance_ms && keep_image(ms)).then(|| texture(rng, PERIODS[terrain]))
+        })
+    }
+
+    /// A stance from `touchdown_us` lasting `stance_ms` and 60 ms of flight after it, with
+    /// the image `image(ms after touchdown)` gives (none: no image then).
+    fn step(
+        &mut self,
+        touchdown_us: u64,
+        stance_ms: u64,
+        image: impl Fn(u64, &mut rand::rngs::StdRng) -> Option<Vec<u16>>,
+    ) -> Vec<Stamped> {
         let mut out = Vec::new();
         let contact = |stance: bool, t: u64, seq: u8| {
             let m = Message::FootContact(FootContact {
@@ -108,8 +121,9 @@ impl FakeFoot {
             let t = touchdown_us + ms * 1000;
             self.seq = self.seq.wrapping_add(1);
             out.push(contact(ms < stance_ms, t, self.seq));
-            if ms % 10 == 5 && ms < stance_ms && keep_image(ms) {
-                let px = texture(&mut self.rng, PERIODS[terrain]);
+            if ms % 10 == 5
+                && let Some(px) = image(ms, &mut self.rng)
+            {
                 let img = ImageRef {
                     rows: 44,
                     cols: 44,
@@ -214,7 +228,63 @@ fn a_stance_without_an_image_is_no_sample_at_liftoff() {
     let (_, tc) = got[0];
     assert_ne!(tc.flags & flags::NO_SAMPLE, 0);
     assert_eq!(tc.terrain, messages::TERRAIN_UNKNOWN);
+    assert_eq!(
+        tc.latency_us, 0,
+        "no sampled frame: latency 0, as documented"
+    );
     assert_eq!(node.counters().no_sample, 1);
+}
+
+/// A foot that sends no image in the stance but streams in flight: the frame sampled with the
+/// liftoff edge (inside the 5 ms debounce, so the node is still in stance) is not the stance's
+/// (it was classified before).
+#[test]
+fn an_image_sampled_after_the_liftoff_edge_is_not_the_stances() {
+    let mut node = NodeService::new(NodeConfig::default(), model()).unwrap();
+    let mut foot = FakeFoot::new();
+    // FootContact every 5 ms: the one at 205 ms is the first to say flight.
+    let frames = foot.step(1_000_000, 203, |ms, rng| {
+        (ms >= 205).then(|| texture(rng, PERIODS[1]))
+    });
+    let got = classes(&lock_step(&mut node, &frames, 1_400_000));
+    assert_eq!(got.len(), 1, "{got:?}");
+    let tc = got[0].1;
+    assert_ne!(tc.flags & flags::NO_SAMPLE, 0, "{tc:?}");
+    assert_eq!(tc.terrain, messages::TERRAIN_UNKNOWN);
+}
+
+/// A stance whose images show no foot on the ground (a blank array, or a few noisy sensels):
+/// flagged NO_CONTACT, terrain unknown, and counted apart from "no sample".
+#[test]
+fn a_stance_image_without_contact_is_no_contact_not_a_terrain() {
+    for multi_frame in [false, true] {
+        let cfg = NodeConfig {
+            multi_frame,
+            ..NodeConfig::default()
+        };
+        let mut node = NodeService::new(cfg, model()).unwrap();
+        let mut foot = FakeFoot::new();
+        let frames = foot.step(1_000_000, 200, |ms, _| {
+            let mut px = vec![0u16; 44 * 44];
+            px[(ms as usize * 7) % (44 * 44)] = 9;
+            (ms < 200).then_some(px)
+        });
+        let got = classes(&lock_step(&mut node, &frames, 1_400_000));
+        assert_eq!(got.len(), 1, "{got:?}");
+        let tc = got[0].1;
+        assert_eq!(tc.flags & flags::NO_SAMPLE, 0, "{tc:?}");
+        assert_ne!(tc.flags & flags::NO_CONTACT, 0, "{tc:?}");
+        assert_eq!(
+            (tc.terrain, tc.confidence_pct),
+            (messages::TERRAIN_UNKNOWN, 0.0)
+        );
+        let c = node.counters();
+        assert_eq!(
+            (c.no_contact, c.no_sample, c.classified),
+            (1, 0, 0),
+            "multi {multi_frame}"
+        );
+    }
 }
 
 #[test]

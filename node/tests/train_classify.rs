@@ -80,7 +80,8 @@ fn trains_with_the_paper_split_and_classifies_held_out_images() {
         let d = c.classify(&imgs[i].pixels, 44, 44, false).unwrap();
         assert!(d.class.is_some(), "a known texture was called unknown");
         correct += (d.best == labels[i]) as usize;
-        let p: f64 = (0..d.n_classes).map(|k| d.log_posteriors[k].exp()).sum();
+        assert!(d.contact);
+        let p: f64 = c.log_posteriors().iter().map(|lp| lp.exp()).sum();
         assert!((p - 1.0).abs() < 1e-9);
     }
     let acc = correct as f64 / test.len() as f64;
@@ -127,6 +128,85 @@ fn something_unlike_any_terrain_is_unknown() {
     assert_eq!(d.class, None);
     assert_eq!(d.terrain_id, 0xFF);
     assert!(c.classify(&stripes, 40, 40, false).is_err());
+}
+
+/// A blank frame, a few noisy pixels or a stuck line is no foot on the ground: never a terrain
+/// (a blank frame used to come out as one class at confidence 1.0).
+#[test]
+fn an_image_without_contact_is_never_a_terrain() {
+    let (model, imgs, ..) = trained();
+    let min = model
+        .contact
+        .expect("a trained model carries its contact figures");
+    assert!(min.load > 0 && min.area > 0, "{min:?}");
+    let mut c = Classifier::new(model);
+    let mut noisy = vec![0u16; 44 * 44];
+    for i in (0..44 * 44).step_by(97) {
+        noisy[i] = 12;
+    }
+    let mut stuck = vec![0u16; 44 * 44];
+    stuck[20 * 44..21 * 44].fill(255);
+    for (what, px) in [
+        ("blank", vec![0u16; 44 * 44]),
+        ("noise", noisy),
+        ("stuck row", stuck),
+    ] {
+        let d = c.classify(&px, 44, 44, false).unwrap();
+        assert!(!d.contact, "{what}");
+        assert_eq!(
+            (d.class, d.terrain_id, d.confidence),
+            (None, 0xFF, 0.0),
+            "{what}"
+        );
+    }
+    // A real press at a third of its load still is one.
+    let light: Vec<u16> = imgs[0].pixels.iter().map(|&p| p / 3).collect();
+    assert!(c.classify(&light, 44, 44, false).unwrap().contact);
+}
+
+/// A lab with more terrains than the paper's twelve: 20 classes (the limit is the catalog's
+/// 255 ids), each decided right, and the per-class buffers sized by the model.
+#[test]
+fn a_model_holds_more_than_sixteen_classes() {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+    let (mut imgs, mut labels) = (Vec::new(), Vec::new());
+    for k in 0..20usize {
+        for _ in 0..12 {
+            // Twenty textures: patch period 3..=22.
+            imgs.push(texture(&mut rng, 3 + k, 0.5));
+            labels.push(k);
+        }
+    }
+    let data: Vec<Labelled> = imgs
+        .iter()
+        .zip(&labels)
+        .map(|(image, &class)| Labelled { image, class })
+        .collect();
+    let classes: Vec<ClassInfo> = (0..20)
+        .map(|k| ClassInfo {
+            name: format!("lab_{k}"),
+            terrain_id: 100 + k as u8,
+        })
+        .collect();
+    let o = TrainOptions {
+        per_class: 10,
+        train: 6,
+        ..TrainOptions::default()
+    };
+    let (model, split) = train(&data, &classes, &o).unwrap();
+    assert_eq!(model.classes.len(), 20);
+    let mut c = Classifier::new(model);
+    let right = split
+        .test
+        .iter()
+        .filter(|&&i| c.classify(&imgs[i].pixels, 44, 44, false).unwrap().best == labels[i])
+        .count();
+    assert_eq!(c.log_posteriors().len(), 20);
+    assert!(
+        right * 10 >= split.test.len() * 8,
+        "{right}/{}",
+        split.test.len()
+    );
 }
 
 #[test]
@@ -203,4 +283,24 @@ fn training_rejects_bad_requests() {
         ..TrainOptions::default()
     };
     assert!(train(&data, &classes(), &o).is_err());
+    // A downsampling of 0 would disable the model silently: refused in training and in a file.
+    let o = TrainOptions {
+        per_class: 10,
+        train: 6,
+        downsample: 0,
+        ..TrainOptions::default()
+    };
+    let e = train(&data, &classes(), &o).unwrap_err().to_string();
+    assert!(
+        e.contains("--downsample 0") && e.contains("1 (full resolution) to 8"),
+        "{e}"
+    );
+    let (mut model, ..) = trained();
+    model.downsample = 0;
+    let json = serde_json::to_string(&model).unwrap();
+    let e = Model::from_json(&json, "m.json").unwrap_err().to_string();
+    assert!(
+        e.contains("m.json") && e.contains("downsample") && e.contains("1..=8"),
+        "{e}"
+    );
 }

@@ -120,12 +120,13 @@ fn signals(kind: MessageKind) -> Vec<Sig> {
             sig("FlagLowConfidence", 41, 1, false, 1.0, ""),
             sig("FlagNoSample", 42, 1, false, 1.0, ""),
             sig("FlagMultiFrame", 43, 1, false, 1.0, ""),
+            sig("FlagNoContact", 44, 1, false, 1.0, ""),
             sig("LatencyUs", 48, 16, false, 1.0, "us"),
         ],
         MessageKind::NodeStatus => vec![
             sig("Heartbeat", 0, 8, false, 1.0, ""),
             sig("State", 8, 8, false, 1.0, "")
-                .range(0.0, 4.0)
+                .range(0.0, 5.0)
                 .values("NodeState"),
             sig("ModelId", 16, 16, false, 1.0, ""),
             sig("CrcFailures", 32, 8, false, 1.0, ""),
@@ -240,7 +241,7 @@ pub fn generate(ids: &IdConfig, terrains: &TerrainCatalog) -> String {
         ("Phase", " 0 \"flight\" 1 \"stance\"".to_string()),
         (
             "NodeState",
-            " 0 \"starting\" 1 \"running\" 2 \"degraded\" 3 \"no_model\" 4 \"stopping\""
+            " 0 \"starting\" 1 \"running\" 2 \"degraded\" 3 \"no_model\" 4 \"stopping\" 5 \"wrong_image_size\""
                 .to_string(),
         ),
         (

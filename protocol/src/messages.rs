@@ -116,7 +116,14 @@ pub mod flags {
     pub const NO_SAMPLE: u8 = 1 << 2;
     /// Decided from several frames of the stance (sum of log-posteriors).
     pub const MULTI_FRAME: u8 = 1 << 3;
+    /// The stance's sampled image showed no foot on the ground (too little load or pressed
+    /// area for the model's training images): the terrain is unknown.
+    pub const NO_CONTACT: u8 = 1 << 4;
 }
+
+/// Largest value of `TerrainClass::latency_us` (its 16-bit CAN field): longer latencies read as
+/// this.
+pub const LATENCY_MAX_US: u32 = 65_535;
 
 /// Node -> all: the terrain under one foot, once per step.
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
@@ -149,6 +156,9 @@ pub enum NodeState {
     NoModel = 3,
     /// Shutting down: the last status.
     Stopping = 4,
+    /// Running, but a foot's latest images are of a size the model does not take: its steps
+    /// are not classified (the log says which size; train a model on that foot's images).
+    WrongImageSize = 5,
 }
 
 impl NodeState {
@@ -160,6 +170,7 @@ impl NodeState {
             2 => Self::Degraded,
             3 => Self::NoModel,
             4 => Self::Stopping,
+            5 => Self::WrongImageSize,
             _ => return None,
         })
     }

@@ -364,8 +364,11 @@ pub struct ReassemblyStats {
     pub delivered: u64,
     /// Images whose pixels did not match the header's CRC-32.
     pub crc_failures: u64,
-    /// Images abandoned unfinished: a newer image replaced them, or they timed out.
+    /// Images abandoned unfinished: a newer image replaced them, or they timed out. One per
+    /// image.
     pub incomplete: u64,
+    /// Segments of an image already abandoned, arriving within a further timeout (ignored).
+    pub late: u64,
     /// Segments received twice (ignored; the first copy is kept).
     pub duplicates: u64,
     /// Segments whose frame length is not the variant's (64 FD, 8 classic).
@@ -382,6 +385,10 @@ enum SlotState {
     Assembling,
     /// Delivered or failed: absorbs late duplicates of the same image.
     Done,
+    /// Timed out unfinished (counted once as incomplete): absorbs the image's late segments
+    /// for another timeout, so that they do not start a second assembly of it, which would be
+    /// abandoned and counted again (a slow transfer counted two per image).
+    Abandoned,
 }
 
 #[derive(Clone, Debug)]
@@ -498,12 +505,16 @@ impl Reassembler {
         let stats = &mut self.stats;
         let pair = &mut self.slots[foot as usize];
         for s in pair.iter_mut() {
-            if s.state != SlotState::Empty && rx_us.saturating_sub(s.first_rx_us) > timeout {
-                if s.state == SlotState::Assembling {
+            let age = rx_us.saturating_sub(s.first_rx_us);
+            s.state = match s.state {
+                SlotState::Assembling if age > timeout => {
                     stats.incomplete += 1;
+                    SlotState::Abandoned
                 }
-                s.state = SlotState::Empty;
-            }
+                SlotState::Done if age > timeout => SlotState::Empty,
+                SlotState::Abandoned if age > 2 * timeout => SlotState::Empty,
+                s => s,
+            };
         }
         let slot_i = match pair
             .iter()
@@ -514,7 +525,7 @@ impl Reassembler {
                 // Evict an empty slot first, then a finished one, then the older assembly.
                 let rank = |s: &Slot| match s.state {
                     SlotState::Empty => (0, 0),
-                    SlotState::Done => (1, s.first_rx_us),
+                    SlotState::Abandoned | SlotState::Done => (1, s.first_rx_us),
                     SlotState::Assembling => (2, s.first_rx_us),
                 };
                 let i = if rank(&pair[0]) <= rank(&pair[1]) {
@@ -530,9 +541,16 @@ impl Reassembler {
             }
         };
         let slot = &mut pair[slot_i];
-        if slot.state == SlotState::Done {
-            stats.duplicates += 1;
-            return None;
+        match slot.state {
+            SlotState::Done => {
+                stats.duplicates += 1;
+                return None;
+            }
+            SlotState::Abandoned => {
+                stats.late += 1;
+                return None;
+            }
+            _ => {}
         }
         let first = variant.first_data_index();
         if index < first {
@@ -784,6 +802,51 @@ mod tests {
         }
         assert_eq!(r.stats().crc_failures, 1);
         assert_eq!(r.stats().delivered, 0);
+    }
+
+    /// Stats after 40 images on `variant`, each sent over `span_us`, with the segments
+    /// `drop(image, segment)` lost; a segment of a 41st image long after flushes the timeouts.
+    fn stream(
+        variant: Variant,
+        timeout_us: u64,
+        span_us: u64,
+        drop: impl Fn(u8, usize) -> bool,
+    ) -> ReassemblyStats {
+        let px = image(44, 44, 8, 9);
+        let mut r = Reassembler::new(timeout_us);
+        for k in 0..40u8 {
+            let fr = frames(variant, 0, k, 44, 44, 8, &px);
+            let n = fr.len() as u64;
+            for (i, f) in fr.iter().enumerate() {
+                if !drop(k, i) {
+                    r.push(
+                        variant,
+                        0,
+                        f.data(),
+                        k as u64 * 100_000 + i as u64 * span_us / n,
+                    );
+                }
+            }
+        }
+        let last = frames(variant, 0, 40, 44, 44, 8, &px);
+        r.push(variant, 0, last[0].data(), 10_000_000);
+        r.stats()
+    }
+
+    #[test]
+    fn each_dropped_image_counts_once_as_incomplete() {
+        for variant in [Variant::Fd, Variant::Classic] {
+            // A middle segment, a header, the second half: three images lost.
+            let s = stream(variant, 100_000, 9_000, |k, i| {
+                (k == 10 && i == 7) || (k == 20 && i == 0) || (k == 30 && i > 20)
+            });
+            assert_eq!((s.delivered, s.incomplete), (37, 3), "{variant:?}: {s:?}");
+            // Every transfer (52 ms) slower than the timeout (30 ms): each image abandoned
+            // once, its late segments ignored (they used to start a second assembly: 79).
+            let s = stream(variant, 30_000, 52_000, |_, _| false);
+            assert_eq!((s.delivered, s.incomplete), (0, 40), "{variant:?}: {s:?}");
+            assert!(s.late > 0);
+        }
     }
 
     #[test]

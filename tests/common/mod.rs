@@ -36,6 +36,7 @@ pub fn signals(m: &Message) -> BTreeMap<&'static str, f64> {
                 ("FlagLowConfidence", flags::LOW_CONFIDENCE),
                 ("FlagNoSample", flags::NO_SAMPLE),
                 ("FlagMultiFrame", flags::MULTI_FRAME),
+                ("FlagNoContact", flags::NO_CONTACT),
             ] {
                 s.insert(name, (c.flags & bit != 0) as u8 as f64);
             }

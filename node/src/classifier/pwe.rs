@@ -4,7 +4,7 @@
 
 use super::Kernels;
 use super::features::FeatureExtractor;
-use super::model::{MAX_CLASSES, Model};
+use super::model::{MinContact, Model};
 use super::repair;
 
 /// The outcome for one image.
@@ -18,12 +18,11 @@ pub struct Decision {
     pub terrain_id: u8,
     /// Posterior of the best class (equal priors), 0..=1.
     pub confidence: f64,
-    /// Log Parzen density of the best class.
+    /// Log Parzen density of the best class (-inf without contact).
     pub log_density: f64,
-    /// Log posterior per class (first `n_classes` entries).
-    pub log_posteriors: [f64; MAX_CLASSES],
-    /// Classes of the model (entries of `log_posteriors` in use).
-    pub n_classes: usize,
+    /// The image shows a foot on the ground (see [`MinContact`]). Without contact nothing else
+    /// was computed: the decision is unknown, confidence 0, and no class is "best".
+    pub contact: bool,
 }
 
 /// An image that does not fit the model.
@@ -63,7 +62,14 @@ pub struct Classifier {
     dead_rows: Vec<bool>,
     dead_cols: Vec<bool>,
     inv_two_s2: f64,
-    log_norm: [f64; MAX_CLASSES],
+    /// Per class, sized once: the density's normalisation, and the last decision's working
+    /// values and log posteriors.
+    log_norm: Vec<f64>,
+    log_dens: Vec<f64>,
+    max_e: Vec<f64>,
+    sums: Vec<f64>,
+    log_posteriors: Vec<f64>,
+    contact: MinContact,
     kernels: Kernels,
     avx2_fma: bool,
 }
@@ -84,8 +90,9 @@ impl Classifier {
         let avx2_fma = kernels.avx2_fma();
         let s = model.kernel_width;
         let h = model.h as f64;
-        let mut log_norm = [0.0; MAX_CLASSES];
-        for (k, ln) in log_norm.iter_mut().enumerate().take(model.classes.len()) {
+        let n_classes = model.classes.len();
+        let mut log_norm = vec![0.0; n_classes];
+        for (k, ln) in log_norm.iter_mut().enumerate() {
             let n_k = model
                 .sample_classes
                 .iter()
@@ -135,6 +142,12 @@ impl Classifier {
             dead_cols: vec![false; work_cols],
             inv_two_s2: 1.0 / (2.0 * s * s),
             log_norm,
+            log_dens: vec![0.0; n_classes],
+            max_e: vec![0.0; n_classes],
+            sums: vec![0.0; n_classes],
+            log_posteriors: vec![0.0; n_classes],
+            // Older model files carry no contact figures: then only a blank image is refused.
+            contact: model.contact.unwrap_or(MinContact { load: 0, area: 0 }),
             kernels,
             avx2_fma,
             model,
@@ -221,8 +234,32 @@ impl Classifier {
         n
     }
 
-    /// Features, projection and decision for the working image.
+    /// The working image shows a foot on the ground (the model's [`MinContact`]).
+    pub fn in_contact(&self) -> bool {
+        self.contact.holds(&self.work)
+    }
+
+    /// Log posterior per class of the last decision (equal priors; all -inf after a decision
+    /// without contact).
+    pub fn log_posteriors(&self) -> &[f64] {
+        &self.log_posteriors
+    }
+
+    /// Features, projection and decision for the working image; an image without contact is
+    /// "unknown" without features (a blank or nearly blank frame lay nearest one class's
+    /// samples and came out as that terrain at confidence 1.0).
     pub fn decide(&mut self) -> Decision {
+        if !self.in_contact() {
+            self.log_posteriors.fill(f64::NEG_INFINITY);
+            return Decision {
+                class: None,
+                best: 0,
+                terrain_id: protocol::messages::TERRAIN_UNKNOWN,
+                confidence: 0.0,
+                log_density: f64::NEG_INFINITY,
+                contact: false,
+            };
+        }
         let m = &self.model;
         let scale = match m.normalize_load {
             Some(target) => {
@@ -251,8 +288,9 @@ impl Classifier {
         }
         sq_dists(&self.samples, &self.q, &mut self.log_kernel, self.avx2_fma);
         let n_classes = m.classes.len();
-        let mut log_dens = [f64::NEG_INFINITY; MAX_CLASSES];
-        let mut max_e = [f64::NEG_INFINITY; MAX_CLASSES];
+        let (log_dens, max_e, sums) = (&mut self.log_dens, &mut self.max_e, &mut self.sums);
+        max_e.fill(f64::NEG_INFINITY);
+        sums.fill(0.0);
         for (e, &k) in self.log_kernel.iter_mut().zip(&m.sample_classes) {
             *e *= -self.inv_two_s2;
             let mk = &mut max_e[k];
@@ -260,7 +298,6 @@ impl Classifier {
                 *mk = *e;
             }
         }
-        let mut sums = [0.0f64; MAX_CLASSES];
         for (e, &k) in self.log_kernel.iter().zip(&m.sample_classes) {
             let x = e - max_e[k];
             // Each class's sum holds its largest term, exp(0) = 1; a term below e^-40 (4e-18)
@@ -279,13 +316,12 @@ impl Classifier {
             }
         }
         let mut z = 0.0;
-        for ld in log_dens.iter().take(n_classes) {
+        for ld in log_dens.iter() {
             z += (ld - log_dens[best]).exp();
         }
         let log_z = log_dens[best] + z.ln();
-        let mut log_posteriors = [f64::NEG_INFINITY; MAX_CLASSES];
-        for k in 0..n_classes {
-            log_posteriors[k] = log_dens[k] - log_z;
+        for (lp, ld) in self.log_posteriors.iter_mut().zip(log_dens.iter()) {
+            *lp = ld - log_z;
         }
         let known = log_dens[best] >= m.unknown_threshold;
         Decision {
@@ -296,10 +332,9 @@ impl Classifier {
             } else {
                 protocol::messages::TERRAIN_UNKNOWN
             },
-            confidence: log_posteriors[best].exp(),
+            confidence: self.log_posteriors[best].exp(),
             log_density: log_dens[best],
-            log_posteriors,
-            n_classes,
+            contact: true,
         }
     }
 

@@ -9,7 +9,9 @@ use rand::seq::SliceRandom;
 
 use super::features::{FeatureExtractor, fft_len};
 use super::image::{Crop, PressureImage};
-use super::model::{ClassInfo, MAX_CLASSES, MODEL_VERSION, Model, StoredImages};
+use super::model::{
+    ClassInfo, MAX_CLASSES, MAX_DOWNSAMPLE, MODEL_VERSION, MinContact, Model, StoredImages,
+};
 
 /// How to train: the paper's split and the preprocessing.
 #[derive(Clone, Debug)]
@@ -67,6 +69,9 @@ pub enum TrainError {
         /// Images per class.
         per_class: usize,
     },
+    /// A downsampling factor outside 1..=MAX_DOWNSAMPLE.
+    #[error("--downsample {0}: use 1 (full resolution) to {MAX_DOWNSAMPLE}")]
+    Downsample(usize),
     /// Too few or too many classes.
     #[error("{0} classes; a model holds 2 to {MAX_CLASSES}")]
     Classes(usize),
@@ -131,6 +136,9 @@ pub fn train(
 ) -> Result<(Model, Split), TrainError> {
     if classes.len() < 2 || classes.len() > MAX_CLASSES {
         return Err(TrainError::Classes(classes.len()));
+    }
+    if !(1..=MAX_DOWNSAMPLE).contains(&o.downsample) {
+        return Err(TrainError::Downsample(o.downsample));
     }
     if o.train == 0 || o.train >= o.per_class {
         return Err(TrainError::BadSplit {
@@ -202,7 +210,7 @@ pub fn train(
         input_rows: rows,
         input_cols: cols,
         crop: o.crop,
-        downsample: o.downsample.max(1),
+        downsample: o.downsample,
         normalize_load: None,
         n_fft: 0,
         h: 0,
@@ -214,6 +222,7 @@ pub fn train(
         unknown_threshold: f64::NEG_INFINITY,
         train_hashes: hash(&split.train),
         val_hashes: hash(&split.validation),
+        contact: Some(MinContact::of_training(&work)),
         images: Some(StoredImages {
             n_train: split.train.len(),
             pixels: work,
