@@ -70,6 +70,8 @@ struct FakeFoot {
     seg: Segmenter,
     rng: rand::rngs::StdRng,
     seq: u8,
+    /// Rows and columns of its images.
+    size: usize,
 }
 
 impl FakeFoot {
@@ -80,6 +82,7 @@ impl FakeFoot {
             ids,
             rng: rand::rngs::StdRng::seed_from_u64(7),
             seq: 0,
+            size: 44,
         }
     }
 
@@ -125,8 +128,8 @@ impl FakeFoot {
                 && let Some(px) = image(ms, &mut self.rng)
             {
                 let img = ImageRef {
-                    rows: 44,
-                    cols: 44,
+                    rows: self.size,
+                    cols: self.size,
                     bits: 8,
                     timestamp_us: t as u32,
                     pixels: &px,
@@ -251,6 +254,30 @@ fn an_image_sampled_after_the_liftoff_edge_is_not_the_stances() {
     let tc = got[0].1;
     assert_ne!(tc.flags & flags::NO_SAMPLE, 0, "{tc:?}");
     assert_eq!(tc.terrain, messages::TERRAIN_UNKNOWN);
+}
+
+/// A 32x32 foot on a 44x44 model: every step unclassified, and the node says why once (log)
+/// and in every NodeStatus while it lasts (state 5), not "running" with silent no-samples.
+#[test]
+fn a_foot_of_another_image_size_is_reported_not_silently_unclassified() {
+    let mut node = NodeService::new(NodeConfig::default(), model()).unwrap();
+    assert_eq!(node.status(false).state, NodeState::Running);
+    let mut foot = FakeFoot::new();
+    foot.size = 32;
+    let frames = foot.step(1_000_000, 200, |ms, _| {
+        (ms < 200).then(|| vec![90u16; 32 * 32])
+    });
+    let got = classes(&lock_step(&mut node, &frames, 1_400_000));
+    assert_eq!(got.len(), 1, "{got:?}");
+    assert_ne!(got[0].1.flags & flags::NO_SAMPLE, 0);
+    assert!(node.counters().wrong_size >= 19, "{:?}", node.counters());
+    assert_eq!(node.status(false).state, NodeState::WrongImageSize);
+    // The foot's images fit again: running.
+    foot.size = 44;
+    let frames = foot.stance(0, 2_000_000, 200, |_| true);
+    let got = classes(&lock_step(&mut node, &frames, 2_400_000));
+    assert_eq!(got.len(), 1);
+    assert_eq!(node.status(false).state, NodeState::Running);
 }
 
 /// A stance whose images show no foot on the ground (a blank array, or a few noisy sensels):
