@@ -260,7 +260,7 @@ pub fn classify(model_path: &Path, files: &[PathBuf], terrains: &TerrainsArg) ->
     for f in files {
         for (i, img) in read_images(f)?.iter().enumerate() {
             let d = c
-                .classify(&img.pixels, img.rows, img.cols, false)
+                .classify_image(img, false)
                 .with_context(|| f.display().to_string())?;
             // An image without contact says so: it is no terrain, whatever it lies nearest.
             let name = match d.class {

@@ -42,7 +42,8 @@ pub fn run(a: NodeArgs) -> Result<ExitCode> {
     if a.terrains.terrains.is_some() {
         cfg.terrains = a.terrains.terrains.clone();
     }
-    let model = Model::load(&a.model).with_context(|| format!("--model {}", a.model.display()))?;
+    // The error names the file already.
+    let model = Model::load(&a.model).context("--model")?;
     match (&a.replay, &a.iface) {
         (Some(log), _) => {
             // The same decisions on every replay: a refit lands at the step that asked for it.

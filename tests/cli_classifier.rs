@@ -62,15 +62,13 @@ fn train_eval_classify_features_repair() {
     let data = dir.join("data");
     write_dataset(&data);
     let model = dir.join("model.json");
-    let (ok, out, err) = presrs(&[
-        "train",
-        "--data",
-        data.to_str().unwrap(),
-        "--out",
-        model.to_str().unwrap(),
-        "--crop",
-        "2,2,2,2",
-    ]);
+    let train = |out: &Path, extra: &[&str]| {
+        let mut args = vec!["train", "--data", data.to_str().unwrap()];
+        args.extend(["--out", out.to_str().unwrap()]);
+        args.extend(extra);
+        presrs(&args)
+    };
+    let (ok, out, err) = train(&model, &["--crop", "2,2,2,2"]);
     assert!(ok, "{out}{err}");
     assert!(out.contains("39 + 21 images"), "{out}");
 
@@ -108,13 +106,52 @@ fn train_eval_classify_features_repair() {
     );
 
     let img = data.join("grass/029.pgm");
-    let (ok, out, _) = presrs(&[
-        "classify",
-        "--model",
-        model.to_str().unwrap(),
-        img.to_str().unwrap(),
-    ]);
+    let classify_with = |model: &Path, file: &Path| {
+        presrs(&[
+            "classify",
+            "--model",
+            model.to_str().unwrap(),
+            file.to_str().unwrap(),
+        ])
+    };
+    let classify = |file: &Path| classify_with(&model, file);
+    let (ok, out, _) = classify(&img);
     assert!(ok && out.contains("\tgrass\t"), "{out}");
+
+    // Issue 16: a blank frame is no terrain (it was one at confidence 1.000), and a 16-bit
+    // image (maxval 65535) on a model of 8-bit images is refused with the fix.
+    let flat = |name: &str, maxval: u32, value: u32| {
+        let path = dir.join(name);
+        let mut b = format!("P2\n44 44\n{maxval}\n").into_bytes();
+        b.extend(format!("{value} ").repeat(44 * 44).into_bytes());
+        std::fs::write(&path, b).unwrap();
+        path
+    };
+    let (ok, out, _) = classify(&flat("blank.pgm", 255, 0));
+    assert!(ok && out.contains("\tunknown (no contact)\t0.000"), "{out}");
+    let (ok, _, err) = classify(&flat("deep.pgm", 65535, 4000));
+    assert!(
+        !ok && err.contains("deep.pgm") && err.contains("train a model on 16-bit images"),
+        "{err}"
+    );
+
+    // Messages: a write says write and names the missing folder; a missing model is said
+    // once; a downsampling of 0 is refused with its range.
+    let nowhere = dir.join("no-such-folder").join("m.json");
+    let (ok, _, err) = train(&nowhere, &[]);
+    assert!(
+        !ok && err.contains("cannot write model") && err.contains("does not exist"),
+        "{err}"
+    );
+    let missing = dir.join("missing.json");
+    let (ok, _, err) = classify_with(&missing, &img);
+    assert!(!ok && err.matches("No such file").count() == 1, "{err}");
+    assert_eq!(err.matches("missing.json").count(), 1, "{err}");
+    let (ok, _, err) = train(&nowhere, &["--downsample", "0"]);
+    assert!(
+        !ok && err.contains("--downsample") && err.contains("1..=8"),
+        "{err}"
+    );
 
     let (ok, out, _) = presrs(&[
         "features",

@@ -67,10 +67,7 @@ pub fn confusion(
     for &i in idx {
         let mut img = set.images[i].clone();
         alter(&mut img);
-        let det = cls
-            .classify(&img.pixels, img.rows, img.cols, repair)
-            .ok()
-            .and_then(|d| d.class);
+        let det = cls.classify_image(&img, repair).ok().and_then(|d| d.class);
         c.add(set.labels[i], det);
     }
     c
@@ -267,7 +264,7 @@ pub enum EvalError {
         /// The image file.
         path: String,
         /// Why.
-        source: node::classifier::pwe::SizeMismatch,
+        source: node::classifier::pwe::ImageMismatch,
     },
 }
 
@@ -308,7 +305,7 @@ pub fn evaluate(
         }
         let t0 = std::time::Instant::now();
         let d = c
-            .classify(&img.pixels, img.rows, img.cols, spec.repair)
+            .classify_image(&img, spec.repair)
             .map_err(|source| EvalError::Image {
                 path: s.path.display().to_string(),
                 source,

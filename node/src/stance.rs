@@ -275,7 +275,7 @@ pub struct StancePipeline {
     /// Receive time of the frame being processed: a decision's latency ends here.
     now_rx_us: u64,
     /// The last image size said not to fit the model (said once per size).
-    said_size: Option<(u8, u8)>,
+    said_size: Option<(u8, u8, u8)>,
     /// Per foot: its latest image was of a size the model does not take.
     wrong_size_now: Vec<bool>,
     /// Counters per stage.
@@ -469,24 +469,24 @@ impl StancePipeline {
         };
         let m = cls.model();
         let (rows, cols) = (img.rows as usize, img.cols as usize);
-        let wrong = rows != m.input_rows || cols != m.input_cols;
+        let wrong =
+            rows != m.input_rows || cols != m.input_cols || m.check_depth(img.bits).is_err();
         if let Some(w) = self.wrong_size_now.get_mut(foot as usize) {
             *w = wrong;
         }
         if wrong {
             self.counters.wrong_size += 1;
-            if self.said_size != Some((img.rows, img.cols)) {
-                self.said_size = Some((img.rows, img.cols));
+            if self.said_size != Some((img.rows, img.cols, img.bits)) {
+                self.said_size = Some((img.rows, img.cols, img.bits));
                 tracing::warn!(
                     foot,
-                    rows,
-                    cols,
-                    model_rows = m.input_rows,
-                    model_cols = m.input_cols,
-                    "the foot's images are {rows}x{cols} but the model takes {}x{} images: \
-                     its steps are not classified (train a model on this foot's images)",
+                    "the foot's images are {rows}x{cols} at {} bits but the model takes {}x{} \
+                     images at {} bits: its steps are not classified (train a model on this \
+                     foot's images)",
+                    img.bits,
                     m.input_rows,
-                    m.input_cols
+                    m.input_cols,
+                    m.bits.map_or("any".to_string(), |b| b.to_string())
                 );
             }
             return;
@@ -544,9 +544,10 @@ impl StancePipeline {
     /// clock, as in [`Stamped::t_us`]) when no nearer frame can still come: a frame lost right
     /// after the best candidate would otherwise hold the decision until liftoff (~200 ms later).
     ///
-    /// The deadline is in the foot's time: the sample time plus the best frame's distance from
-    /// it (a later frame can only be further), plus one frame period for the transfer of a
-    /// frame already captured. The foot's time is the newest timestamp heard from it (a
+    /// The deadline is in the foot's time: the last time on the array's sampling grid at which
+    /// an image nearer the sample time than the best one could have been taken (without a known
+    /// period: the sample time plus the best image's distance from it), plus one frame period
+    /// for the transfer of an image already captured. The foot's time is the newest timestamp heard from it (a
     /// FootContact or an image), never extrapolated with the receiver's clock: robot time may
     /// run slower than the receiver's (the simulator under emulation runs at 0.35), and an
     /// extrapolated foot clock could pass the deadline before a nearer frame arrived. So the
@@ -568,8 +569,19 @@ impl StancePipeline {
             let due = if self.cfg.multi_frame {
                 f.used > 0 && dt >= w1 + margin
             } else {
-                f.best_err
-                    .is_some_and(|e| dt >= sample_us.saturating_add(e).saturating_add(margin))
+                f.best_err.is_some_and(|e| {
+                    // Images sampled before `limit` would be nearer than the best. The array
+                    // samples on a fixed period, so the last of them that can exist is the
+                    // last grid point before `limit` (images lost on the bus keep the grid);
+                    // without a known period, any time before `limit`.
+                    let limit = sample_us.saturating_add(e);
+                    let last_dt = f.last_image_us.map(|l| l.wrapping_sub(f.touchdown_us));
+                    let last_nearer = match (f.period_us, last_dt) {
+                        (Some(p), Some(l)) if l < limit => l + (limit - 1 - l) / p * p,
+                        _ => limit,
+                    };
+                    dt >= last_nearer.saturating_add(margin)
+                })
             };
             if due {
                 self.now_rx_us = now_rx_us;

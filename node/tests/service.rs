@@ -72,6 +72,8 @@ struct FakeFoot {
     seq: u8,
     /// Rows and columns of its images.
     size: usize,
+    /// Bits per pixel of its images.
+    bits: u8,
 }
 
 impl FakeFoot {
@@ -83,6 +85,7 @@ impl FakeFoot {
             rng: rand::rngs::StdRng::seed_from_u64(7),
             seq: 0,
             size: 44,
+            bits: 8,
         }
     }
 
@@ -130,7 +133,7 @@ impl FakeFoot {
                 let img = ImageRef {
                     rows: self.size,
                     cols: self.size,
-                    bits: 8,
+                    bits: self.bits,
                     timestamp_us: t as u32,
                     pixels: &px,
                 };
@@ -206,8 +209,9 @@ fn one_decision_per_step_from_the_image_nearest_the_sample_time() {
 fn a_frame_lost_after_the_best_one_is_decided_at_the_deadline_not_at_liftoff() {
     let mut node = NodeService::new(NodeConfig::default(), model()).unwrap();
     let mut foot = FakeFoot::new();
-    // Images up to 45 ms only: 45 is the nearest to 70 that came; nothing nearer can come
-    // once the foot's clock passes 70 + 25 (+ one 10 ms period for a transfer in flight).
+    // Images up to 45 ms only: 45 is the nearest to 70 that came. On the array's 10 ms grid
+    // the last image that could be nearer is the one at 85; it would be here by 95 (one
+    // period for its transfer). (Without the grid: 70 + 25 + 10 = 105.)
     let frames = foot.stance(1, 1_000_000, 250, |ms| ms <= 45);
     let said = lock_step(&mut node, &frames, 1_500_000);
     let got = classes(&said);
@@ -216,8 +220,27 @@ fn a_frame_lost_after_the_best_one_is_decided_at_the_deadline_not_at_liftoff() {
     assert_eq!(TerrainCatalog::paper().describe(tc.terrain), "carpet");
     let after_touchdown_ms = (t - 1_000_000) as f64 / 1000.0;
     assert!(
-        (105.0..=107.0).contains(&after_touchdown_ms),
+        (95.0..=97.0).contains(&after_touchdown_ms),
         "decided {after_touchdown_ms} ms after touchdown; liftoff is at 250"
+    );
+}
+
+/// Images stop after 55 ms (the 65 and 75 ms ones and all after lost), FootContact goes on at
+/// its 100 Hz (5 ms here): decided once the foot's clock shows that no nearer image can come
+/// (the 75 ms one, nearer than 55, would have been here by 85), not at liftoff (200 ms).
+#[test]
+fn the_nearest_image_before_the_sample_time_is_decided_within_a_frame_period() {
+    let mut node = NodeService::new(NodeConfig::default(), model()).unwrap();
+    let mut foot = FakeFoot::new();
+    let frames = foot.stance(2, 1_000_000, 200, |ms| ms <= 55);
+    let got = classes(&lock_step(&mut node, &frames, 1_400_000));
+    assert_eq!(got.len(), 1, "{got:?}");
+    let (t, tc) = got[0];
+    assert_eq!(TerrainCatalog::paper().describe(tc.terrain), "grass");
+    let after_ms = (t - 1_000_000) as f64 / 1000.0;
+    assert!(
+        (85.0..=87.0).contains(&after_ms),
+        "decided {after_ms} ms after touchdown"
     );
 }
 
@@ -278,6 +301,12 @@ fn a_foot_of_another_image_size_is_reported_not_silently_unclassified() {
     let got = classes(&lock_step(&mut node, &frames, 2_400_000));
     assert_eq!(got.len(), 1);
     assert_eq!(node.status(false).state, NodeState::Running);
+    // 16-bit images of the right size on a model trained on 8-bit ones: the same.
+    foot.bits = 16;
+    let frames = foot.stance(0, 3_000_000, 200, |_| true);
+    let got = classes(&lock_step(&mut node, &frames, 3_400_000));
+    assert_ne!(got[0].1.flags & flags::NO_SAMPLE, 0, "{got:?}");
+    assert_eq!(node.status(false).state, NodeState::WrongImageSize);
 }
 
 /// A stance whose images show no foot on the ground (a blank array, or a few noisy sensels):

@@ -159,6 +159,14 @@ fn an_image_without_contact_is_never_a_terrain() {
             "{what}"
         );
     }
+    // The same press as a 16-bit image: refused, not read on the 8-bit scale.
+    let deep = PressureImage::new(44, 44, 16, imgs[0].pixels.clone());
+    let e = c.classify_image(&deep, false).unwrap_err().to_string();
+    assert!(
+        e.contains("16-bit image") && e.contains("8-bit images"),
+        "{e}"
+    );
+    assert!(c.classify_image(&imgs[0], false).is_ok());
     // A real press at a third of its load still is one.
     let light: Vec<u16> = imgs[0].pixels.iter().map(|&p| p / 3).collect();
     assert!(c.classify(&light, 44, 44, false).unwrap().contact);

@@ -411,7 +411,10 @@ pub fn load_dataset(dir: &Path, skip_bad: bool) -> Result<Dataset, ImageError> {
                     }
                 }
                 Err(e) if skip_bad => ds.bad.push(e),
-                Err(e) => return Err(e),
+                Err(mut e) => {
+                    e.msg.push_str(SKIP_HINT);
+                    return Err(e);
+                }
             }
         }
     }
@@ -422,8 +425,45 @@ pub fn load_dataset(dir: &Path, skip_bad: bool) -> Result<Dataset, ImageError> {
             "no class sub-directories: a dataset is DIR/<class>/<images>",
         ));
     }
+    // One sensor, one size and depth: the images of another than most are named (or skipped).
+    let mut sizes: Vec<((usize, usize, u8), usize)> = Vec::new();
+    for s in &ds.samples {
+        let size = (s.image.rows, s.image.cols, s.image.bits);
+        match sizes.iter_mut().find(|(z, _)| *z == size) {
+            Some((_, n)) => *n += 1,
+            None => sizes.push((size, 1)),
+        }
+    }
+    if let Some(&((rows, cols, bits), most)) = sizes.iter().max_by_key(|(_, n)| *n)
+        && sizes.len() > 1
+    {
+        let odd = |s: &Sample| (s.image.rows, s.image.cols, s.image.bits) != (rows, cols, bits);
+        let say = |s: &Sample| {
+            err(
+                &s.path,
+                None,
+                format!(
+                    "a {}x{} {}-bit image, but {most} of the dataset's images are \
+                     {rows}x{cols} {bits}-bit",
+                    s.image.rows, s.image.cols, s.image.bits
+                ),
+            )
+        };
+        if !skip_bad && let Some(s) = ds.samples.iter().find(|s| odd(s)) {
+            let mut e = say(s);
+            e.msg.push_str(SKIP_HINT);
+            return Err(e);
+        }
+        let bad: Vec<ImageError> = ds.samples.iter().filter(|s| odd(s)).map(say).collect();
+        ds.bad.extend(bad);
+        ds.samples.retain(|s| !odd(s));
+    }
     Ok(ds)
 }
+
+/// Appended to a bad file's error when it stops a dataset from loading.
+const SKIP_HINT: &str = " (remove it, or pass --skip-bad to leave out the files that are not \
+                         images of the dataset's size)";
 
 #[cfg(test)]
 mod tests {
@@ -519,5 +559,34 @@ mod tests {
         let bad = b"ROWS 2\nCOLS 2\nASCII_DATA @@\n\nFrame 1\n1,2\n3\n";
         let e = parse_asf(bad, Path::new("x.asf")).unwrap_err();
         assert_eq!(e.line, Some(7));
+    }
+
+    #[test]
+    fn a_bad_file_in_a_dataset_is_named_with_the_way_out() {
+        let dir = std::env::temp_dir().join(format!("presrs-ds-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        for class in ["wood", "clay"] {
+            std::fs::create_dir_all(dir.join(class)).unwrap();
+            for i in 0..3 {
+                let f = dir.join(class).join(format!("{i}.pgm"));
+                std::fs::write(f, b"P2\n2 2\n255\n1 2\n3 4\n").unwrap();
+            }
+        }
+        let odd = dir.join("clay").join("odd.pgm");
+        std::fs::write(&odd, b"P2\n3 1\n255\n1 2 3\n").unwrap();
+        let e = load_dataset(&dir, false).unwrap_err().to_string();
+        assert!(
+            e.contains("odd.pgm") && e.contains("1x3") && e.contains("--skip-bad"),
+            "{e}"
+        );
+        let ds = load_dataset(&dir, true).unwrap();
+        assert_eq!((ds.samples.len(), ds.bad.len()), (6, 1));
+        std::fs::remove_file(&odd).unwrap();
+        let notes = dir.join("wood").join("notes.txt");
+        std::fs::write(&notes, "notes about this set\n").unwrap();
+        let e = load_dataset(&dir, false).unwrap_err().to_string();
+        assert!(e.contains("notes.txt") && e.contains("--skip-bad"), "{e}");
+        assert_eq!(load_dataset(&dir, true).unwrap().bad.len(), 1);
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -146,6 +146,11 @@ pub struct Model {
     /// older model files: then only a blank image is "no contact".
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub contact: Option<MinContact>,
+    /// Bits per pixel of the training images (8 or 16): the model takes images of this depth
+    /// only, as 16-bit pixels have no defined scale to 8 bits. Absent in older model files:
+    /// any depth.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bits: Option<u8>,
 }
 
 /// The working images of the stored samples, in the order of `Model::samples`: the training
@@ -169,6 +174,16 @@ pub enum ModelError {
         path: String,
         /// What the OS said.
         source: std::io::Error,
+    },
+    /// The file cannot be written.
+    #[error("cannot write model {path}: {source}{hint}")]
+    Write {
+        /// The file.
+        path: String,
+        /// What the OS said.
+        source: std::io::Error,
+        /// How to fix it, when known (a missing folder).
+        hint: &'static str,
     },
     #[error("model {path} is not a PreSRS model file (JSON): {msg}")]
     /// The file is not a model's JSON.
@@ -252,8 +267,25 @@ impl Model {
         Ok(())
     }
 
+    /// An image of `bits` per pixel is of the model's depth.
+    pub fn check_depth(&self, bits: u8) -> Result<(), super::pwe::DepthMismatch> {
+        match self.bits {
+            Some(want) if want != bits => Err(super::pwe::DepthMismatch {
+                bits,
+                want_bits: want,
+            }),
+            _ => Ok(()),
+        }
+    }
+
     /// Checks that the model's parts fit together (sizes, indexes, finite numbers).
     pub fn validate(&self) -> Result<(), Invalid> {
+        if let Some(b) = self.bits
+            && b != 8
+            && b != 16
+        {
+            return Err(Invalid::range("bits", b, "8 or 16"));
+        }
         let n = self.feature_len();
         if self.classes.is_empty() || self.classes.len() > MAX_CLASSES {
             return Err(Invalid::new(
@@ -406,8 +438,14 @@ impl Model {
             path: path.display().to_string(),
             msg: e.to_string(),
         })?;
-        std::fs::write(path, text).map_err(|source| ModelError::Io {
+        std::fs::write(path, text).map_err(|source| ModelError::Write {
             path: path.display().to_string(),
+            hint: match path.parent() {
+                Some(d) if !d.as_os_str().is_empty() && !d.exists() => {
+                    " (its folder does not exist: create it first)"
+                }
+                _ => "",
+            },
             source,
         })
     }

@@ -25,6 +25,31 @@ pub struct Decision {
     pub contact: bool,
 }
 
+/// An image of another bit depth than the model's training images.
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+#[error(
+    "a {bits}-bit image, but the model was trained on {want_bits}-bit images: pixel values of \
+     one depth mean nothing on the other's scale (docs/protocol.md); train a model on \
+     {bits}-bit images"
+)]
+pub struct DepthMismatch {
+    /// Bits per pixel of the image given.
+    pub bits: u8,
+    /// Bits per pixel of the model's training images.
+    pub want_bits: u8,
+}
+
+/// An image that does not fit the model.
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+pub enum ImageMismatch {
+    /// Another size.
+    #[error(transparent)]
+    Size(#[from] SizeMismatch),
+    /// Another bit depth.
+    #[error(transparent)]
+    Depth(#[from] DepthMismatch),
+}
+
 /// An image that does not fit the model.
 #[derive(Debug, thiserror::Error, PartialEq, Eq)]
 #[error("image is {rows}x{cols} but the model takes {want_rows}x{want_cols} images")]
@@ -344,7 +369,19 @@ impl Classifier {
         self.decide()
     }
 
-    /// The whole pipeline for one sensor image.
+    /// The whole pipeline for one image file's image: its size and bit depth checked against
+    /// the model's.
+    pub fn classify_image(
+        &mut self,
+        img: &super::PressureImage,
+        repair: bool,
+    ) -> Result<Decision, ImageMismatch> {
+        self.model.check_depth(img.bits)?;
+        Ok(self.classify(&img.pixels, img.rows, img.cols, repair)?)
+    }
+
+    /// The whole pipeline for one sensor image (its bit depth is the caller's to check, see
+    /// [`Model::check_depth`]).
     pub fn classify(
         &mut self,
         pixels: &[u16],

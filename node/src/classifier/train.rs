@@ -146,12 +146,12 @@ pub fn train(
             per_class: o.per_class,
         });
     }
-    let (rows, cols) = (data[0].image.rows, data[0].image.cols);
+    let (rows, cols, bits) = (data[0].image.rows, data[0].image.cols, data[0].image.bits);
     for d in data {
-        if (d.image.rows, d.image.cols) != (rows, cols) {
+        if (d.image.rows, d.image.cols, d.image.bits) != (rows, cols, bits) {
             return Err(TrainError::Sizes {
-                a: format!("{rows}x{cols}"),
-                b: format!("{}x{}", d.image.rows, d.image.cols),
+                a: format!("{rows}x{cols} {bits}-bit"),
+                b: format!("{}x{} {}-bit", d.image.rows, d.image.cols, d.image.bits),
             });
         }
     }
@@ -223,6 +223,7 @@ pub fn train(
         train_hashes: hash(&split.train),
         val_hashes: hash(&split.validation),
         contact: Some(MinContact::of_training(&work)),
+        bits: Some(bits),
         images: Some(StoredImages {
             n_train: split.train.len(),
             pixels: work,
