@@ -400,6 +400,10 @@ impl StancePipeline {
     }
 
     fn on_contact(&mut self, foot: u8, fc: FootContact, out: &mut impl FnMut(u8, TerrainClass)) {
+        // The state this report ends held until now: settle it first. A foot that reports only
+        // its edges (and sends no image in flight) would otherwise never confirm a liftoff,
+        // and every later stance would run on as the first one (1 of 3 steps decided).
+        self.settle(foot, fc.timestamp_us, out);
         let f = &mut self.feet[foot as usize];
         f.heard = Some((self.now_rx_us, fc.timestamp_us));
         if !f.have_raw || fc.stance != f.raw {

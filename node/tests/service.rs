@@ -542,3 +542,147 @@ fn a_classic_foot_at_the_spec_worst_case_is_classified_with_the_default_timeout(
         "{short:?}"
     );
 }
+
+/// Property test of stance tracking (issue 16): random feet — steps of random length, switch
+/// bounce at both edges, images on a 10 ms grid with random loss, a sender clock that wraps
+/// mid-run, malformed frames on our identifiers mixed in — replayed through the node. Images
+/// inside each stance show wood; images in flight, including those sampled right after the
+/// liftoff edge while the debounce is pending, show grass. Feet report the switch at 100 Hz or
+/// only on its edges, with or without images in flight. Whatever the sequence: one TerrainClass
+/// per stance, each with its own step number, and never grass.
+#[test]
+fn stance_tracking_properties_hold_for_random_feet_and_malformed_traffic() {
+    use protocol::MessageKind;
+    let ids = IdConfig::default();
+    let seg = Segmenter::new(Variant::Fd, ids.clone());
+    let model = model();
+    let (wood, grass) = (0usize, 2usize);
+    let grass_id = TerrainCatalog::paper().by_name(NAMES[grass]).unwrap().id();
+    let mut totals = (0usize, 0usize, 0usize);
+    for run in 0..60u64 {
+        // Half the feet report the switch at 100 Hz as the spec has it, half only its edges;
+        // a third send no images in flight.
+        let periodic = run % 2 == 0;
+        let flight_images = run % 3 != 0;
+        let mut rng = rand::rngs::StdRng::seed_from_u64(1000 + run);
+        // The sender's clock starts up to 1.5 s before it wraps.
+        let t0 = u32::MAX as u64 - rng.random_range(0..1_500_000u64);
+        let mut frames: Vec<Stamped> = Vec::new();
+        let mut seq = 0u8;
+        let mut contact = |frames: &mut Vec<Stamped>, stance: bool, t: u64| {
+            seq = seq.wrapping_add(1);
+            let m = Message::FootContact(FootContact {
+                stance,
+                seq,
+                timestamp_us: t as u32,
+            });
+            frames.push(Stamped {
+                t_us: t + 150,
+                frame: m.to_frame(&ids, 0).unwrap(),
+            });
+        };
+        // Stances [touchdown, liftoff) on the foot's clock.
+        let mut stances = Vec::new();
+        let mut t = t0 + rng.random_range(20_000..200_000u64);
+        for _ in 0..rng.random_range(2..6) {
+            let len = rng.random_range(60_000..250_000u64);
+            stances.push((t, t + len));
+            t += len + rng.random_range(60_000..250_000u64);
+        }
+        let end = t;
+        let in_stance = |x: u64| stances.iter().any(|&(a, b)| (a..b).contains(&x));
+        // The switch: a report every 10 ms, and every edge with up to 3 ms of bounce.
+        for ms in (t0..end).step_by(10_000).filter(|_| periodic) {
+            contact(&mut frames, in_stance(ms), ms);
+        }
+        for &(a, b) in &stances {
+            for (edge, state) in [(a, true), (b, false)] {
+                let mut x = edge;
+                if rng.random_bool(0.5) {
+                    contact(&mut frames, state, x);
+                    contact(&mut frames, !state, x + 1_000);
+                    x += rng.random_range(2_000..3_000u64);
+                }
+                contact(&mut frames, state, x);
+            }
+        }
+        // Images on a 10 ms grid, 20% lost.
+        let phase = rng.random_range(0..10_000u64);
+        for (k, ts) in (t0 + phase..end).step_by(10_000).enumerate() {
+            if rng.random_bool(0.2) || !(flight_images || in_stance(ts)) {
+                continue;
+            }
+            let terrain = if in_stance(ts) { wood } else { grass };
+            let px = texture(&mut rng, PERIODS[terrain]);
+            let img = ImageRef {
+                rows: 44,
+                cols: 44,
+                bits: 8,
+                timestamp_us: ts as u32,
+                pixels: &px,
+            };
+            let mut n = 0;
+            seg.frames(0, k as u8, &img, |f: CanFrame| {
+                n += 1;
+                frames.push(Stamped {
+                    t_us: ts + 500 + n * 150,
+                    frame: f,
+                });
+            })
+            .unwrap();
+        }
+        // Malformed traffic on our identifiers: wrong lengths, FD on fixed-layout ids, garbage
+        // tactile segments, a stance value of 7.
+        for _ in 0..rng.random_range(20..80) {
+            let at = rng.random_range(t0..end) + 150;
+            let kind = MessageKind::ALL[rng.random_range(0..MessageKind::ALL.len())];
+            let Some(id) = protocol::frame::make_id(ids.id(kind, 0), false) else {
+                continue;
+            };
+            let len = rng.random_range(0..9);
+            let mut data = vec![0u8; if rng.random_bool(0.5) { 64 } else { len }];
+            rng.fill(&mut data[..]);
+            if kind == MessageKind::FootContact && data.len() == 8 {
+                data[0] = 7;
+            }
+            let frame = if data.len() > 8 || rng.random_bool(0.3) {
+                CanFrame::fd(id, &data, true)
+            } else {
+                CanFrame::classic(id, &data)
+            };
+            if let Some(frame) = frame {
+                frames.push(Stamped { t_us: at, frame });
+            }
+        }
+        frames.sort_by_key(|s| s.t_us);
+        let mut node = NodeService::new(NodeConfig::default(), model.clone()).unwrap();
+        let mut said = Vec::new();
+        node.replay(&frames, &mut |t, o| said.push((t, o)));
+        node.tick(end + 1_000_000, &mut |o| said.push((end + 1_000_000, o)));
+        let got = classes(&said);
+        let steps: std::collections::BTreeSet<u16> = got.iter().map(|(_, tc)| tc.step).collect();
+        // Exactly one: every stance here lasts longer than the debounce and gets images.
+        assert!(
+            got.len() == stances.len() && steps.len() == got.len(),
+            "run {run}: {} TerrainClass for {} stances: {got:?}",
+            got.len(),
+            stances.len()
+        );
+        assert!(
+            got.iter().all(|(_, tc)| tc.terrain != grass_id),
+            "run {run}: an image from outside a stance was classified: {got:?}"
+        );
+        totals.0 += stances.len();
+        totals.1 += got.len();
+        totals.2 += got
+            .iter()
+            .filter(|(_, tc)| tc.flags & flags::NO_SAMPLE == 0)
+            .count();
+    }
+    // The properties are not met by saying nothing: most stances are decided from an image.
+    let (stances, decided, classified) = totals;
+    assert!(
+        decided * 10 >= stances * 9 && classified * 10 >= stances * 7,
+        "{stances} stances, {decided} decided, {classified} from an image"
+    );
+}
