@@ -103,6 +103,15 @@ impl ControllerConfig {
         }
         let has = |id: u8| self.gaits.iter().any(|g| g.id == id);
         let ids: Vec<u8> = self.gaits.iter().map(|g| g.id).collect();
+        if let Some(dup) = ids
+            .iter()
+            .find(|&&id| ids.iter().filter(|&&j| j == id).count() > 1)
+        {
+            return Err(Invalid::new(
+                "gaits",
+                format!("gaits: two gaits have id {dup}; each needs its own"),
+            ));
+        }
         for (name, id) in [
             ("initial_gait", self.initial_gait),
             ("safe_gait", self.safe_gait),
@@ -147,6 +156,8 @@ impl ControllerConfig {
             60_000.0,
         )?;
         range("command_hz", self.command_hz, 10.0, 5_000.0)?;
+        // Longer than a stance, every edge would be taken for bounce.
+        range("lockout_us", self.lockout_us as f64, 0.0, 100_000.0)?;
         range("status_hz", self.status_hz, 0.1, 100.0)?;
         range(
             "foot",
@@ -759,6 +770,23 @@ mod tests {
 
     #[test]
     fn invalid_config_names_the_field() {
+        for (text, key) in [
+            ("lockout_us = 500000", "lockout_us"),
+            ("switch_after_steps = 0", "switch_after_steps"),
+            ("command_hz = 0.0", "command_hz"),
+        ] {
+            let e = ControllerConfig::parse(text, "c.toml")
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(key) && e.contains("c.toml"), "{text}: {e}");
+        }
+        let mut two = ControllerConfig::default();
+        two.gaits.push(Gait::g1());
+        let e = two
+            .validate(&TerrainCatalog::paper())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("two gaits have id 1"), "{e}");
         let e = ControllerConfig::parse("safe_gait = 9", "c.toml").unwrap_err();
         assert!(e.to_string().contains("c.toml: safe_gait = 9"), "{e}");
         let e = ControllerConfig::parse("min_confidence_pct = 120.0", "c.toml").unwrap_err();

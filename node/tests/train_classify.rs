@@ -262,8 +262,48 @@ fn model_file_round_trips_and_guards_its_version() {
     );
 
     v["version"] = MODEL_VERSION.into();
-    v["h"] = 3.into();
-    let e = Model::from_json(&v.to_string(), "m.json").unwrap_err();
+    // Every field that could disable the model silently is refused, naming it.
+    for (key, bad) in [
+        ("h", serde_json::json!(3)),
+        ("downsample", serde_json::json!(0)),
+        ("normalize_load", serde_json::json!(0.0)),
+        ("input_rows", serde_json::json!(65)),
+        ("kernel_width", serde_json::json!(-1.0)),
+        ("bits", serde_json::json!(12)),
+    ] {
+        let mut w = v.clone();
+        w[key] = bad;
+        let e = Model::from_json(&w.to_string(), "m.json").unwrap_err();
+        assert!(
+            matches!(e, ModelError::Invalid { .. } | ModelError::Parse { .. }),
+            "{key}: {e}"
+        );
+        assert!(e.to_string().contains(key), "{key}: {e}");
+    }
+    let mut nan = model.clone();
+    nan.unknown_threshold = f64::NAN;
+    assert!(
+        nan.validate()
+            .unwrap_err()
+            .to_string()
+            .contains("unknown_threshold")
+    );
+    let mut w = v.clone();
+    w["classes"][0]["terrain_id"] = 255.into();
+    let e = Model::from_json(&w.to_string(), "m.json")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("terrain id 255"), "{e}");
+    let e = Model::from_json(
+        &{
+            let mut w = v.clone();
+            w["h"] = 3.into();
+            w
+        }
+        .to_string(),
+        "m.json",
+    )
+    .unwrap_err();
     assert!(matches!(e, ModelError::Invalid { .. }), "{e}");
     assert!(matches!(
         Model::from_json("{not json", "x").unwrap_err(),

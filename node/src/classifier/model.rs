@@ -300,6 +300,15 @@ impl Model {
                 format!("1..={MAX_DOWNSAMPLE} (1 = full resolution)"),
             ));
         }
+        if !(1..=64).contains(&self.input_rows) || !(1..=64).contains(&self.input_cols) {
+            return Err(Invalid::new(
+                "input_rows",
+                format!(
+                    "input_rows x input_cols = {}x{}: the protocol carries 1x1 to 64x64 images",
+                    self.input_rows, self.input_cols
+                ),
+            ));
+        }
         let (r, c) = self
             .work_size()
             .ok_or_else(|| Invalid::new("crop", "crop leaves no pixels"))?;
@@ -344,6 +353,38 @@ impl Model {
             return Err(Invalid::new(
                 "sample_classes",
                 format!("sample class {bad} is not a class index"),
+            ));
+        }
+        // Values that would not fail loudly but disable the model: every decision unknown
+        // (a NaN or +inf threshold), every image scaled to nothing, a class sent as "unknown".
+        if self.unknown_threshold.is_nan() || self.unknown_threshold == f64::INFINITY {
+            return Err(Invalid::new(
+                "unknown_threshold",
+                format!(
+                    "unknown_threshold {} would make every decision unknown",
+                    self.unknown_threshold
+                ),
+            ));
+        }
+        if let Some(v) = self.normalize_load
+            && !(v.is_finite() && v > 0.0)
+        {
+            return Err(Invalid::new(
+                "normalize_load",
+                format!("normalize_load {v} must be a positive total intensity"),
+            ));
+        }
+        if let Some(c) = self
+            .classes
+            .iter()
+            .find(|c| c.terrain_id == protocol::messages::TERRAIN_UNKNOWN)
+        {
+            return Err(Invalid::new(
+                "classes",
+                format!(
+                    "class `{}` sends terrain id 255, which means unknown",
+                    c.name
+                ),
             ));
         }
         if !(self.kernel_width.is_finite() && self.kernel_width > 0.0) {
