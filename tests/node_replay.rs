@@ -88,6 +88,21 @@ fn replay_prints_the_pipelines_decisions_with_the_logs_timestamps() {
         assert_eq!(g["step"], tc.step);
         assert_eq!(g["terrain_id"], tc.terrain);
         assert_eq!(g["flags"], tc.flags);
+        // Issue 16: the printed latency is the value the CAN field carries (saturated, and 0
+        // for a step without a sampled frame).
+        let ids = protocol::IdConfig::default();
+        let frame = protocol::Message::TerrainClass(*tc)
+            .to_frame(&ids, *foot)
+            .unwrap();
+        let Ok(Some((_, protocol::Message::TerrainClass(on_bus)))) =
+            protocol::messages::decode(&frame, &ids)
+        else {
+            panic!("TerrainClass does not decode");
+        };
+        assert_eq!(g["latency_us"], on_bus.latency_us, "{g}");
+        if tc.flags & protocol::messages::flags::NO_SAMPLE != 0 {
+            assert_eq!(on_bus.latency_us, 0);
+        }
     }
 
     // A damaged log: the error names the line and the expected format, nothing is printed.
