@@ -551,11 +551,12 @@ impl StancePipeline {
     /// The deadline is in the foot's time: the last time on the array's sampling grid at which
     /// an image nearer the sample time than the best one could have been taken (without a known
     /// period: the sample time plus the best image's distance from it), plus one frame period
-    /// for the transfer of an image already captured. The foot's time is the newest timestamp heard from it (a
-    /// FootContact or an image), never extrapolated with the receiver's clock: robot time may
-    /// run slower than the receiver's (the simulator under emulation runs at 0.35), and an
-    /// extrapolated foot clock could pass the deadline before a nearer frame arrived. So the
-    /// deadline only moves with frames; a foot that falls silent is decided at liftoff.
+    /// for the transfer of an image already captured. The foot's time is the newest timestamp
+    /// heard from it (a FootContact or an image), never extrapolated with the receiver's
+    /// clock: robot time may run slower than the receiver's (the simulator under emulation runs
+    /// at 0.35), and an extrapolated foot clock could pass the deadline before a nearer frame
+    /// arrived. So the deadline only moves with frames; a foot that falls silent is decided at
+    /// liftoff.
     pub fn tick(&mut self, now_rx_us: u64, out: &mut impl FnMut(u8, TerrainClass)) {
         let sample_us = self.cfg.sample_ms * 1000;
         let w1 = self.cfg.window_ms[1] * 1000;
@@ -696,8 +697,9 @@ fn classify(
     counters: &mut Counters,
 ) -> Option<(crate::classifier::Decision, bool)> {
     cls.prepare(&f.best, rows, cols).ok()?;
+    // Measured once here: the decisions below skip the check.
     if !cls.in_contact() {
-        return Some((cls.decide(), false));
+        return Some((crate::classifier::Decision::NO_CONTACT, false));
     }
     let add = |sum_lp: Option<&mut Vec<f64>>, lp: &[f64]| {
         if let Some(s) = sum_lp {
@@ -717,14 +719,14 @@ fn classify(
             if let Some(a) = f.adapted.as_mut().filter(|a| a.fits(&f.health)) {
                 a.cls.work_mut().copy_from_slice(cls.work_mut());
                 let repaired = f.health.repair(a.cls.work_mut()) > 0;
-                let d = a.cls.decide();
+                let d = a.cls.decide_in_contact();
                 add(sum_lp, a.cls.log_posteriors());
                 return Some((d, repaired));
             }
             f.health.repair(cls.work_mut()) > 0
         }
     };
-    let d = cls.decide();
+    let d = cls.decide_in_contact();
     add(sum_lp, cls.log_posteriors());
     Some((d, repaired))
 }

@@ -25,6 +25,18 @@ pub struct Decision {
     pub contact: bool,
 }
 
+impl Decision {
+    /// The decision for an image without contact: unknown, confidence 0.
+    pub const NO_CONTACT: Decision = Decision {
+        class: None,
+        best: 0,
+        terrain_id: protocol::messages::TERRAIN_UNKNOWN,
+        confidence: 0.0,
+        log_density: f64::NEG_INFINITY,
+        contact: false,
+    };
+}
+
 /// An image of another bit depth than the model's training images.
 #[derive(Debug, thiserror::Error, PartialEq, Eq)]
 #[error(
@@ -276,15 +288,14 @@ impl Classifier {
     pub fn decide(&mut self) -> Decision {
         if !self.in_contact() {
             self.log_posteriors.fill(f64::NEG_INFINITY);
-            return Decision {
-                class: None,
-                best: 0,
-                terrain_id: protocol::messages::TERRAIN_UNKNOWN,
-                confidence: 0.0,
-                log_density: f64::NEG_INFINITY,
-                contact: false,
-            };
+            return Decision::NO_CONTACT;
         }
+        self.decide_in_contact()
+    }
+
+    /// [`Classifier::decide`] for a working image the caller has found in contact
+    /// ([`Classifier::in_contact`]), without measuring it again.
+    pub fn decide_in_contact(&mut self) -> Decision {
         let m = &self.model;
         let scale = match m.normalize_load {
             Some(target) => {
