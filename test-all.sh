@@ -9,6 +9,9 @@ part() { echo "== $1 (at $((SECONDS - t0)) s)"; }
 part "install dependencies"; scripts/install-deps.sh
 part "cargo fmt --check"; cargo fmt --all --check
 part "cargo clippy"; cargo clippy --workspace --all-targets --features vcan,interop -- -D warnings
+part "protocol without std, for the foot's microcontroller (thumbv7em-none-eabihf)"
+cargo build -p presrs-protocol --no-default-features --target thumbv7em-none-eabihf
+cargo clippy -p presrs-protocol --no-default-features --target thumbv7em-none-eabihf -- -D warnings
 part "cargo test (unit, property, cantools/python-can interop)"
 cargo test --workspace --features interop
 part "arm64: cross-build, tests under qemu-aarch64, Debian packages"; scripts/test-arm64.sh

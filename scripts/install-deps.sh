@@ -47,6 +47,11 @@ if ! py_ok; then
   echo "install-deps: pip install -r tests/requirements.txt"
   python3 -m pip install -q -r "$here/tests/requirements.txt"
 fi
+# The foot's firmware build of the protocol crate (no_std, Cortex-M4F).
+if ! rustup target list --installed | grep -qx thumbv7em-none-eabihf; then
+  echo "install-deps: rustup target add thumbv7em-none-eabihf"
+  rustup target add thumbv7em-none-eabihf
+fi
 if [ "$cross" = arm64 ] && ! rustup target list --installed | grep -qx aarch64-unknown-linux-gnu; then
   echo "install-deps: rustup target add aarch64-unknown-linux-gnu"
   rustup target add aarch64-unknown-linux-gnu

@@ -135,3 +135,48 @@ fn the_example_configs_parse_and_equal_the_defaults() {
     .unwrap();
     assert_eq!(c, controller::ControllerConfig::default());
 }
+
+/// Issue 17 §3: the firmware example (the `no_std` foot sender over an `embedded_can` driver)
+/// writes a candump log; the node replays it and decides every stance from an image sampled
+/// about 70 ms after its touchdown, by the foot's clock.
+#[test]
+fn the_firmware_examples_log_is_a_run_the_node_decides() {
+    let dir = std::env::temp_dir().join(format!("presrs-firmware-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let model_path = small_model(&dir);
+    let log = dir.join("foot.log");
+    common::output_ok(
+        Command::new(env!("CARGO"))
+            .current_dir(common::root())
+            .args([
+                "run",
+                "-q",
+                "-p",
+                "presrs-protocol",
+                "--example",
+                "foot_firmware",
+            ])
+            .args(["--", "--steps", "8", "--log", log.to_str().unwrap()]),
+    );
+    let out = common::output_ok(
+        Command::new(env!("CARGO_BIN_EXE_presrs"))
+            .args(["node", "--replay", log.to_str().unwrap()])
+            .args(["--model", model_path.to_str().unwrap(), "--json"]),
+    );
+    let got: Vec<serde_json::Value> = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(got.len(), 8, "{got:?}");
+    let log_start_us = 1_700_000_000_000_000u64;
+    for (k, g) in got.iter().enumerate() {
+        assert_eq!(g["step"], k as u64 + 1);
+        let flags = g["flags"].as_u64().unwrap() as u8;
+        use protocol::messages::flags;
+        assert_eq!(flags & (flags::NO_SAMPLE | flags::NO_CONTACT), 0, "{g}");
+        // Touchdowns every 440 ms of foot time; images every 10 ms; decided on the 70 ms image.
+        let since_touchdown = g["t_us"].as_u64().unwrap() - log_start_us - k as u64 * 440_000;
+        assert!((70_000..75_000).contains(&since_touchdown), "{g}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -78,6 +78,7 @@ pub enum DecodeError {
 }
 
 /// A failure of the CAN interface.
+#[cfg(feature = "std")]
 #[derive(Debug, Error)]
 pub enum BusError {
     #[error(

@@ -123,8 +123,8 @@ impl CanFrame {
     }
 }
 
-impl std::fmt::Debug for CanFrame {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+impl core::fmt::Debug for CanFrame {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         write!(f, "{:03X}", self.raw_id())?;
         if self.fd {
             write!(f, "##{}", if self.brs { 1 } else { 0 })?;

@@ -124,6 +124,7 @@ impl Default for IdConfig {
 impl IdConfig {
     /// The `[ids]` table of a config file (the node's, the controller's, or one of its own),
     /// checked; the defaults when the file has no `[ids]` table.
+    #[cfg(feature = "std")]
     pub fn from_file(path: &std::path::Path) -> Result<Self, crate::config::ConfigFileError> {
         use crate::config::{ConfigFileError, Invalid};
         // Only the [ids] table is read: the rest of the file is another tool's business.
@@ -244,6 +245,7 @@ impl IdConfig {
     }
 
     /// The receive filter `(id, mask)` list that passes exactly the given messages.
+    #[cfg(feature = "std")]
     pub fn filters(&self, kinds: &[MessageKind]) -> Vec<(u32, u32)> {
         let width = if self.extended { 0x1FFF_FFFF } else { 0x7FF };
         let mut out = Vec::new();

@@ -1,3 +1,4 @@
+#![cfg_attr(not(feature = "std"), no_std)]
 #![warn(missing_docs)]
 //! # presrs-protocol: the CAN protocol of the PreSRS terrain node
 //!
@@ -12,11 +13,20 @@
 //!   [`Stamped`] frames with their receive time;
 //! - [`ids`]: the identifier map, relocatable per message, 11- or 29-bit;
 //! - [`messages`]: typed messages and their byte layouts;
-//! - [`tactile`]: segmentation and reassembly of pressure images;
+//! - [`tactile`]: segmentation and reassembly of pressure images; [`foot`]: the foot's sender,
+//!   over any `embedded-can` driver (firmware);
 //! - [`terrain`]: the terrain type and the catalog of terrain ids (the paper's and a lab's own);
 //! - [`dbc`]: the DBC file for any CAN tool; [`candump`]: can-utils log files;
 //! - [`bus`]: SocketCAN and an in-process bus behind one trait; [`clock`]: time sources;
 //! - [`config`]: the one config-file loader and its errors; [`error`]: the error types.
+//!
+//! ## On the foot's microcontroller
+//!
+//! Without its default `std` feature the crate is `#![no_std]` and allocates nothing: [`frame`],
+//! [`ids`], [`messages`], the CRC and [`tactile::Segmenter`] are what a foot's firmware needs
+//! to speak the protocol through any [`embedded_can`] driver. The test command builds it with
+//! `cargo build -p presrs-protocol --no-default-features --target thumbv7em-none-eabihf`;
+//! `examples/foot_firmware.rs` is a foot written that way.
 //!
 //! ```
 //! use presrs_protocol::{bus::{CanBus, InProcBus}, ids::IdConfig, messages::*};
@@ -29,20 +39,30 @@
 //! assert_eq!(decode(&rx.frame, &ids).unwrap(), Some((0, touchdown)));
 //! ```
 
+#[cfg(feature = "std")]
 pub mod bus;
+#[cfg(feature = "std")]
 pub mod candump;
+#[cfg(feature = "std")]
 pub mod clock;
+#[cfg(feature = "std")]
 pub mod config;
+#[cfg(feature = "std")]
 pub mod dbc;
 pub mod error;
+pub mod foot;
 pub mod frame;
 pub mod ids;
 pub mod messages;
 pub mod tactile;
+#[cfg(feature = "std")]
 pub mod terrain;
 
-pub use error::{BusError, ConfigError, DecodeError};
+#[cfg(feature = "std")]
+pub use error::BusError;
+pub use error::{ConfigError, DecodeError};
 pub use frame::{CanFrame, Stamped};
 pub use ids::{IdConfig, MessageKind};
 pub use messages::Message;
+#[cfg(feature = "std")]
 pub use terrain::{Terrain, TerrainCatalog};

@@ -10,13 +10,27 @@ use crate::frame::{CanFrame, make_id};
 use crate::ids::{IdConfig, MessageKind};
 
 /// Terrain id meaning "not classified" (no sample, or below the unknown threshold).
-pub const TERRAIN_UNKNOWN: u8 = crate::terrain::UNKNOWN_ID;
+pub const TERRAIN_UNKNOWN: u8 = 0xFF;
+
+/// Rounds half away from zero, as `f64::round` does; `core` has no `round` without std, and
+/// the firmware build encodes messages too. Exact for the field ranges (below 2^52).
+fn round(v: f64) -> f64 {
+    let t = v as i64 as f64; // toward zero, saturating; the callers clamp afterwards
+    let frac = v - t;
+    if frac >= 0.5 {
+        t + 1.0
+    } else if frac <= -0.5 {
+        t - 1.0
+    } else {
+        t
+    }
+}
 
 fn sat_u(v: f64, max: f64) -> f64 {
     if v.is_nan() {
         0.0
     } else {
-        v.round().clamp(0.0, max)
+        round(v).clamp(0.0, max)
     }
 }
 
@@ -24,7 +38,7 @@ fn sat_i16(v: f64) -> i16 {
     if v.is_nan() {
         0
     } else {
-        v.round().clamp(i16::MIN as f64, i16::MAX as f64) as i16
+        round(v).clamp(i16::MIN as f64, i16::MAX as f64) as i16
     }
 }
 
@@ -521,6 +535,15 @@ pub fn decode(frame: &CanFrame, ids: &IdConfig) -> Result<Option<(u8, Message)>,
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn round_matches_std_round() {
+        for v in [
+            0.0, 0.49, 0.5, 0.51, 1.5, 2.5, -0.5, -0.49, -1.5, -2.5, 32767.4, -32768.6, 1e9,
+        ] {
+            assert_eq!(round(v), v.round(), "{v}");
+        }
+    }
 
     fn rt(m: Message, foot: u8) -> Message {
         let ids = IdConfig::default();

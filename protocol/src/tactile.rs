@@ -17,7 +17,9 @@
 //! length or geometry does not check, and counts every kind of drop in [`ReassemblyStats`].
 
 use crate::frame::{CanFrame, make_id};
-use crate::ids::{IdConfig, MAX_FEET, MessageKind};
+#[cfg(feature = "std")]
+use crate::ids::MAX_FEET;
+use crate::ids::{IdConfig, MessageKind};
 
 /// Largest image the transfer accepts (64 x 64 pixels): enough for the 44x44 PreSRS array, and
 /// it bounds the receive buffers, which are allocated once.
@@ -85,6 +87,7 @@ impl Variant {
             Variant::Classic => MessageKind::TactileFrameClassic,
         }
     }
+    #[cfg(feature = "std")]
     fn index(self, p: &[u8]) -> usize {
         match self {
             Variant::Fd => p[1] as usize,
@@ -379,6 +382,7 @@ pub struct ReassemblyStats {
     pub out_of_range: u64,
 }
 
+#[cfg(feature = "std")]
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 enum SlotState {
     Empty,
@@ -391,6 +395,7 @@ enum SlotState {
     Abandoned,
 }
 
+#[cfg(feature = "std")]
 #[derive(Clone, Debug)]
 struct Slot {
     state: SlotState,
@@ -405,6 +410,7 @@ struct Slot {
     buf: Vec<u8>,
 }
 
+#[cfg(feature = "std")]
 impl Slot {
     fn new() -> Self {
         Self {
@@ -437,6 +443,7 @@ impl Slot {
     }
 }
 
+#[cfg(feature = "std")]
 /// Rebuilds tactile images from segments; see the module docs. Two assembly slots per foot, so a
 /// late segment of the previous image does not destroy the image being received.
 pub struct Reassembler {
@@ -446,12 +453,14 @@ pub struct Reassembler {
     stats: ReassemblyStats,
 }
 
+#[cfg(feature = "std")]
 impl Default for Reassembler {
     fn default() -> Self {
         Self::new(100_000)
     }
 }
 
+#[cfg(feature = "std")]
 impl Reassembler {
     /// `timeout_us`: an image not completed this long after its first segment is abandoned
     /// (and its sequence number may be reused).
@@ -619,6 +628,7 @@ impl Reassembler {
     }
 }
 
+#[cfg(feature = "std")]
 const fn full_header(v: Variant) -> u8 {
     match v {
         Variant::Fd => 0b1,
@@ -627,6 +637,7 @@ const fn full_header(v: Variant) -> u8 {
 }
 
 /// Takes one header segment into the slot. False when it is dropped (duplicate or bad).
+#[cfg(feature = "std")]
 fn absorb_header(
     v: Variant,
     part: usize,
