@@ -38,6 +38,19 @@ fn small_model(dir: &std::path::Path) -> std::path::PathBuf {
     path
 }
 
+/// `presrs node --replay LOG --model MODEL --json`, its lines parsed.
+fn replay_json(log: &std::path::Path, model: &std::path::Path) -> Vec<serde_json::Value> {
+    let out = common::output_ok(
+        Command::new(env!("CARGO_BIN_EXE_presrs"))
+            .args(["node", "--replay", log.to_str().unwrap()])
+            .args(["--model", model.to_str().unwrap(), "--json"]),
+    );
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect()
+}
+
 #[test]
 fn replay_prints_the_pipelines_decisions_with_the_logs_timestamps() {
     let dir = std::env::temp_dir().join(format!("presrs-replay-{}", std::process::id()));
@@ -72,15 +85,7 @@ fn replay_prints_the_pipelines_decisions_with_the_logs_timestamps() {
     }
     assert!(want.len() > 5, "only {} decisions in 6 s", want.len());
 
-    let out = common::output_ok(
-        Command::new(env!("CARGO_BIN_EXE_presrs"))
-            .args(["node", "--replay", log.to_str().unwrap()])
-            .args(["--model", model_path.to_str().unwrap(), "--json"]),
-    );
-    let got: Vec<serde_json::Value> = String::from_utf8_lossy(&out.stdout)
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect();
+    let got = replay_json(&log, &model_path);
     assert_eq!(got.len(), want.len());
     for (g, (t_us, foot, tc)) in got.iter().zip(&want) {
         assert_eq!(g["t_us"], *t_us);
@@ -158,15 +163,7 @@ fn the_firmware_examples_log_is_a_run_the_node_decides() {
             ])
             .args(["--", "--steps", "8", "--log", log.to_str().unwrap()]),
     );
-    let out = common::output_ok(
-        Command::new(env!("CARGO_BIN_EXE_presrs"))
-            .args(["node", "--replay", log.to_str().unwrap()])
-            .args(["--model", model_path.to_str().unwrap(), "--json"]),
-    );
-    let got: Vec<serde_json::Value> = String::from_utf8_lossy(&out.stdout)
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect();
+    let got = replay_json(&log, &model_path);
     assert_eq!(got.len(), 8, "{got:?}");
     let log_start_us = 1_700_000_000_000_000u64;
     for (k, g) in got.iter().enumerate() {
