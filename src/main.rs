@@ -7,6 +7,7 @@ use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 
 mod bench_node;
+mod capture_cmd;
 mod cli;
 mod controller_cmd;
 mod demo;
@@ -44,6 +45,9 @@ enum Cmd {
     Node(node_cmd::NodeArgs),
     /// The gait controller on a CAN interface: LegCommand out, gait switched per terrain.
     Controller(controller_cmd::ControllerArgs),
+    /// A training set from the robot's own runs: one image per step (the node's stance logic),
+    /// labelled, into DIR/<terrain>/ with a manifest.
+    Capture(capture_cmd::CaptureArgs),
     /// The simulated hopper and foot on a CAN interface, in real time.
     Sim(sim_cmd::SimArgs),
     /// Simulator, node and controller in one process on the in-process bus: the closed loop.
@@ -111,6 +115,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Cmd::Node(a) => node_cmd::run(a),
         Cmd::Controller(a) => controller_cmd::run(a),
         Cmd::Sim(a) => sim_cmd::run(a),
+        Cmd::Capture(a) => capture_cmd::run(a),
         Cmd::Demo(args) => demo::run(args),
         Cmd::BenchNode(args) => bench_node::run(args),
         Cmd::Train(a) => cli::train(&a),

@@ -21,8 +21,16 @@ use protocol::bus::BusSource;
 #[derive(clap::Args)]
 pub struct SimArgs {
     /// CAN interface (vcan0, can0). Must carry CAN FD (MTU 72): the tactile frames are FD.
-    #[arg(long)]
-    pub iface: String,
+    #[arg(long, required_unless_present = "log", conflicts_with = "log")]
+    pub iface: Option<String>,
+    /// No bus: write what the robot sends to this candump log (`candump -L` format), in
+    /// simulated time, as fast as it computes; needs --duration. The robot holds its gait.
+    #[arg(long, requires = "duration")]
+    pub log: Option<PathBuf>,
+    /// With --log: write the true terrain of every step as a labels CSV for `presrs capture
+    /// --labels` (start_s,end_s,terrain,foot in the log's timestamps).
+    #[arg(long, requires = "log")]
+    pub truth: Option<PathBuf>,
     /// Track file (TOML: diameter_m, [[segments]] terrain, length_m); default: a quarter each of
     /// wood, grass, clay and carpet on the paper's 2.8 m circle.
     #[arg(long)]
@@ -69,12 +77,19 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         sensor: a.foot.sensor,
         ..Default::default()
     };
+    if let Some(log) = &a.log {
+        return write_log(cfg, &a, log);
+    }
     let opts = RunOptions {
         speed: a.speed,
         duration_s: a.duration,
         seed: a.seed,
     };
-    let source = BusSource::Iface(a.iface.clone());
+    let source = BusSource::Iface(
+        a.iface
+            .clone()
+            .context("give --iface IFACE or --log FILE")?,
+    );
     let r = sim::service::run(cfg, &opts, source, &catalog, &signals.stop);
     // No gait table: the simulator scores the node, not the controller.
     let sum = lab::Summary::of(&r.steps, &Default::default());
@@ -96,5 +111,36 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         std::fs::write(p, serde_json::to_string_pretty(&r)?)
             .with_context(|| format!("writing --report {}", p.display()))?;
     }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `presrs sim --log`: the robot's frames to a candump log, and its truth to a labels CSV.
+fn write_log(cfg: SimConfig, a: &SimArgs, log: &std::path::Path) -> Result<ExitCode> {
+    use std::io::Write;
+    let duration_us = (a.duration.unwrap_or(0.0).max(0.0) * 1e6) as u64;
+    let file = std::fs::File::create(log).with_context(|| format!("--log {}", log.display()))?;
+    let mut w = std::io::BufWriter::new(file);
+    let mut err = None;
+    let mut frames = 0u64;
+    let steps = sim::runner::record(cfg, a.seed, duration_us, &mut |st| {
+        if err.is_none() {
+            frames += 1;
+            err = protocol::candump::write_record(&mut w, "can0", &st).err();
+        }
+    });
+    if let Some(e) = err.or_else(|| w.flush().err()) {
+        return Err(e).with_context(|| format!("writing --log {}", log.display()));
+    }
+    if let Some(p) = &a.truth {
+        let end = sim::runner::LOG_EPOCH_US + duration_us;
+        std::fs::write(p, sim::runner::truth_labels(&steps, end))
+            .with_context(|| format!("writing --truth {}", p.display()))?;
+    }
+    eprintln!(
+        "presrs sim: {:.1} s simulated, {} steps, {frames} frames written to {}",
+        duration_us as f64 * 1e-6,
+        steps.len(),
+        log.display()
+    );
     Ok(ExitCode::SUCCESS)
 }

@@ -34,6 +34,7 @@
 //! }
 //! ```
 
+pub mod capture;
 pub mod classifier;
 pub mod config;
 pub mod health;

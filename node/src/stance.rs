@@ -100,7 +100,11 @@ struct Foot {
     /// Single frame: the best candidate so far (|dt - sample| in µs) and its pixels.
     best_err: Option<u32>,
     best_rx_us: u64,
+    /// The best candidate's pixels (the first `best_len`), geometry and sample time.
     best: Vec<u16>,
+    best_len: usize,
+    best_shape: (u8, u8, u8),
+    best_ts: u32,
     /// Multi-frame: summed log-posteriors (one per class of the model) and frames used.
     sum_lp: Vec<f64>,
     used: u32,
@@ -123,6 +127,16 @@ struct Foot {
 }
 
 impl Foot {
+    /// Keeps `img` as the stance's candidate image.
+    fn keep(&mut self, img: &protocol::tactile::TactileImage, rx_us: u64) {
+        let n = img.len();
+        self.best[..n].copy_from_slice(img.pixels());
+        self.best_len = n;
+        self.best_shape = (img.rows, img.cols, img.bits);
+        self.best_ts = img.timestamp_us;
+        self.best_rx_us = rx_us;
+    }
+
     fn new(input: usize, rows: usize, cols: usize, classes: usize) -> Self {
         Self {
             raw: false,
@@ -135,6 +149,9 @@ impl Foot {
             best_err: None,
             best_rx_us: 0,
             best: vec![0; input],
+            best_len: input,
+            best_shape: (0, 0, 8),
+            best_ts: 0,
             sum_lp: vec![0.0; classes],
             used: 0,
             no_contact: false,
@@ -280,6 +297,31 @@ pub struct StancePipeline {
     wrong_size_now: Vec<bool>,
     /// Counters per stage.
     pub counters: Counters,
+    /// Capture mode: no model; every stance's sampled image is kept for [`Self::sample`].
+    capture: bool,
+}
+
+/// The image a step was decided on, as the node picked it: see [`StancePipeline::sample`].
+#[derive(Clone, Copy, Debug)]
+pub struct StanceSample<'a> {
+    /// The foot.
+    pub foot: u8,
+    /// The step's number (the TerrainClass's `step`).
+    pub step: u16,
+    /// Touchdown, the foot's clock (µs, wrapping).
+    pub touchdown_us: u32,
+    /// The image's sample time, the foot's clock.
+    pub sample_us: u32,
+    /// Receive time of the image's last segment, the bus's clock (a log's timestamps).
+    pub rx_us: u64,
+    /// Rows, columns and bits per pixel of the image.
+    pub rows: usize,
+    /// Columns.
+    pub cols: usize,
+    /// 8 or 16.
+    pub bits: u8,
+    /// Row-major pixels as received (not cropped or repaired).
+    pub pixels: &'a [u16],
 }
 
 impl StancePipeline {
@@ -294,10 +336,47 @@ impl StancePipeline {
             said_size: None,
             wrong_size_now: Vec::new(),
             counters: Counters::default(),
+            capture: false,
             cfg,
         };
         p.set_model(model);
         p
+    }
+
+    /// A pipeline without a model that picks every stance's image as the node would (the same
+    /// debounce, stance and sample-time rules), for `presrs capture`: after a step's
+    /// TerrainClass (always NoSample: there is no model), [`Self::sample`] gives its image.
+    /// Single-frame: `multi_frame` is ignored.
+    pub fn for_capture(mut cfg: NodeConfig) -> Self {
+        cfg.multi_frame = false;
+        let mut p = Self::new(cfg, None);
+        p.capture = true;
+        for f in &mut p.feet {
+            f.best = vec![0; protocol::tactile::MAX_PIXELS];
+        }
+        p
+    }
+
+    /// The image the foot's latest decided step was sampled from; `None` before its first
+    /// decision, while a step is open, or when the step had no image inside its stance. Valid
+    /// from the step's TerrainClass until the foot's next touchdown.
+    pub fn sample(&self, foot: u8) -> Option<StanceSample<'_>> {
+        let f = self.feet.get(foot as usize)?;
+        if !f.decided || f.best_err.is_none() {
+            return None;
+        }
+        let (rows, cols, bits) = f.best_shape;
+        Some(StanceSample {
+            foot,
+            step: f.step,
+            touchdown_us: f.touchdown_us,
+            sample_us: f.best_ts,
+            rx_us: f.best_rx_us,
+            rows: rows as usize,
+            cols: cols as usize,
+            bits,
+            pixels: &f.best[..f.best_len],
+        })
     }
 
     /// Installs a model (SIGHUP reload); sizes every buffer for it.
@@ -332,6 +411,7 @@ impl StancePipeline {
             }
             if f.best.len() != input {
                 f.best = vec![0; input];
+                f.best_len = input;
                 f.best_err = None;
             }
             if f.health.size() != (rows, cols) {
@@ -445,7 +525,6 @@ impl StancePipeline {
         self.settle(foot, ts, out);
         self.refitter.collect(&mut self.feet, &mut self.counters);
         let img = self.reassembler.last_image();
-        let sample_us = self.cfg.sample_ms * 1000;
         let [w0, w1] = [self.cfg.window_ms[0] * 1000, self.cfg.window_ms[1] * 1000];
         let multi = self.cfg.multi_frame;
         let f = &mut self.feet[foot as usize];
@@ -468,11 +547,14 @@ impl StancePipeline {
             // stance unless the edge was bounce, and then the next images are inside again.
             return;
         }
+        let (rows, cols) = (img.rows as usize, img.cols as usize);
         let Some(cls) = self.classifier.as_mut() else {
+            if self.capture {
+                self.pick_nearest(foot, dt, rx_us, out);
+            }
             return;
         };
         let m = cls.model();
-        let (rows, cols) = (img.rows as usize, img.cols as usize);
         let wrong =
             rows != m.input_rows || cols != m.input_cols || m.check_depth(img.bits).is_err();
         if let Some(w) = self.wrong_size_now.get_mut(foot as usize) {
@@ -497,8 +579,7 @@ impl StancePipeline {
         }
         if multi {
             if dt >= w0 && dt <= w1 {
-                f.best.copy_from_slice(img.pixels());
-                f.best_rx_us = rx_us;
+                f.keep(img, rx_us);
                 // The stance history learns from one frame per stance, not every frame.
                 let observe = f.used == 0;
                 let mut sum_lp = std::mem::take(&mut f.sum_lp);
@@ -529,11 +610,25 @@ impl StancePipeline {
             }
             return;
         }
+        self.pick_nearest(foot, dt, rx_us, out);
+    }
+
+    /// Single frame: keeps the latest image (`dt` after touchdown) if it is the nearest to the
+    /// sample time so far, and decides once no nearer one can come.
+    fn pick_nearest(
+        &mut self,
+        foot: u8,
+        dt: u32,
+        rx_us: u64,
+        out: &mut impl FnMut(u8, TerrainClass),
+    ) {
+        let sample_us = self.cfg.sample_ms * 1000;
+        let img = self.reassembler.last_image();
+        let f = &mut self.feet[foot as usize];
         let err = dt.abs_diff(sample_us);
         if f.best_err.is_none_or(|e| err < e) {
             f.best_err = Some(err);
-            f.best.copy_from_slice(img.pixels());
-            f.best_rx_us = rx_us;
+            f.keep(img, rx_us);
         }
         // Decide as soon as the next frame can only be further from the sample time: at or past
         // it, or (with a known frame period) less than half a period before it. Waiting for the
@@ -696,7 +791,7 @@ fn classify(
     refitter: &mut Refitter,
     counters: &mut Counters,
 ) -> Option<(crate::classifier::Decision, bool)> {
-    cls.prepare(&f.best, rows, cols).ok()?;
+    cls.prepare(&f.best[..f.best_len], rows, cols).ok()?;
     // Measured once here: the decisions below skip the check.
     if !cls.in_contact() {
         return Some((crate::classifier::Decision::NO_CONTACT, false));

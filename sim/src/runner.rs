@@ -570,6 +570,68 @@ fn bounce(edges: &mut Vec<(u64, bool)>, t: u64, state: bool, rng: &mut impl Rng)
     }
 }
 
+/// The log's clock at simulated time 0 for [`record`]: 2023-11-14, a plausible candump time.
+pub const LOG_EPOCH_US: u64 = 1_700_000_000_000_000;
+
+/// Runs the robot alone (no controller: each leg holds its gait) for `duration_us` of simulated
+/// time and hands every frame it sends to `emit`, stamped on a log clock starting at
+/// [`LOG_EPOCH_US`], as `candump -L` would have recorded it. Returns the ground truth of every
+/// step, touchdown times on the same log clock.
+pub fn record(
+    cfg: SimConfig,
+    seed: u64,
+    duration_us: u64,
+    emit: &mut dyn FnMut(protocol::Stamped),
+) -> Vec<StepTruth> {
+    let mut robot = SimRobot::new(cfg, seed);
+    let mut t = 0;
+    while t < duration_us {
+        t = (t + 1000).min(duration_us);
+        robot.advance_to(t, &mut |frame| {
+            emit(protocol::Stamped {
+                t_us: LOG_EPOCH_US + t,
+                frame,
+            })
+        });
+    }
+    robot
+        .steps
+        .iter()
+        .map(|s| StepTruth {
+            touchdown_us: LOG_EPOCH_US + s.touchdown_us,
+            ..*s
+        })
+        .collect()
+}
+
+/// Labels (`start_s,end_s,terrain,foot` lines, the format `presrs capture --labels` reads) for
+/// the steps of a [`record`]: one range per run of steps on one terrain, from the first
+/// touchdown to the next terrain's first touchdown (the last to `end_us`).
+pub fn truth_labels(steps: &[StepTruth], end_us: u64) -> String {
+    let mut out = String::from("start_s,end_s,terrain,foot\n");
+    let secs = |us: u64| format!("{}.{:06}", us / 1_000_000, us % 1_000_000);
+    let feet = steps.iter().map(|s| s.foot).max().map_or(0, |m| m + 1);
+    for foot in 0..feet {
+        let mine: Vec<&StepTruth> = steps.iter().filter(|s| s.foot == foot).collect();
+        let mut i = 0;
+        while i < mine.len() {
+            let mut j = i;
+            while j + 1 < mine.len() && mine[j + 1].terrain == mine[i].terrain {
+                j += 1;
+            }
+            let end = mine.get(j + 1).map_or(end_us, |s| s.touchdown_us);
+            out += &format!(
+                "{},{},{},{foot}\n",
+                secs(mine[i].touchdown_us),
+                secs(end),
+                mine[i].terrain.name()
+            );
+            i = j + 1;
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -1,0 +1,558 @@
+//! A training set from the robot's own runs (`presrs capture`).
+//!
+//! [`Capture`] runs the node's own stance logic ([`StancePipeline::for_capture`]: debounce, the
+//! stance, the image nearest the sample time) on a bus or a candump log, fills dead sensor lines
+//! as the node's repair filter does ([`LineHealth`], learned over the stances), labels each step
+//! with a terrain ([`Labelling`]) and hands out one [`CapturedStep`] per step. [`CaptureSet`]
+//! writes them in the layout `presrs train` reads, `DIR/<terrain>/<name>.pgm`, with a
+//! `DIR/manifest.csv` that also keeps a second capture of the same log from adding anything.
+
+use std::collections::HashSet;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use protocol::Stamped;
+use protocol::terrain::{Terrain, TerrainCatalog};
+
+use crate::classifier::PressureImage;
+use crate::classifier::dataset::write_pgm;
+use crate::config::{NodeConfig, RepairMode};
+use crate::health::LineHealth;
+use crate::stance::StancePipeline;
+
+/// Errors of a capture: labels, the output folder, a write.
+#[derive(Debug, thiserror::Error)]
+pub enum CaptureError {
+    /// A labels file line that cannot be used.
+    #[error("{path} line {line}: {reason}")]
+    Labels {
+        /// The labels file.
+        path: String,
+        /// 1-based line.
+        line: usize,
+        /// What is wrong and the fix.
+        reason: String,
+    },
+    /// A file of the capture cannot be read or written.
+    #[error("cannot {what} {}: {source}{hint}", path.display())]
+    Io {
+        /// What was being done.
+        what: &'static str,
+        /// The file or folder.
+        path: PathBuf,
+        /// What the OS said.
+        source: std::io::Error,
+        /// The likely fix.
+        hint: &'static str,
+    },
+    /// The manifest of an earlier capture is not one this version wrote.
+    #[error("{} line {line}: not a capture manifest line ({reason}); move it away or fix it", path.display())]
+    Manifest {
+        /// The manifest.
+        path: PathBuf,
+        /// 1-based line.
+        line: usize,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+fn io(what: &'static str, path: &Path, source: std::io::Error) -> CaptureError {
+    let hint = match source.raw_os_error() {
+        Some(28) => " (the disk is full: free space; what was written before is kept)",
+        Some(13) | Some(30) => " (not writable: pick another --out)",
+        Some(2) => " (its folder does not exist)",
+        _ => "",
+    };
+    CaptureError::Io {
+        what,
+        path: path.to_path_buf(),
+        source,
+        hint,
+    }
+}
+
+/// One range of a labels file: steps whose touchdown and sample both fall in `[start, end)`
+/// (the log's clock, µs) on `foot` (any foot when `None`) are `terrain`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LabelRange {
+    /// Start, µs on the log's clock.
+    pub start_us: u64,
+    /// End (exclusive).
+    pub end_us: u64,
+    /// The terrain.
+    pub terrain: Terrain,
+    /// The foot it applies to; all feet when `None`.
+    pub foot: Option<u8>,
+}
+
+/// How steps get their terrain.
+#[derive(Clone, Debug)]
+pub enum Labelling {
+    /// Every step is this terrain (`--label`).
+    All(Terrain),
+    /// Time ranges (`--labels`), for a run that crosses terrains.
+    Ranges(Vec<LabelRange>),
+}
+
+/// Why a step was not written.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Skip {
+    /// No image was sampled inside the stance (lost, or none sent).
+    NoImage,
+    /// The sampled image reads zero everywhere: the array was not read.
+    Blank,
+    /// Outside every labelled range.
+    Unlabelled,
+    /// Touchdown and sample in different ranges (or one in none).
+    SpansLabels,
+}
+
+/// What a capture did with the steps it saw.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct CaptureCounts {
+    /// Steps decided (one per stance).
+    pub steps: u64,
+    /// Steps handed out as [`CapturedStep`]s.
+    pub captured: u64,
+    /// Skipped: no image inside the stance.
+    pub no_image: u64,
+    /// Skipped: blank image.
+    pub blank: u64,
+    /// Skipped: outside every labelled range.
+    pub unlabelled: u64,
+    /// Skipped: spanning two ranges.
+    pub spans_labels: u64,
+}
+
+/// One step's image, labelled, ready to be written.
+#[derive(Clone, Debug)]
+pub struct CapturedStep {
+    /// The foot.
+    pub foot: u8,
+    /// The step number (the node's TerrainClass `step`).
+    pub step: u16,
+    /// Its terrain.
+    pub terrain: Terrain,
+    /// Touchdown on the log's clock (µs): the image's receipt less its time in the stance.
+    pub touchdown_us: u64,
+    /// The image's receipt on the log's clock (µs).
+    pub sample_us: u64,
+    /// Sum of the image's pixels (after the repair).
+    pub load_sum: u64,
+    /// The foot's learned damage (eq. 6) when it was taken, percent.
+    pub damage_pct: f64,
+    /// Lines the repair filter filled in this image.
+    pub repaired_lines: usize,
+    /// The image (repaired unless the config's `repair = "none"`).
+    pub image: PressureImage,
+}
+
+/// Parses a labels CSV: `start_s,end_s,terrain[,foot]` per line, in the log's own timestamps
+/// (seconds, as `candump -L` prints them). A header line, blank lines and `#` comments are
+/// allowed. Terrains must be in `catalog`; ranges of one foot must not overlap.
+pub fn parse_labels(
+    text: &str,
+    origin: &str,
+    catalog: &TerrainCatalog,
+) -> Result<Vec<LabelRange>, CaptureError> {
+    let bad = |line: usize, reason: String| CaptureError::Labels {
+        path: origin.to_string(),
+        line,
+        reason,
+    };
+    let mut out: Vec<(usize, LabelRange)> = Vec::new();
+    for (i, raw) in text.lines().enumerate() {
+        let line = i + 1;
+        let l = raw.trim();
+        if l.is_empty() || l.starts_with('#') || (line == 1 && l.starts_with("start")) {
+            continue;
+        }
+        let f: Vec<&str> = l.split(',').map(str::trim).collect();
+        if !(3..=4).contains(&f.len()) {
+            return Err(bad(
+                line,
+                format!(
+                    "`{l}` has {} fields; want start_s,end_s,terrain[,foot]",
+                    f.len()
+                ),
+            ));
+        }
+        let secs = |s: &str, what: &str| -> Result<u64, CaptureError> {
+            match s.parse::<f64>() {
+                Ok(v) if v.is_finite() && v >= 0.0 => Ok((v * 1e6).round() as u64),
+                _ => Err(bad(
+                    line,
+                    format!(
+                        "{what} `{s}` is not a time in seconds (as candump -L prints it, e.g. 1700000000.250000)"
+                    ),
+                )),
+            }
+        };
+        let (start_us, end_us) = (secs(f[0], "start_s")?, secs(f[1], "end_s")?);
+        if end_us <= start_us {
+            return Err(bad(
+                line,
+                format!("end_s {} is not after start_s {}", f[1], f[0]),
+            ));
+        }
+        let terrain = catalog
+            .by_name(f[2])
+            .filter(|t| !t.is_unknown())
+            .ok_or_else(|| {
+                let known: Vec<&str> = catalog.iter().map(|t| t.name()).collect();
+                bad(
+                    line,
+                    format!(
+                        "`{}` is not a terrain of the catalog (known: {}); add it to a terrains file (--terrains)",
+                        f[2],
+                        known.join(", ")
+                    ),
+                )
+            })?;
+        let foot = match f.get(3) {
+            None | Some(&"") => None,
+            Some(s) => Some(
+                s.parse::<u8>()
+                    .ok()
+                    .filter(|&n| n < protocol::ids::MAX_FEET)
+                    .ok_or_else(|| bad(line, format!("foot `{s}` is not 0..7")))?,
+            ),
+        };
+        let r = LabelRange {
+            start_us,
+            end_us,
+            terrain,
+            foot,
+        };
+        if let Some((other, _)) = out.iter().find(|(_, o)| {
+            (o.foot.is_none() || r.foot.is_none() || o.foot == r.foot)
+                && o.start_us < r.end_us
+                && r.start_us < o.end_us
+        }) {
+            return Err(bad(
+                line,
+                format!("overlaps the range of line {other}: a step there would have two terrains"),
+            ));
+        }
+        out.push((line, r));
+    }
+    if out.is_empty() {
+        return Err(bad(
+            0,
+            "no ranges: want lines start_s,end_s,terrain[,foot]".into(),
+        ));
+    }
+    Ok(out.into_iter().map(|(_, r)| r).collect())
+}
+
+impl Labelling {
+    /// The terrain of a step on `foot` from `t0` (touchdown) to `t1` (sample), log clock.
+    pub fn label(&self, foot: u8, t0: u64, t1: u64) -> Result<Terrain, Skip> {
+        let ranges = match self {
+            Labelling::All(t) => return Ok(*t),
+            Labelling::Ranges(r) => r,
+        };
+        let find = |t: u64| {
+            ranges
+                .iter()
+                .position(|r| r.foot.is_none_or(|f| f == foot) && r.start_us <= t && t < r.end_us)
+        };
+        match (find(t0), find(t1)) {
+            (Some(a), Some(b)) if a == b => Ok(ranges[a].terrain),
+            (None, None) => Err(Skip::Unlabelled),
+            _ => Err(Skip::SpansLabels),
+        }
+    }
+}
+
+/// The node's stance logic and repair filter, turning frames into labelled step images.
+pub struct Capture {
+    pipeline: StancePipeline,
+    repair: RepairMode,
+    dead_after: u32,
+    health: Vec<LineHealth>,
+    labelling: Labelling,
+    counts: CaptureCounts,
+    decided: Vec<u8>,
+}
+
+impl Capture {
+    /// A capture with the node's config `cfg` (debounce, sample time, repair, feet, ids).
+    pub fn new(cfg: NodeConfig, labelling: Labelling) -> Self {
+        Self {
+            health: (0..cfg.feet).map(|_| LineHealth::new(0, 0)).collect(),
+            repair: cfg.repair,
+            dead_after: cfg.dead_after_stances,
+            pipeline: StancePipeline::for_capture(cfg),
+            labelling,
+            counts: CaptureCounts::default(),
+            decided: Vec::new(),
+        }
+    }
+
+    /// Counts so far.
+    pub fn counts(&self) -> CaptureCounts {
+        self.counts
+    }
+
+    /// The stance pipeline's counters (frames, images, steps).
+    pub fn pipeline(&self) -> &StancePipeline {
+        &self.pipeline
+    }
+
+    /// One received (or logged) frame; a step it ends goes to `out`.
+    pub fn process(&mut self, st: &Stamped, out: &mut impl FnMut(CapturedStep)) {
+        let decided = &mut self.decided;
+        self.pipeline
+            .on_frame(st, &mut |foot, _| decided.push(foot));
+        self.take(out);
+    }
+
+    /// The receiver's clock moved on to `now_us` without a frame: decides steps whose nearer
+    /// images can no longer come (as the node does).
+    pub fn tick(&mut self, now_us: u64, out: &mut impl FnMut(CapturedStep)) {
+        let decided = &mut self.decided;
+        self.pipeline
+            .tick(now_us, &mut |foot, _| decided.push(foot));
+        self.take(out);
+    }
+
+    fn take(&mut self, out: &mut impl FnMut(CapturedStep)) {
+        for i in 0..self.decided.len() {
+            let foot = self.decided[i];
+            self.counts.steps += 1;
+            match self.step(foot) {
+                Ok(c) => {
+                    self.counts.captured += 1;
+                    out(c);
+                }
+                Err(Skip::NoImage) => self.counts.no_image += 1,
+                Err(Skip::Blank) => self.counts.blank += 1,
+                Err(Skip::Unlabelled) => self.counts.unlabelled += 1,
+                Err(Skip::SpansLabels) => self.counts.spans_labels += 1,
+            }
+        }
+        self.decided.clear();
+    }
+
+    fn step(&mut self, foot: u8) -> Result<CapturedStep, Skip> {
+        let s = self.pipeline.sample(foot).ok_or(Skip::NoImage)?;
+        if s.pixels.iter().all(|&p| p == 0) {
+            return Err(Skip::Blank);
+        }
+        let in_stance = s.sample_us.wrapping_sub(s.touchdown_us) as u64;
+        let touchdown_us = s.rx_us.saturating_sub(in_stance);
+        let terrain = self.labelling.label(foot, touchdown_us, s.rx_us)?;
+        let mut image = PressureImage::new(s.rows, s.cols, s.bits, s.pixels.to_vec());
+        let h = &mut self.health[foot as usize];
+        if h.size() != (s.rows, s.cols) {
+            *h = LineHealth::new(s.rows, s.cols);
+        }
+        let repaired_lines = match self.repair {
+            RepairMode::None => 0,
+            RepairMode::PerImage => {
+                let (r, c) = crate::classifier::repair::repair(&mut image);
+                r + c
+            }
+            RepairMode::History => {
+                h.observe(&image.pixels, self.dead_after);
+                h.repair(&mut image.pixels)
+            }
+        };
+        Ok(CapturedStep {
+            foot,
+            step: s.step,
+            terrain,
+            touchdown_us,
+            sample_us: s.rx_us,
+            load_sum: image.pixels.iter().map(|&p| p as u64).sum(),
+            damage_pct: h.damage_pct(),
+            repaired_lines,
+            image,
+        })
+    }
+}
+
+/// The manifest's header line.
+pub const MANIFEST_HEADER: &str =
+    "file,terrain,foot,step,touchdown_s,sample_s,load_sum,damage_pct,source";
+
+/// A training-set folder being filled: `DIR/<terrain>/<name>.pgm` plus `DIR/manifest.csv`.
+/// Steps already in the manifest (same source, foot, step and touchdown) are not added again.
+pub struct CaptureSet {
+    dir: PathBuf,
+    manifest_path: PathBuf,
+    manifest: std::fs::File,
+    keys: HashSet<(String, u8, u16, u64)>,
+    /// Images written by this set.
+    pub written: u64,
+    /// Steps already in the manifest.
+    pub duplicates: u64,
+}
+
+impl CaptureSet {
+    /// Opens (creating) `dir` and its manifest; reads the steps it already holds.
+    pub fn open(dir: &Path) -> Result<Self, CaptureError> {
+        std::fs::create_dir_all(dir).map_err(|e| io("create the folder", dir, e))?;
+        let manifest_path = dir.join("manifest.csv");
+        let mut keys = HashSet::new();
+        let existing = match std::fs::read_to_string(&manifest_path) {
+            Ok(t) => t,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => String::new(),
+            Err(e) => return Err(io("read", &manifest_path, e)),
+        };
+        for (i, l) in existing.lines().enumerate() {
+            if l.is_empty() || l == MANIFEST_HEADER {
+                continue;
+            }
+            let bad = |reason: &str| CaptureError::Manifest {
+                path: manifest_path.clone(),
+                line: i + 1,
+                reason: reason.into(),
+            };
+            let f: Vec<&str> = l.split(',').collect();
+            if f.len() != 9 {
+                return Err(bad("want 9 fields"));
+            }
+            let foot = f[2].parse().map_err(|_| bad("foot"))?;
+            let step = f[3].parse().map_err(|_| bad("step"))?;
+            let td = secs_to_us(f[4]).ok_or_else(|| bad("touchdown_s"))?;
+            keys.insert((f[8].to_string(), foot, step, td));
+        }
+        let mut manifest = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&manifest_path)
+            .map_err(|e| io("open", &manifest_path, e))?;
+        if existing.is_empty() {
+            writeln!(manifest, "{MANIFEST_HEADER}").map_err(|e| io("write", &manifest_path, e))?;
+        }
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            manifest_path,
+            manifest,
+            keys,
+            written: 0,
+            duplicates: 0,
+        })
+    }
+
+    /// Writes one step's image and its manifest line; `false` when the manifest has it already.
+    /// The image is written to a temporary name and renamed, and the manifest line appended
+    /// after it, so a failure (a full disk) leaves every earlier image and line intact.
+    pub fn add(&mut self, c: &CapturedStep, source: &str) -> Result<bool, CaptureError> {
+        // Commas would break the manifest's columns.
+        let source = source.replace([',', '\n'], "_");
+        let td = format_secs(c.touchdown_us);
+        let key = (source.clone(), c.foot, c.step, secs_to_us(&td).unwrap_or(0));
+        if self.keys.contains(&key) {
+            self.duplicates += 1;
+            return Ok(false);
+        }
+        let class_dir = self.dir.join(c.terrain.name());
+        std::fs::create_dir_all(&class_dir).map_err(|e| io("create the folder", &class_dir, e))?;
+        let stem: String = Path::new(&source)
+            .file_stem()
+            .map(|s| s.to_string_lossy().to_string())
+            .unwrap_or_else(|| "run".into())
+            .chars()
+            .map(|ch| {
+                if ch.is_ascii_alphanumeric() || ch == '-' {
+                    ch
+                } else {
+                    '_'
+                }
+            })
+            .collect();
+        let name = format!("{stem}_f{}_s{:05}_{}.pgm", c.foot, c.step, c.touchdown_us);
+        let path = class_dir.join(&name);
+        let tmp = class_dir.join(format!(".{name}.tmp"));
+        if let Err(e) = write_pgm(&c.image, &tmp) {
+            let _ = std::fs::remove_file(&tmp);
+            return Err(io("write", &path, e));
+        }
+        std::fs::rename(&tmp, &path).map_err(|e| io("write", &path, e))?;
+        let line = format!(
+            "{}/{name},{},{},{},{td},{},{},{:.1},{source}\n",
+            c.terrain.name(),
+            c.terrain.name(),
+            c.foot,
+            c.step,
+            format_secs(c.sample_us),
+            c.load_sum,
+            c.damage_pct,
+        );
+        self.manifest
+            .write_all(line.as_bytes())
+            .and_then(|_| self.manifest.flush())
+            .map_err(|e| io("append to", &self.manifest_path, e))?;
+        self.keys.insert(key);
+        self.written += 1;
+        Ok(true)
+    }
+
+    /// Steps the folder's manifest holds (earlier captures included).
+    pub fn len(&self) -> usize {
+        self.keys.len()
+    }
+
+    /// The manifest holds no step.
+    pub fn is_empty(&self) -> bool {
+        self.keys.is_empty()
+    }
+}
+
+/// µs as candump's seconds (6 decimals).
+fn format_secs(us: u64) -> String {
+    format!("{}.{:06}", us / 1_000_000, us % 1_000_000)
+}
+
+fn secs_to_us(s: &str) -> Option<u64> {
+    let (a, b) = s.split_once('.').unwrap_or((s, "0"));
+    let frac: String = b.chars().chain(std::iter::repeat('0')).take(6).collect();
+    Some(a.parse::<u64>().ok()? * 1_000_000 + frac.parse::<u64>().ok()?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn labels_parse_and_name_the_bad_line() {
+        let cat = TerrainCatalog::paper();
+        let text = "start_s,end_s,terrain,foot\n# wood first\n10.0,20.5,wood\n20.5,30,clay,0\n";
+        let r = parse_labels(text, "labels.csv", &cat).unwrap();
+        assert_eq!(r.len(), 2);
+        assert_eq!((r[0].start_us, r[0].end_us), (10_000_000, 20_500_000));
+        assert_eq!((r[1].terrain, r[1].foot), (Terrain::CLAY, Some(0)));
+        let l = Labelling::Ranges(r);
+        assert_eq!(l.label(0, 11_000_000, 11_070_000), Ok(Terrain::WOOD));
+        assert_eq!(l.label(0, 20_450_000, 20_520_000), Err(Skip::SpansLabels));
+        assert_eq!(l.label(0, 31_000_000, 31_070_000), Err(Skip::Unlabelled));
+        assert_eq!(l.label(1, 25_000_000, 25_070_000), Err(Skip::Unlabelled));
+        for (text, want) in [
+            ("1,2,moon\n", "line 1: `moon` is not a terrain"),
+            ("1,2,wood\n3,2,clay\n", "line 2: end_s 2 is not after"),
+            ("1,2\n", "line 1: `1,2` has 2 fields"),
+            (
+                "1,3,wood\n2,4,clay\n",
+                "line 2: overlaps the range of line 1",
+            ),
+            ("x,3,wood\n", "start_s `x` is not a time"),
+            ("1,3,wood,9\n", "foot `9` is not 0..7"),
+        ] {
+            let e = parse_labels(text, "labels.csv", &cat)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(want) && e.starts_with("labels.csv"), "{e}");
+        }
+    }
+
+    #[test]
+    fn seconds_round_trip() {
+        for us in [0, 1, 1_700_000_000_070_680, 999_999] {
+            assert_eq!(secs_to_us(&format_secs(us)), Some(us));
+        }
+    }
+}

@@ -1,0 +1,196 @@
+//! `presrs capture`: a training set from the robot's own runs. The work is
+//! [`node::capture`]; this module reads the arguments, the log or the bus, and prints the summary.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Duration;
+
+use anyhow::{Context, Result, bail};
+use node::capture::{Capture, CaptureError, CaptureSet, CapturedStep, Labelling, parse_labels};
+use protocol::bus::CanBus;
+
+use crate::runtime::Signals;
+
+#[derive(clap::Args)]
+pub struct CaptureArgs {
+    /// A candump log (`candump -L`) of the robot's run.
+    #[arg(long, required_unless_present = "iface", conflicts_with = "iface")]
+    pub replay: Option<PathBuf>,
+    /// Capture live from a CAN interface until SIGINT/SIGTERM.
+    #[arg(long)]
+    pub iface: Option<String>,
+    /// Every step is this terrain (a name from the catalog).
+    #[arg(long, required_unless_present = "labels", conflicts_with = "labels")]
+    pub label: Option<String>,
+    /// A CSV of `start_s,end_s,terrain[,foot]` in the log's timestamps, for a run that crosses
+    /// terrains; steps outside every range or spanning two are skipped and counted.
+    #[arg(long)]
+    pub labels: Option<PathBuf>,
+    /// The training-set folder: `DIR/<terrain>/*.pgm` (what `presrs train` reads) and
+    /// `DIR/manifest.csv`. Capturing the same log again adds nothing.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Node config (TOML): debounce, sample time, repair, feet, CAN ids, terrains.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// The source name the manifest keys steps by (default: the log's file name, or
+    /// `IFACE-<unix time>` live).
+    #[arg(long)]
+    pub source: Option<String>,
+    /// Print the summary as one JSON object.
+    #[arg(long)]
+    pub json: bool,
+    /// Overrides the config's `terrains` key.
+    #[command(flatten)]
+    pub terrains: crate::cli::TerrainsArg,
+}
+
+pub fn run(a: CaptureArgs) -> Result<ExitCode> {
+    let mut cfg = crate::cli::load_node_config(a.config.as_deref())?;
+    if a.terrains.terrains.is_some() {
+        cfg.terrains = a.terrains.terrains.clone();
+    }
+    let catalog = cfg.catalog()?;
+    let labelling = match (&a.label, &a.labels) {
+        (Some(name), _) => Labelling::All(
+            catalog
+                .by_name(name)
+                .filter(|t| !t.is_unknown())
+                .with_context(|| {
+                    let known: Vec<&str> = catalog.iter().map(|t| t.name()).collect();
+                    format!(
+                        "--label {name}: not a terrain of the catalog (known: {}); add it with --terrains FILE",
+                        known.join(", ")
+                    )
+                })?,
+        ),
+        (None, Some(p)) => {
+            let text = std::fs::read_to_string(p)
+                .with_context(|| format!("--labels {}: cannot read it", p.display()))?;
+            Labelling::Ranges(parse_labels(&text, &p.display().to_string(), &catalog)?)
+        }
+        (None, None) => bail!("give --label TERRAIN or --labels FILE.csv"),
+    };
+    let mut capture = Capture::new(cfg, labelling);
+    let mut sink = Sink {
+        set: CaptureSet::open(&a.out)?,
+        source: String::new(),
+        per_terrain: BTreeMap::new(),
+        failed: None,
+    };
+    if let Some(log) = &a.replay {
+        sink.source = a.source.clone().unwrap_or_else(|| {
+            log.file_name()
+                .map_or("log".into(), |n| n.to_string_lossy().to_string())
+        });
+        let file =
+            std::fs::File::open(log).with_context(|| format!("opening {}", log.display()))?;
+        let records = protocol::candump::read_log(std::io::BufReader::new(file))
+            .with_context(|| format!("reading {}", log.display()))?;
+        for r in &records {
+            // The log's clock ticks the capture before each record, as a live clock would.
+            capture.tick(r.stamped.t_us, &mut |c| sink.keep(c));
+            capture.process(&r.stamped, &mut |c| sink.keep(c));
+            if sink.failed.is_some() {
+                break;
+            }
+        }
+    } else if let Some(iface) = &a.iface {
+        let signals = Signals::install()?;
+        let start = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_secs());
+        sink.source = a
+            .source
+            .clone()
+            .unwrap_or_else(|| format!("{iface}-{start}"));
+        let mut bus = protocol::bus::SocketCanBus::open(iface)?;
+        tracing::info!(%iface, out = %a.out.display(), "capturing until SIGINT/SIGTERM");
+        let mut last_t = 0;
+        while !signals.stopping() && sink.failed.is_none() {
+            match bus.recv(Duration::from_millis(50))? {
+                Some(st) => {
+                    last_t = st.t_us;
+                    capture.tick(st.t_us, &mut |c| sink.keep(c));
+                    capture.process(&st, &mut |c| sink.keep(c));
+                }
+                None => capture.tick(last_t, &mut |c| sink.keep(c)),
+            }
+        }
+    } else {
+        bail!("give --replay FILE.log or --iface IFACE");
+    }
+    let Sink {
+        set,
+        source,
+        per_terrain,
+        failed,
+    } = sink;
+    let c = capture.counts();
+    let pc = capture.pipeline().counters;
+    if a.json {
+        println!(
+            "{}",
+            serde_json::json!({
+                "source": source, "out": a.out, "frames": pc.frames, "images": pc.images,
+                "steps": c.steps, "written": set.written, "duplicates": set.duplicates,
+                "no_image": c.no_image, "blank": c.blank, "unlabelled": c.unlabelled,
+                "spans_labels": c.spans_labels, "per_terrain": per_terrain,
+                "set_total": set.len(), "error": failed.as_ref().map(|e| e.to_string()),
+            })
+        );
+    } else {
+        let terrains: Vec<String> = per_terrain
+            .iter()
+            .map(|(t, n)| format!("{t} {n}"))
+            .collect();
+        eprintln!(
+            "capture of {source}: {} steps, {} written ({}), {} already in the set; skipped: {} without an image in the stance, {} blank, {} outside every label, {} spanning two labels; {} holds {} steps",
+            c.steps,
+            set.written,
+            if terrains.is_empty() {
+                "none".into()
+            } else {
+                terrains.join(", ")
+            },
+            set.duplicates,
+            c.no_image,
+            c.blank,
+            c.unlabelled,
+            c.spans_labels,
+            a.out.display(),
+            set.len()
+        );
+    }
+    if let Some(e) = failed {
+        return Err(e).context(format!("capture stopped after {} images", set.written));
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Where captured steps go: the set, counted per terrain; the first write error stops it.
+struct Sink {
+    set: CaptureSet,
+    source: String,
+    per_terrain: BTreeMap<String, u64>,
+    failed: Option<CaptureError>,
+}
+
+impl Sink {
+    fn keep(&mut self, c: CapturedStep) {
+        if self.failed.is_some() {
+            return;
+        }
+        match self.set.add(&c, &self.source) {
+            Ok(true) => {
+                *self
+                    .per_terrain
+                    .entry(c.terrain.name().to_string())
+                    .or_default() += 1
+            }
+            Ok(false) => {}
+            Err(e) => self.failed = Some(e),
+        }
+    }
+}

@@ -1,0 +1,246 @@
+//! Issue 17 §1 and §4: `presrs capture` builds a training set from the robot's own logs, and
+//! the whole path a lab walks (record per terrain, capture, train, deploy, classify a fresh
+//! mixed run) works from the CLI. The simulator stands in for the robot (`presrs sim --log`);
+//! the vcan suite walks the same path over real SocketCAN with candump.
+
+mod common;
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn presrs() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_presrs"))
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("presrs-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+fn json(out: &std::process::Output) -> serde_json::Value {
+    serde_json::from_slice(&out.stdout)
+        .unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(&out.stdout)))
+}
+
+/// A one-terrain track of the paper's circle.
+fn track(dir: &Path, terrain: &str) -> PathBuf {
+    let p = dir.join(format!("{terrain}.toml"));
+    let text = format!("diameter_m = 2.8\n[[segments]]\nterrain = \"{terrain}\"\nlength_m = 8.8\n");
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+fn sim_log(dir: &Path, name: &str, track: Option<&Path>, secs: u32, seed: u64) -> PathBuf {
+    let log = dir.join(format!("{name}.log"));
+    let mut cmd = presrs();
+    cmd.args(["sim", "--log", s(&log), "--duration", &secs.to_string()])
+        .args(["--seed", &seed.to_string()]);
+    if let Some(t) = track {
+        cmd.args(["--track", s(t)]);
+    } else {
+        cmd.args(["--truth", s(&dir.join(format!("{name}.csv")))]);
+    }
+    common::output_ok(&mut cmd);
+    log
+}
+
+/// (foot, step) -> terrain name from a JSON-lines stream.
+fn by_step(lines: &str) -> BTreeMap<(u64, u64), String> {
+    lines
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
+        .map(|v| {
+            let k = (v["foot"].as_u64().unwrap(), v["step"].as_u64().unwrap());
+            (k, v["terrain"].as_str().unwrap().to_string())
+        })
+        .collect()
+}
+
+#[test]
+fn a_lab_records_captures_trains_and_classifies_a_fresh_run() {
+    let dir = tmp("capture-path");
+    let set = dir.join("set");
+    let terrains = ["wood", "grass", "clay", "carpet"];
+    let mut first = BTreeMap::new();
+    for (i, t) in terrains.iter().enumerate() {
+        let log = sim_log(&dir, t, Some(&track(&dir, t)), 30, 10 + i as u64);
+        let out = common::output_ok(
+            presrs()
+                .args(["capture", "--replay", s(&log), "--label", t])
+                .args(["--out", s(&set), "--json"]),
+        );
+        let j = json(&out);
+        assert!(j["written"].as_u64().unwrap() >= 60, "{t}: {j}");
+        assert_eq!(
+            j["written"], j["steps"],
+            "{t}: every step has its image: {j}"
+        );
+        assert_eq!(j["per_terrain"][t], j["written"]);
+        first.insert(t.to_string(), (log, j["written"].as_u64().unwrap()));
+    }
+    // The manifest lists every image once, and every listed file exists with its terrain.
+    let manifest = std::fs::read_to_string(set.join("manifest.csv")).unwrap();
+    let rows: Vec<&str> = manifest.lines().skip(1).collect();
+    let total: u64 = first.values().map(|(_, n)| n).sum();
+    assert_eq!(rows.len() as u64, total);
+    for r in &rows {
+        let f: Vec<&str> = r.split(',').collect();
+        assert_eq!(f.len(), 9, "{r}");
+        assert!(f[0].starts_with(&format!("{}/", f[1])), "{r}");
+        assert!(set.join(f[0]).is_file(), "{r}");
+        assert!(f[6].parse::<u64>().unwrap() > 0, "load sum: {r}");
+    }
+    // Capturing the same log again adds nothing.
+    let (wood_log, _) = &first["wood"];
+    let again = json(&common::output_ok(
+        presrs()
+            .args(["capture", "--replay", s(wood_log), "--label", "wood"])
+            .args(["--out", s(&set), "--json"]),
+    ));
+    assert_eq!(again["written"], 0);
+    assert_eq!(again["duplicates"], again["steps"]);
+    assert_eq!(again["set_total"].as_u64().unwrap(), total);
+
+    // Train on the captured set; the node classifies a fresh run over all four terrains.
+    let model = dir.join("model.json");
+    common::output_ok(
+        presrs()
+            .args(["train", "--data", s(&set), "--out", s(&model)])
+            .args(["--per-class", "60", "--train", "40", "--normalize-load"])
+            .args(["--crop", "0,3,6,0"]),
+    );
+    let mixed = sim_log(&dir, "mixed", None, 40, 99);
+    let node = common::output_ok(presrs().args([
+        "node",
+        "--replay",
+        s(&mixed),
+        "--model",
+        s(&model),
+        "--json",
+    ]));
+    let said = by_step(&String::from_utf8_lossy(&node.stdout));
+    // The truth per step: capture with the simulator's labels (a second, labelled set).
+    let truth_set = dir.join("truth-set");
+    let labelled = json(&common::output_ok(
+        presrs()
+            .args([
+                "capture",
+                "--replay",
+                s(&mixed),
+                "--labels",
+                s(&dir.join("mixed.csv")),
+            ])
+            .args(["--out", s(&truth_set), "--json"]),
+    ));
+    assert_eq!(labelled["unlabelled"], 0);
+    assert_eq!(labelled["spans_labels"], 0);
+    let manifest = std::fs::read_to_string(truth_set.join("manifest.csv")).unwrap();
+    let (mut n, mut right) = (0, 0);
+    for r in manifest.lines().skip(1) {
+        let f: Vec<&str> = r.split(',').collect();
+        let key = (f[2].parse().unwrap(), f[3].parse().unwrap());
+        n += 1;
+        right += (said.get(&key).map(String::as_str) == Some(f[1])) as u32;
+    }
+    assert!(n >= 100, "{n} steps");
+    let acc = right as f64 / n as f64;
+    eprintln!(
+        "fresh mixed run: {right}/{n} steps right ({:.1}%)",
+        100.0 * acc
+    );
+    assert!(acc >= 0.95, "{right}/{n} steps right");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn labels_that_cross_terrains_skip_and_count_the_steps_they_do_not_cover() {
+    let dir = tmp("capture-labels");
+    let log = sim_log(&dir, "run", None, 8, 5);
+    // Only the first 3 s are labelled, and a range boundary at 1.9 s falls inside a stance
+    // (touchdowns are ~0.35 s apart, the sample 70 ms after).
+    let labels = dir.join("labels.csv");
+    std::fs::write(
+        &labels,
+        "start_s,end_s,terrain\n1700000000.0,1700000001.9,wood\n1700000001.9,1700000003,grass\n",
+    )
+    .unwrap();
+    let j = json(&common::output_ok(
+        presrs()
+            .args(["capture", "--replay", s(&log), "--labels", s(&labels)])
+            .args(["--out", s(&dir.join("set")), "--json"]),
+    ));
+    let n = |k: &str| j[k].as_u64().unwrap();
+    assert_eq!(
+        n("written") + n("unlabelled") + n("spans_labels") + n("no_image") + n("blank"),
+        n("steps"),
+        "{j}"
+    );
+    assert!(n("unlabelled") >= 10, "{j}");
+    assert!(n("written") >= 6 && n("written") <= 9, "{j}");
+    assert_eq!(
+        j["per_terrain"]["wood"].as_u64().unwrap() + j["per_terrain"]["grass"].as_u64().unwrap(),
+        n("written")
+    );
+
+    // Bad labels name the file and line; bad terrains name the catalog; nothing is written.
+    std::fs::write(
+        &labels,
+        "1700000000.0,1700000001.0,wood\n1700000001.0,1700000002.0,moon\n",
+    )
+    .unwrap();
+    let out = presrs()
+        .args(["capture", "--replay", s(&log), "--labels", s(&labels)])
+        .args(["--out", s(&dir.join("bad")), "--json"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("labels.csv line 2") && err.contains("`moon` is not a terrain"),
+        "{err}"
+    );
+    assert!(!dir.join("bad").exists(), "nothing written on bad labels");
+    let out = presrs()
+        .args([
+            "capture",
+            "--replay",
+            s(&log),
+            "--label",
+            "moon",
+            "--out",
+            s(&dir.join("bad")),
+        ])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("--label moon"),
+        "{err}"
+    );
+
+    // An output that cannot be a folder: a clear error naming it.
+    let file = dir.join("a-file");
+    std::fs::write(&file, "x").unwrap();
+    let out = presrs()
+        .args([
+            "capture",
+            "--replay",
+            s(&log),
+            "--label",
+            "wood",
+            "--out",
+            s(&file.join("set")),
+        ])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("a-file/set"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
