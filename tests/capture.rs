@@ -207,40 +207,32 @@ fn labels_that_cross_terrains_skip_and_count_the_steps_they_do_not_cover() {
         "{err}"
     );
     assert!(!dir.join("bad").exists(), "nothing written on bad labels");
-    let out = presrs()
-        .args([
-            "capture",
-            "--replay",
-            s(&log),
-            "--label",
-            "moon",
-            "--out",
-            s(&dir.join("bad")),
-        ])
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        !out.status.success() && err.contains("--label moon"),
-        "{err}"
-    );
+    let bad_out = dir.join("bad");
+    let err = capture_fails(&log, "moon", &bad_out);
+    assert!(err.contains("--label moon"), "{err}");
 
     // An output that cannot be a folder: a clear error naming it.
     let file = dir.join("a-file");
     std::fs::write(&file, "x").unwrap();
-    let out = presrs()
+    let err = capture_fails(&log, "wood", &file.join("set"));
+    assert!(err.contains("a-file/set"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `presrs capture --replay LOG --label TERRAIN --out OUT`, which must fail: its stderr.
+fn capture_fails(log: &Path, terrain: &str, out: &Path) -> String {
+    let o = presrs()
         .args([
             "capture",
             "--replay",
-            s(&log),
+            s(log),
             "--label",
-            "wood",
+            terrain,
             "--out",
-            s(&file.join("set")),
+            s(out),
         ])
         .output()
         .unwrap();
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success() && err.contains("a-file/set"), "{err}");
-    let _ = std::fs::remove_dir_all(&dir);
+    assert!(!o.status.success());
+    String::from_utf8_lossy(&o.stderr).to_string()
 }
