@@ -96,6 +96,16 @@ pub struct TrainArgs {
     /// Skip unreadable files (counted) instead of stopping.
     #[arg(long)]
     pub skip_bad: bool,
+    /// Share of known-terrain images the model may call unknown: the rejection threshold is
+    /// calibrated on held-out training images to this rate (0..=0.5; 0: reject almost nothing).
+    #[arg(long, default_value_t = node::classifier::train::DEFAULT_UNKNOWN_RATE, value_parser = parse_rate)]
+    pub unknown_rate: f64,
+    /// Also call unknown an image whose load lies outside its class's training range: catches
+    /// ground that looks like a known terrain but yields differently (on the simulator: sand
+    /// that reads as clay), at the price of false unknowns in gait transitions the training
+    /// images do not show.
+    #[arg(long)]
+    pub check_load: bool,
     #[command(flatten)]
     pub terrains: TerrainsArg,
 }
@@ -110,6 +120,8 @@ pub fn train(a: &TrainArgs) -> Result<ExitCode> {
         normalize_load: a.normalize_load,
         h: a.dims,
         seed: a.seed,
+        unknown_rate: a.unknown_rate,
+        check_load: a.check_load,
     };
     let catalog = a.terrains.catalog()?;
     let ds = load_dataset(data, a.skip_bad)?;
@@ -189,11 +201,24 @@ pub fn eval(
         seed,
         kernels,
     };
+    let ev = lab::score::evaluate(model, &ds, &spec)?;
+    let unknown_rate = ev.unknown_rate();
     let lab::score::Evaluation {
         confusion: counts,
         skipped,
         classify_us: times,
-    } = lab::score::evaluate(model, &ds, &spec)?;
+        novel,
+    } = ev;
+    let novel_json: serde_json::Map<String, serde_json::Value> = novel
+        .iter()
+        .map(|(t, (n, u))| {
+            let share = *u as f64 / (*n).max(1) as f64;
+            (
+                t.clone(),
+                serde_json::json!({"images": n, "called_unknown": u, "unknown_share": share}),
+            )
+        })
+        .collect();
     let k = names.len();
     let n_tested = counts.total();
     let correct: usize = (0..k).map(|i| counts.counts[i][i]).sum();
@@ -212,7 +237,8 @@ pub fn eval(
             .collect();
         let v = serde_json::json!({
             "overall_accuracy": acc, "per_class": per, "classes": names, "confusion": confusion,
-            "unknown": unknown, "n_tested": n_tested, "n_skipped": skipped,
+            "unknown": unknown, "unknown_rate": unknown_rate, "novel_terrains": novel_json,
+            "n_tested": n_tested, "n_skipped": skipped,
             "damage_pct": damage, "repair": repair,
             "classify_us_median": med, "classify_us_p99": p99,
             "kernels": kernels.describe(),
@@ -248,6 +274,16 @@ pub fn eval(
             acc * 100.0,
             kernels.describe()
         );
+        println!(
+            "known terrains called unknown: {:.1}%",
+            100.0 * unknown_rate
+        );
+        for (t, (n, u)) in &novel {
+            println!(
+                "{t} (not in the model): {u}/{n} called unknown ({:.1}%)",
+                100.0 * *u as f64 / (*n).max(1) as f64
+            );
+        }
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -409,4 +445,12 @@ pub fn dataset(a: &DatasetArgs) -> Result<ExitCode> {
     }
     println!("wrote {} images to {}", samples.len(), out.display());
     Ok(ExitCode::SUCCESS)
+}
+
+/// `--unknown-rate`: a share in 0..=0.5.
+fn parse_rate(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(r) if (0.0..=0.5).contains(&r) => Ok(r),
+        _ => Err(format!("`{s}` is not a share in 0..=0.5 (0.02 is 2%)")),
+    }
 }

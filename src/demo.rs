@@ -45,6 +45,10 @@ pub struct DemoArgs {
     /// Sensor damage from the start, percent of sensels on dead rows and columns (eq. 6).
     #[arg(long, default_value_t = 0.0, value_name = "PCT")]
     pub damage: f64,
+    /// Also reject stances whose load lies outside the class's training range (`train
+    /// --check-load`): catches ground that reads like a known terrain but yields differently.
+    #[arg(long)]
+    pub check_load: bool,
     /// For the track's terrain names and the node's and controller's catalogs.
     #[command(flatten)]
     pub terrains: crate::cli::TerrainsArg,
@@ -54,7 +58,14 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
     crate::cli::check_damage(a.damage)?;
     let catalog = a.terrains.catalog()?;
     let track = crate::cli::load_track(a.track.as_deref(), &catalog)?;
-    let model = crate::cli::load_or_train(a.model.as_deref())?;
+    let mut model = crate::cli::load_or_train(a.model.as_deref())?;
+    if a.check_load {
+        anyhow::ensure!(
+            node::classifier::train::add_load_check(&mut model),
+            "--check-load: the model holds no training images (an older file); retrain it"
+        );
+    }
+    let known: Vec<String> = model.classes.iter().map(|c| c.name.clone()).collect();
     let mut ctrl_cfg = ControllerConfig::default();
     let mut node_cfg = crate::cli::load_node_config(a.node_config.as_deref())?;
     if a.terrains.terrains.is_some() {
@@ -107,7 +118,7 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
         })?;
         (run.rows, run.falls)
     };
-    summarize(&rows, falls, &track, &ctrl_cfg, &a)
+    summarize(&rows, falls, &track, &ctrl_cfg, &known, &a)
 }
 
 /// The closed loop on the wall clock: `presrs sim`, `presrs node` and `presrs controller`'s own
@@ -126,9 +137,10 @@ fn summarize(
     falls: u64,
     track: &Track,
     cfg: &ControllerConfig,
+    known: &[String],
     a: &DemoArgs,
 ) -> Result<ExitCode> {
-    let sum = Summary::of(rows, &cfg.terrain_gaits);
+    let sum = Summary::of(rows, &cfg.terrain_gaits).with_unknown(rows, known, cfg.safe_gait);
     let (n, correct, accuracy, switches) = (sum.steps, sum.correct, sum.accuracy, sum.switches);
     let delays = &sum.steps_to_switch;
     let mut csv =
@@ -161,6 +173,10 @@ fn summarize(
             "realtime": a.realtime,
             "speed_per_terrain_and_gait": table,
             "track_m": track.length(),
+            "unknown_terrains": sum.unknown_terrains.iter().map(|(t, u)| serde_json::json!({
+                "terrain": t, "steps": u.steps, "called_unknown": u.called_unknown,
+                "steps_to_safe_gait": u.steps_to_safe_gait,
+            })).collect::<Vec<_>>(),
             "csv": a.csv.display().to_string(),
         });
         println!("{j}");
@@ -171,6 +187,20 @@ fn summarize(
         );
         println!("steps from a terrain change to its gait: {delays:?} (max {max_delay})");
         println!("falls: {falls}");
+        for (t, u) in &sum.unknown_terrains {
+            let to_safe: Vec<String> = u
+                .steps_to_safe_gait
+                .iter()
+                .map(|d| d.map_or("never".into(), |d| d.to_string()))
+                .collect();
+            println!(
+                "terrain the model does not know: {t}: {}/{} steps called unknown; safe gait G{} reached after [{}] steps on each entry",
+                u.called_unknown,
+                u.steps,
+                cfg.safe_gait,
+                to_safe.join(", ")
+            );
+        }
         println!("mean speed (m/s) per terrain and gait:");
         for ((t, g), (v, k)) in &sum.speeds {
             println!("  {t:<8} G{g}: {v:.2} ({k} steps)");

@@ -20,6 +20,7 @@ pub enum Which {
     Lifespan,
     Gaits,
     Adaptation,
+    OpenSet,
     All,
 }
 
@@ -82,6 +83,7 @@ pub fn run(a: ExperimentArgs) -> Result<ExitCode> {
         Which::Lifespan => vec![Experiment::Lifespan],
         Which::Gaits => vec![Experiment::Gaits],
         Which::Adaptation => vec![Experiment::Adaptation],
+        Which::OpenSet => vec![Experiment::OpenSet],
     };
     let md = ctx.markdown(
         &list,

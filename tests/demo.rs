@@ -74,3 +74,53 @@ fn realtime_and_fixed_gait(dir: &std::path::Path) {
         .collect();
     assert!(gaits.iter().all(|&g| g == 3), "{gaits:?}");
 }
+
+/// Issue 17 §2: sand on the track, which the demo model was not trained on. With the load check
+/// the node calls most sand steps unknown and the controller puts the hopper in the safe gait
+/// within 3 steps of each time it comes onto sand; the summary says so.
+#[test]
+fn sand_the_model_never_saw_is_unknown_and_gets_the_safe_gait() {
+    let dir = std::env::temp_dir().join(format!("presrs-demo-sand-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let track = dir.join("sand.toml");
+    let mut text = String::from("diameter_m = 2.8\n");
+    for t in ["wood", "sand", "clay", "grass"] {
+        text += &format!("[[segments]]\nterrain = \"{t}\"\nlength_m = 2.2\n");
+    }
+    std::fs::write(&track, text).unwrap();
+    let out = common::output_ok(
+        Command::new(env!("CARGO_BIN_EXE_presrs"))
+            .args([
+                "demo",
+                "--steps",
+                "160",
+                "--json",
+                "--check-load",
+                "--track",
+            ])
+            .arg(&track)
+            .arg("--csv")
+            .arg(dir.join("steps.csv")),
+    );
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let u = &j["unknown_terrains"][0];
+    assert_eq!(u["terrain"], "sand", "{j}");
+    let (n, unknown) = (
+        u["steps"].as_u64().unwrap(),
+        u["called_unknown"].as_u64().unwrap(),
+    );
+    assert!(
+        n >= 30 && unknown * 2 >= n,
+        "{unknown}/{n} sand steps unknown: {j}"
+    );
+    let entries = u["steps_to_safe_gait"].as_array().unwrap();
+    assert!(!entries.is_empty());
+    for e in entries {
+        assert!(
+            e.as_u64().is_some_and(|d| d <= 3),
+            "safe gait after {e} steps: {j}"
+        );
+    }
+    assert_eq!(j["falls"], 0, "{j}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -9,6 +9,11 @@ use node::classifier::{Crop, Model};
 use crate::LabError;
 use crate::simdata::TrainingSet;
 
+/// Bumped when training's rejection of unknown terrain changes (1: per-class thresholds
+/// calibrated to `--unknown-rate`; 2, 3: the opt-in load check), so that a cached model is
+/// retrained with it.
+pub const OPEN_SET_VERSION: u32 = 3;
+
 /// Where the model trained on first run is kept: `$XDG_CACHE_HOME/presrs` (or `~/.cache`),
 /// named by the model format and simulator versions so that either change retrains.
 pub fn cache_path() -> PathBuf {
@@ -17,9 +22,10 @@ pub fn cache_path() -> PathBuf {
         .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))
         .unwrap_or_else(std::env::temp_dir);
     base.join("presrs").join(format!(
-        "demo-model-v{}-sim{}.json",
+        "demo-model-v{}-sim{}-open{}.json",
         node::classifier::model::MODEL_VERSION,
-        sim::SIM_VERSION
+        sim::SIM_VERSION,
+        OPEN_SET_VERSION
     ))
 }
 

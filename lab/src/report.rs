@@ -21,7 +21,7 @@ use sim::terrain::Terrain;
 use crate::LabError;
 use crate::score::confusion;
 use crate::simdata::TrainingSet;
-use crate::study::{Curves, DEAD_AFTER_STANCES, dataset, train_on};
+use crate::study::{Curves, DEAD_AFTER_STANCES, dataset, leave_one_terrain_out, train_on};
 
 /// One section of the report.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -40,11 +40,13 @@ pub enum Experiment {
     Lifespan,
     /// Gait adaptation on the default track (the demo's closed loop).
     Adaptation,
+    /// Unknown terrain: leave-one-terrain-out with the calibrated rejection (issue 17).
+    OpenSet,
 }
 
 impl Experiment {
     /// Every section, in the report's order.
-    pub const ALL: [Experiment; 7] = [
+    pub const ALL: [Experiment; 8] = [
         Experiment::Static,
         Experiment::Resolution,
         Experiment::Dynamic,
@@ -52,6 +54,7 @@ impl Experiment {
         Experiment::Damage,
         Experiment::Lifespan,
         Experiment::Adaptation,
+        Experiment::OpenSet,
     ];
 }
 
@@ -168,6 +171,7 @@ impl Report {
                 Experiment::Adaptation => {
                     adaptation(self, demo_model().map_err(ReportError::DemoModel)?)?
                 }
+                Experiment::OpenSet => open_set(self)?,
             };
             md.push_str(&section);
             md.push('\n');
@@ -832,4 +836,103 @@ where
         .border_style(BLACK)
         .draw()
         .map_err(pe)
+}
+
+/// Leave-one-terrain-out on the static, sandpaper and dynamic sets (or the lab's own set): how
+/// much of a terrain the model never saw is called unknown, and how much of the known ones.
+fn open_set(ctx: &Report) -> Result<String, ReportError> {
+    use node::classifier::train::{DEFAULT_UNKNOWN_RATE, TrainOptions};
+    let n = if ctx.quick { 30 } else { 60 };
+    let mut sets: Vec<(String, TrainingSet, Crop, bool)> = Vec::new();
+    match &ctx.user {
+        Some(u) => sets.push((
+            format!("`{}`", u.dir.display()),
+            u.set.clone(),
+            u.crop,
+            false,
+        )),
+        None => {
+            for (what, kind, crop, norm) in [
+                ("static", Kind::Static, STATIC_CROP, false),
+                ("sandpaper", Kind::Sandpaper, STATIC_CROP, false),
+                (
+                    "dynamic (G2 stances)",
+                    Kind::Dynamic,
+                    FOOT_CROP,
+                    NORMALIZE_DYNAMIC,
+                ),
+            ] {
+                let set = dataset(kind, n, controller::Gait::g2(), ctx.seed + 40);
+                sets.push((what.to_string(), set, crop, norm));
+            }
+        }
+    }
+    let mut md = String::from(
+        "## Unknown terrain: leave one terrain out
+
+",
+    );
+    let _ = writeln!(
+        md,
+        "Per set, each terrain in turn is left out of training; the model (paper's split, \
+         {n} images per terrain on the simulator, rejection calibrated to \
+         `--unknown-rate {DEFAULT_UNKNOWN_RATE}` on held-out training images) then classifies \
+         every image of the left-out terrain and the known terrains' test images. \
+         *Held-out unknown*: share of the left-out terrain called unknown (goal: at least 90% \
+         on average). *Known unknown*: share of known test images called unknown (goal: at most \
+         5%). AUROC: how well the rejection score (the best class's log density less that class's threshold) separates the \
+         two, whatever the threshold (1 perfect, 0.5 chance). *Known right*: the known test \
+         images classified right. The last two columns add the load check (`train \
+         --check-load`: an image whose load lies outside its class's training range is \
+         unknown too).\n"
+    );
+    let _ = writeln!(
+        md,
+        "| set | left out | held-out unknown | known unknown | AUROC | known right | with load check: held-out unknown | known unknown |"
+    );
+    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|");
+    for (what, set, crop, norm) in &sets {
+        let opts = TrainOptions {
+            crop: *crop,
+            normalize_load: *norm,
+            seed: ctx.seed,
+            ..Default::default()
+        };
+        let rows = leave_one_terrain_out(set, &opts)?;
+        let loaded = leave_one_terrain_out(
+            set,
+            &TrainOptions {
+                check_load: true,
+                ..opts
+            },
+        )?;
+        for (r, l) in rows.iter().zip(&loaded) {
+            let _ = writeln!(
+                md,
+                "| {what} | {} | {} | {} | {:.3} | {} | {} | {} |",
+                r.held_out.name(),
+                pct(r.unknown_held_out),
+                pct(r.unknown_known),
+                r.auroc,
+                pct(r.known_accuracy),
+                pct(l.unknown_held_out),
+                pct(l.unknown_known)
+            );
+        }
+        type Row = crate::study::OpenSetRow;
+        let mean = |rows: &[Row], f: &dyn Fn(&Row) -> f64| {
+            rows.iter().map(f).sum::<f64>() / rows.len().max(1) as f64
+        };
+        let _ = writeln!(
+            md,
+            "| {what} | **mean** | **{}** | **{}** | **{:.3}** | {} | **{}** | **{}** |",
+            pct(mean(&rows, &|r| r.unknown_held_out)),
+            pct(mean(&rows, &|r| r.unknown_known)),
+            mean(&rows, &|r| r.auroc),
+            pct(mean(&rows, &|r| r.known_accuracy)),
+            pct(mean(&loaded, &|r| r.unknown_held_out)),
+            pct(mean(&loaded, &|r| r.unknown_known))
+        );
+    }
+    Ok(md)
 }

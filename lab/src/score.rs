@@ -90,6 +90,20 @@ pub struct Summary {
     pub steps_to_switch: Vec<usize>,
     /// Mean speed (m/s) and steps, per (terrain, gait).
     pub speeds: BTreeMap<(String, u8), (f64, usize)>,
+    /// Terrains on the track the model was not trained on (see [`Summary::with_unknown`]).
+    pub unknown_terrains: BTreeMap<String, UnknownTerrain>,
+}
+
+/// How the loop met a terrain its model does not know.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct UnknownTerrain {
+    /// Steps on it.
+    pub steps: usize,
+    /// Of those, steps the node called unknown (the right answer).
+    pub called_unknown: usize,
+    /// For each time the hopper came onto it: steps until the first step in the safe gait
+    /// (`None`: not reached before it left).
+    pub steps_to_safe_gait: Vec<Option<usize>>,
 }
 
 impl Summary {
@@ -135,7 +149,36 @@ impl Summary {
             switches,
             steps_to_switch,
             speeds,
+            unknown_terrains: BTreeMap::new(),
         }
+    }
+
+    /// Scores the steps on terrains outside `known` (the model's classes): "unknown" is the
+    /// right answer there (counted in `correct` and `accuracy`), and the loop should reach
+    /// `safe_gait` on them.
+    pub fn with_unknown(mut self, rows: &[StepRecord], known: &[String], safe_gait: u8) -> Self {
+        for (i, r) in rows.iter().enumerate() {
+            if known.contains(&r.truth) {
+                continue;
+            }
+            let u = self.unknown_terrains.entry(r.truth.clone()).or_default();
+            u.steps += 1;
+            if r.classified == "unknown" {
+                u.called_unknown += 1;
+                self.correct += 1;
+            }
+            if i == 0 || rows[i - 1].truth != r.truth {
+                let d = rows[i..]
+                    .iter()
+                    .take_while(|x| x.truth == r.truth)
+                    .position(|x| x.gait == safe_gait);
+                u.steps_to_safe_gait.push(d);
+            }
+        }
+        if self.steps > 0 {
+            self.accuracy = self.correct as f64 / self.steps as f64;
+        }
+        self
     }
 
     /// The largest of [`Summary::steps_to_switch`] (0 when none).
@@ -192,6 +235,24 @@ mod tests {
     }
 
     #[test]
+    fn unknown_is_the_right_answer_on_a_terrain_the_model_does_not_know() {
+        let table: BTreeMap<String, u8> = [("wood".into(), 3)].into();
+        let rows = [
+            row("wood", "wood", 3, 0.7),
+            row("sand", "wood", 3, 0.6),
+            row("sand", "unknown", 3, 0.5),
+            row("sand", "unknown", 1, 0.4),
+            row("wood", "wood", 1, 0.4),
+            row("sand", "wood", 3, 0.6),
+        ];
+        let s = Summary::of(&rows, &table).with_unknown(&rows, &["wood".into()], 1);
+        assert_eq!((s.steps, s.correct), (6, 4));
+        let u = &s.unknown_terrains["sand"];
+        assert_eq!((u.steps, u.called_unknown), (4, 2));
+        assert_eq!(u.steps_to_safe_gait, vec![Some(2), None]);
+    }
+
+    #[test]
     fn a_change_already_in_its_gait_is_zero_steps() {
         let table: BTreeMap<String, u8> = [("wood".into(), 3), ("carpet".into(), 3)].into();
         let rows = [row("wood", "wood", 3, 0.7), row("carpet", "carpet", 3, 0.6)];
@@ -243,21 +304,23 @@ pub struct Evaluation {
     pub skipped: usize,
     /// Time per classification, µs, ascending.
     pub classify_us: Vec<f64>,
+    /// Class folders of terrains the model was not trained on (open-set test): per folder,
+    /// images and how many the model called unknown (the right answer).
+    pub novel: BTreeMap<String, (usize, usize)>,
+}
+
+impl Evaluation {
+    /// Share of the known classes' test images the model called unknown.
+    pub fn unknown_rate(&self) -> f64 {
+        let k = self.confusion.counts.len();
+        let unknown: usize = self.confusion.counts.iter().map(|r| r[k]).sum();
+        unknown as f64 / self.confusion.total().max(1) as f64
+    }
 }
 
 /// Why [`evaluate`] stopped.
 #[derive(Debug, thiserror::Error)]
 pub enum EvalError {
-    /// A class folder the model has no class for.
-    #[error("class `{class}` of {dir} is not in the model (it knows {knows:?})")]
-    UnknownClass {
-        /// The folder name.
-        class: String,
-        /// The dataset.
-        dir: String,
-        /// The model's classes.
-        knows: Vec<String>,
-    },
     /// An image the model cannot take.
     #[error("{path}: {source}")]
     Image {
@@ -269,7 +332,9 @@ pub enum EvalError {
 }
 
 /// Classifies every image of `ds` the model was neither trained nor validated on (matched by
-/// content hash), each damaged per `spec`, timing each classification.
+/// content hash), each damaged per `spec`, timing each classification. A class folder the
+/// model has no class for is a terrain it does not know: its images are counted apart
+/// ([`Evaluation::novel`]).
 pub fn evaluate(
     model: Model,
     ds: &node::classifier::dataset::Dataset,
@@ -285,16 +350,11 @@ pub fn evaluate(
         .collect();
     let mut confusion = Confusion::new(names.len());
     let (mut skipped, mut times) = (0, Vec::new());
+    let mut novel: BTreeMap<String, (usize, usize)> = BTreeMap::new();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(spec.seed);
     let mut c = Classifier::with_kernels(model, spec.kernels);
     for s in &ds.samples {
-        let Some(actual) = names.iter().position(|n| *n == ds.classes[s.class]) else {
-            return Err(EvalError::UnknownClass {
-                class: ds.classes[s.class].clone(),
-                dir: ds.root.display().to_string(),
-                knows: names,
-            });
-        };
+        let actual = names.iter().position(|n| *n == ds.classes[s.class]);
         if used.contains(&s.image.content_hash()) {
             skipped += 1;
             continue;
@@ -311,12 +371,20 @@ pub fn evaluate(
                 source,
             })?;
         times.push(t0.elapsed().as_secs_f64() * 1e6);
-        confusion.add(actual, d.class);
+        match actual {
+            Some(a) => confusion.add(a, d.class),
+            None => {
+                let e = novel.entry(ds.classes[s.class].clone()).or_default();
+                e.0 += 1;
+                e.1 += d.class.is_none() as usize;
+            }
+        }
     }
     times.sort_by(f64::total_cmp);
     Ok(Evaluation {
         confusion,
         skipped,
         classify_us: times,
+        novel,
     })
 }

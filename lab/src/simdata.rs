@@ -23,6 +23,7 @@ pub struct NotInCatalog {
 
 /// Images, each one's class (an index into `classes`), and the classes in the order of the
 /// terrains given: the name and the terrain id the model puts on the bus.
+#[derive(Clone)]
 pub struct TrainingSet {
     /// One entry per class: its name and the terrain id the model sends.
     pub classes: Vec<ClassInfo>,

@@ -134,6 +134,21 @@ pub struct Model {
     pub kernel_width: f64,
     /// Log-density below which a decision is "unknown".
     pub unknown_threshold: f64,
+    /// The share of held-out known-terrain images the threshold was calibrated to call unknown
+    /// (`train --unknown-rate`). Absent in older model files (their threshold rejects almost
+    /// nothing).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unknown_rate: Option<f64>,
+    /// Per class: the log density below which an image decided as that class is "unknown"
+    /// (calibrated with `unknown_rate`). Absent in older model files: `unknown_threshold` for
+    /// every class.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unknown_thresholds: Option<Vec<f64>>,
+    /// Per class: the load (summed working image, before any normalisation) its training
+    /// images showed, widened; an image outside its best class's range is "unknown". Absent in
+    /// older model files: no load check.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub load_ranges: Option<Vec<[f64; 2]>>,
     /// Content hashes of the training images (to keep test images out).
     pub train_hashes: Vec<String>,
     /// Content hashes of the validation images.
@@ -364,6 +379,40 @@ impl Model {
                     "unknown_threshold {} would make every decision unknown",
                     self.unknown_threshold
                 ),
+            ));
+        }
+        if let Some(t) = &self.unknown_thresholds {
+            if t.len() != self.classes.len() {
+                return Err(Invalid::new(
+                    "unknown_thresholds",
+                    format!("{} thresholds for {} classes", t.len(), self.classes.len()),
+                ));
+            }
+            if let Some(v) = t.iter().find(|v| v.is_nan() || **v == f64::INFINITY) {
+                return Err(Invalid::new(
+                    "unknown_thresholds",
+                    format!("a threshold of {v} would make every decision of its class unknown"),
+                ));
+            }
+        }
+        if let Some(l) = &self.load_ranges
+            && (l.len() != self.classes.len()
+                || l.iter().any(|[a, b]| a.is_nan() || b.is_nan() || a > b))
+        {
+            return Err(Invalid::new(
+                "load_ranges",
+                format!(
+                    "want one [low, high] pair per class ({}), low <= high",
+                    self.classes.len()
+                ),
+            ));
+        }
+        if let Some(r) = self.unknown_rate
+            && !(0.0..=0.5).contains(&r)
+        {
+            return Err(Invalid::new(
+                "unknown_rate",
+                format!("unknown_rate {r} is not a share in 0..=0.5"),
             ));
         }
         if let Some(v) = self.normalize_load

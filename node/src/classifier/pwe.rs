@@ -297,17 +297,12 @@ impl Classifier {
     /// ([`Classifier::in_contact`]), without measuring it again.
     pub fn decide_in_contact(&mut self) -> Decision {
         let m = &self.model;
+        // An integer sum: exact, and it vectorises (an f64 running sum is one long dependency
+        // chain).
+        let total = self.work.iter().map(|&p| p as u64).sum::<u64>() as f64;
         let scale = match m.normalize_load {
-            Some(target) => {
-                // An integer sum: exact, and it vectorises (an f64 running sum is one long dependency chain).
-                let total = self.work.iter().map(|&p| p as u64).sum::<u64>() as f64;
-                if total > 0.0 {
-                    (target / total) as f32
-                } else {
-                    1.0
-                }
-            }
-            None => 1.0,
+            Some(target) if total > 0.0 => (target / total) as f32,
+            _ => 1.0,
         };
         self.fx.extract(&self.work, scale, &mut self.feat);
         // U (F - mean) = U F - U mean, with U mean computed once in `new`.
@@ -359,7 +354,15 @@ impl Classifier {
         for (lp, ld) in self.log_posteriors.iter_mut().zip(log_dens.iter()) {
             *lp = ld - log_z;
         }
-        let known = log_dens[best] >= m.unknown_threshold;
+        let threshold = match &m.unknown_thresholds {
+            Some(t) => t[best],
+            None => m.unknown_threshold,
+        };
+        let in_range = m
+            .load_ranges
+            .as_ref()
+            .is_none_or(|r| (r[best][0]..=r[best][1]).contains(&total));
+        let known = log_dens[best] >= threshold && in_range;
         Decision {
             class: known.then_some(best),
             best,
