@@ -225,6 +225,8 @@ pub struct Controller {
     beta_td: f64,
     next_beta_td: f64,
     candidate: (u8, u32),
+    /// Unknown steps in a row (counted apart: one does not break a terrain's run).
+    unknown_run: u32,
     last_heartbeat_us: Option<u64>,
     next_cmd_us: u64,
     next_status_us: u64,
@@ -265,6 +267,7 @@ impl Controller {
             beta_td: b,
             next_beta_td: b,
             candidate: (TERRAIN_UNKNOWN, 0),
+            unknown_run: 0,
             last_heartbeat_us: None,
             next_cmd_us: 0,
             next_status_us: 0,
@@ -393,16 +396,15 @@ impl Controller {
                     // `presrs demo --steps 300 --json`, seeds 1-3 (a model calibrated to 2%
                     // false unknowns): switching on every unknown step made 32, 23 and 31 gait
                     // switches and took up to 3, 4 and 5 steps to reach a terrain's gait;
-                    // switching on the second in a row 21, 21, 21 and 3, 3, 4.
-                    if self.candidate.0 == TERRAIN_UNKNOWN {
-                        self.candidate.1 += 1;
-                    } else {
-                        self.candidate = (TERRAIN_UNKNOWN, 1);
-                    }
-                    if self.candidate.1 >= self.cfg.switch_after_steps {
+                    // switching on the second in a row 21, 21, 21 and 3, 2, 3 (an unknown step
+                    // that also restarted the terrain's count: 3, 3, 4).
+                    self.unknown_run += 1;
+                    if self.unknown_run >= self.cfg.switch_after_steps {
+                        self.candidate = (TERRAIN_UNKNOWN, 0);
                         self.request(self.cfg.safe_gait, GaitReason::Unknown, TERRAIN_UNKNOWN);
                     }
                 } else if tc.confidence_pct >= self.cfg.min_confidence_pct {
+                    self.unknown_run = 0;
                     if self.candidate.0 == tc.terrain {
                         self.candidate.1 += 1;
                     } else {
@@ -552,6 +554,38 @@ mod tests {
             out.push(m)
         });
         assert_eq!(c.gait().id, 3);
+    }
+
+    /// Issue 17: unknown is confirmed like a terrain (two in a row put the safe gait), and one
+    /// unknown step in a terrain's run neither switches nor restarts that terrain's count.
+    #[test]
+    fn an_unknown_step_is_confirmed_before_the_safe_gait() {
+        let mut c = Controller::new(ControllerConfig::default(), &TerrainCatalog::paper());
+        let mut out = Vec::new();
+        let hb = Message::NodeStatus(NodeStatus::default());
+        let wood = protocol::Terrain::WOOD.id();
+        let unknown = protocol::messages::TERRAIN_UNKNOWN;
+        let mut t = 0;
+        let mut step = |c: &mut Controller, terrain: u8| {
+            t += 240_000;
+            c.on_message(0, &hb, t, &mut |m| out.push(m));
+            c.on_message(0, &contact(true, t), t, &mut |m| out.push(m));
+            c.on_message(0, &tc(terrain, 90.0), t + 70_000, &mut |m| out.push(m));
+            c.on_message(0, &contact(false, t + 140_000), t + 140_000, &mut |m| {
+                out.push(m)
+            });
+            c.gait().id
+        };
+        // wood, unknown, wood: wood's second step switches to G3 (the unknown between is not
+        // new ground); then one unknown keeps G3, the second in a row gives the safe G1.
+        assert_eq!(step(&mut c, wood), 2);
+        assert_eq!(step(&mut c, unknown), 2);
+        assert_eq!(step(&mut c, wood), 3);
+        assert_eq!(step(&mut c, unknown), 3);
+        assert_eq!(step(&mut c, unknown), 1);
+        assert_eq!(c.reason(), GaitReason::Unknown);
+        assert_eq!(step(&mut c, wood), 1);
+        assert_eq!(step(&mut c, wood), 3);
     }
 
     #[test]

@@ -10,9 +10,9 @@ use crate::LabError;
 use crate::simdata::TrainingSet;
 
 /// Bumped when training's rejection of unknown terrain changes (1: per-class thresholds
-/// calibrated to `--unknown-rate`; 2, 3: the opt-in load check), so that a cached model is
-/// retrained with it.
-pub const OPEN_SET_VERSION: u32 = 3;
+/// calibrated to `--unknown-rate`; 2, 3: the opt-in load check; 4: the distance margin), so
+/// that a cached model is retrained with it.
+pub const OPEN_SET_VERSION: u32 = 4;
 
 /// Where the model trained on first run is kept: `$XDG_CACHE_HOME/presrs` (or `~/.cache`),
 /// named by the model format and simulator versions so that either change retrains.

@@ -21,6 +21,7 @@ for l in sys.stdin:
 # time (also under TCG), and the node needs a model trained on simulated G2 stances.
 echo "vcan suite: building presrs (release) and training the system tests' G2 model"
 cargo build --release --quiet
+cargo build --release --quiet -p presrs-protocol --example foot_firmware
 # Wherever cargo puts its output (CARGO_TARGET_DIR or ./target): a stale binary must not run.
 target_dir=$(cargo metadata --no-deps --format-version 1 |
   python3 -c 'import json, sys; print(json.load(sys.stdin)["target_directory"])')
@@ -33,6 +34,7 @@ if [ ! -s "$work/g2-model.json" ] || [ "$PRESRS_BIN" -nt "$work/g2-model.json" ]
     --per-class 45 --train 30 --normalize-load --seed 21
 fi
 export PRESRS_MODEL="$work/g2-model.json"
+export PRESRS_FIRMWARE="$target_dir/release/examples/foot_firmware"
 
 setup='modprobe vcan 2>/dev/null || true
 ip link add dev vcan0 type vcan 2>/dev/null || true; ip link set vcan0 mtu 72 up
@@ -64,7 +66,7 @@ else
   set +e
   timeout 1800 vng -r "$kernel" --user root --disable-kvm --cpus 2 --memory 2G \
     --exec "$setup
-export PATH='$PATH' HOME='$HOME' PRESRS_BIN='$PRESRS_BIN' PRESRS_MODEL='$PRESRS_MODEL'
+export PATH='$PATH' HOME='$HOME' PRESRS_BIN='$PRESRS_BIN' PRESRS_MODEL='$PRESRS_MODEL' PRESRS_FIRMWARE='$PRESRS_FIRMWARE'
 export PRESRS_SYSTEM_SPEED='${PRESRS_SYSTEM_SPEED:-0.35}'
 export PRESRS_BENCH_LABEL='emulated: vcan inside a TCG VM, 2 vCPUs'
 cd '$root' && '$bin' --test-threads=1 --nocapture ${PRESRS_VCAN_FILTER:-}; echo VCAN_EXIT=\$?" 2>&1 | tee "$log"

@@ -564,7 +564,8 @@ fn unknown_thresholds(m: &Model) -> (Vec<f64>, f64) {
         .fold(f64::INFINITY, f64::min);
     let t: Vec<f64> = per
         .iter_mut()
-        .map(|v| {
+        .enumerate()
+        .map(|(k, v)| {
             if v.is_empty() {
                 return f64::NEG_INFINITY;
             }
@@ -572,7 +573,8 @@ fn unknown_thresholds(m: &Model) -> (Vec<f64>, f64) {
             match m.unknown_rate {
                 Some(r) if r > 0.0 => {
                     // Images strictly below v[k] are unknown: k of n, at most the rate.
-                    v[((r * v.len() as f64).floor() as usize).min(v.len() - 1)]
+                    let q = v[((r * v.len() as f64).floor() as usize).min(v.len() - 1)];
+                    widen(m, k, q)
                 }
                 _ => lowest - 10.0,
             }
@@ -636,6 +638,30 @@ fn load_ranges(work: &[Vec<u16>], labels: &[usize], rate: f64) -> Vec<[f64; 2]> 
         })
         .collect()
 }
+
+/// Moves a class's calibrated threshold `q` so that images DISTANCE_MARGIN farther from the
+/// class's samples than the calibration's own held-out ones still pass. The log density is
+/// `c - d^2 / (2 sigma^2)` near a sample at distance `d` (`c` the class's density at a sample),
+/// so a distance scaled by `1 + m` moves `c - q` by `(1 + m)^2`.
+///
+/// Why: held-out training images come from the same recording as the stored samples; the
+/// robot's next run does not. Measured: 4 terrains captured from 14 s simulator logs, models
+/// trained on 30 images per terrain, a fresh mixed run of 73 steps: 6 of 73 known steps fell
+/// below the unscaled thresholds (8%, against the 2% asked), 4 with a 10% distance margin, 3
+/// with 20% (with 40 images per terrain and 10%: 2). What it costs, leave-one-terrain-out
+/// (`presrs experiment openset`), unscaled -> 10% -> 20%: a left-out terrain called unknown
+/// 99.6 -> 97.5 -> 95.8% (static), 97.0 -> 91.3 -> 84.7% (sandpaper); known dynamic images
+/// called unknown 5.8 -> 4.8 -> 4.0%.
+fn widen(m: &Model, k: usize, q: f64) -> f64 {
+    let n_k = m.sample_classes.iter().filter(|&&c| c == k).count().max(1) as f64;
+    let s2 = 2.0 * m.kernel_width * m.kernel_width;
+    let c = -n_k.ln() - 0.5 * m.h as f64 * (std::f64::consts::PI * s2).ln();
+    let f = (1.0 + DISTANCE_MARGIN) * (1.0 + DISTANCE_MARGIN);
+    if q < c { c - f * (c - q) } else { q }
+}
+
+/// See [`widen`].
+const DISTANCE_MARGIN: f64 = 0.1;
 
 /// Each stored sample's leave-one-out log density under its own class, in the samples' order
 /// (`-inf` for a sample alone in its class).
