@@ -314,7 +314,7 @@ pub struct StanceSample<'a> {
     pub sample_us: u32,
     /// Receive time of the image's last segment, the bus's clock (a log's timestamps).
     pub rx_us: u64,
-    /// Rows, columns and bits per pixel of the image.
+    /// Rows.
     pub rows: usize,
     /// Columns.
     pub cols: usize,
