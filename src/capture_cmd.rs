@@ -1,7 +1,6 @@
 //! `presrs capture`: a training set from the robot's own runs. The work is
 //! [`node::capture`]; this module reads the arguments, the log or the bus, and prints the summary.
 
-use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;
@@ -55,15 +54,8 @@ pub fn run(a: CaptureArgs) -> Result<ExitCode> {
     let labelling = match (&a.label, &a.labels) {
         (Some(name), _) => Labelling::All(
             catalog
-                .by_name(name)
-                .filter(|t| !t.is_unknown())
-                .with_context(|| {
-                    let known: Vec<&str> = catalog.iter().map(|t| t.name()).collect();
-                    format!(
-                        "--label {name}: not a terrain of the catalog (known: {}); add it with --terrains FILE",
-                        known.join(", ")
-                    )
-                })?,
+                .known(name)
+                .map_err(|e| anyhow::anyhow!("--label {name}: {e}"))?,
         ),
         (None, Some(p)) => {
             let text = std::fs::read_to_string(p)
@@ -76,7 +68,6 @@ pub fn run(a: CaptureArgs) -> Result<ExitCode> {
     let mut sink = Sink {
         set: CaptureSet::open(&a.out)?,
         source: String::new(),
-        per_terrain: BTreeMap::new(),
         failed: None,
     };
     if let Some(log) = &a.replay {
@@ -89,9 +80,7 @@ pub fn run(a: CaptureArgs) -> Result<ExitCode> {
         let records = protocol::candump::read_log(std::io::BufReader::new(file))
             .with_context(|| format!("reading {}", log.display()))?;
         for r in &records {
-            // The log's clock ticks the capture before each record, as a live clock would.
-            capture.tick(r.stamped.t_us, &mut |c| sink.keep(c));
-            capture.process(&r.stamped, &mut |c| sink.keep(c));
+            capture.feed(&r.stamped, &mut |c| sink.keep(c));
             if sink.failed.is_some() {
                 break;
             }
@@ -112,8 +101,7 @@ pub fn run(a: CaptureArgs) -> Result<ExitCode> {
             match bus.recv(Duration::from_millis(50))? {
                 Some(st) => {
                     last_t = st.t_us;
-                    capture.tick(st.t_us, &mut |c| sink.keep(c));
-                    capture.process(&st, &mut |c| sink.keep(c));
+                    capture.feed(&st, &mut |c| sink.keep(c));
                 }
                 None => capture.tick(last_t, &mut |c| sink.keep(c)),
             }
@@ -124,9 +112,9 @@ pub fn run(a: CaptureArgs) -> Result<ExitCode> {
     let Sink {
         set,
         source,
-        per_terrain,
         failed,
     } = sink;
+    let per_terrain = &set.written_per_terrain;
     let c = capture.counts();
     let pc = capture.pipeline().counters;
     if a.json {
@@ -169,28 +157,20 @@ pub fn run(a: CaptureArgs) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// Where captured steps go: the set, counted per terrain; the first write error stops it.
+/// Where captured steps go; the first write error stops the capture (everything before it
+/// stays written).
 struct Sink {
     set: CaptureSet,
     source: String,
-    per_terrain: BTreeMap<String, u64>,
     failed: Option<CaptureError>,
 }
 
 impl Sink {
     fn keep(&mut self, c: CapturedStep) {
-        if self.failed.is_some() {
-            return;
-        }
-        match self.set.add(&c, &self.source) {
-            Ok(true) => {
-                *self
-                    .per_terrain
-                    .entry(c.terrain.name().to_string())
-                    .or_default() += 1
-            }
-            Ok(false) => {}
-            Err(e) => self.failed = Some(e),
+        if self.failed.is_none()
+            && let Err(e) = self.set.add(&c, &self.source)
+        {
+            self.failed = Some(e);
         }
     }
 }

@@ -323,26 +323,13 @@ fn spawn(args: &[&str]) -> Proc {
 #[test]
 fn sim_traffic_is_recorded_by_candump_and_decoded_by_cantools() {
     let iface = fd_iface();
-    let log_path = std::env::temp_dir().join(format!("presrs-simdump-{}.log", std::process::id()));
-    let file = std::fs::File::create(&log_path).unwrap();
-    let mut candump = Proc(
-        std::process::Command::new("candump")
-            // 10 000 frames/s of tactile segments: under TCG on a busy host, candump's default
-            // socket buffer overflowed (290 of 300 images logged, sim reporting 0 send errors).
-            .args(["-r", "8388608", "-L", &iface])
-            .stdout(file)
-            .spawn()
-            .expect("candump from can-utils must be installed (apt-get install can-utils)"),
-    );
-    std::thread::sleep(Duration::from_millis(500));
-    let status = std::process::Command::new(presrs())
-        .args(["sim", "--iface", &iface, "--duration", "3", "--seed", "2"])
-        .status()
-        .unwrap();
-    assert!(status.success());
-    std::thread::sleep(Duration::from_millis(500));
-    let _ = candump.0.kill();
-    let _ = candump.0.wait();
+    let log_path = candump_during(&iface, "simdump", || {
+        let status = std::process::Command::new(presrs())
+            .args(["sim", "--iface", &iface, "--duration", "3", "--seed", "2"])
+            .status()
+            .unwrap();
+        assert!(status.success());
+    });
     let dbc = root().join("protocol/presrs.dbc");
     let out = python(&["log", dbc.to_str().unwrap(), log_path.to_str().unwrap()]);
     let v: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
@@ -368,10 +355,7 @@ fn sim_node_and_controller_as_processes_classify_steps_and_survive_a_node_restar
     // The robot's time runs at `speed` of the wall clock: under TCG emulation the simulator
     // cannot keep real time (3 s simulated took 5.4 s alone). The node runs on the foot's
     // timestamps; the controller is told the rate. Times below are in robot time.
-    let speed: f64 = std::env::var("PRESRS_SYSTEM_SPEED")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(1.0);
+    let speed = system_speed();
     let wall = |robot_s: f64| Duration::from_secs_f64(robot_s / speed);
     let mut node = spawn(&["node", "--iface", &iface, "--model", model_s]);
     // The controller runs the simulator's leg (foot 0): it sends the stance law and the
@@ -621,37 +605,18 @@ fn node_bench_on_vcan_reports_latency_cpu_and_memory_for_six_feet() {
 
 /// One `presrs sim` run against a fresh `presrs node` (G2 model): the per-step report.
 fn sim_run(iface: &str, gait: &str, damage: f64, seed: u64, sim_s: f64) -> serde_json::Value {
-    let speed: f64 = std::env::var("PRESRS_SYSTEM_SPEED")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(1.0);
     let model = system_model();
-    let report = std::env::temp_dir().join(format!(
-        "presrs-run-{}-{gait}-{damage}.json",
-        std::process::id()
-    ));
-    let node = spawn(&["node", "--iface", iface, "--model", model.to_str().unwrap()]);
+    let _node = spawn(&["node", "--iface", iface, "--model", model.to_str().unwrap()]);
     std::thread::sleep(Duration::from_millis(1500));
-    let status = std::process::Command::new(presrs())
-        .args(["sim", "--iface", iface, "--gait", gait, "--damage"])
-        .arg(damage.to_string())
-        .args([
-            "--seed",
-            &seed.to_string(),
-            "--duration",
-            &sim_s.to_string(),
-        ])
-        .args(["--speed", &speed.to_string(), "--report"])
-        .arg(&report)
-        .env("RUST_LOG", "warn")
-        .status()
-        .unwrap();
-    assert!(status.success(), "presrs sim {gait}: {status}");
-    drop(node);
-    let r: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
-    let _ = std::fs::remove_file(&report);
-    r
+    let damage = damage.to_string();
+    let name = format!("run-{gait}-{damage}");
+    sim_report(
+        iface,
+        &["--gait", gait, "--damage", &damage],
+        sim_s,
+        seed,
+        &name,
+    )
 }
 
 fn accuracy(r: &serde_json::Value) -> (usize, usize) {
@@ -828,6 +793,8 @@ fn candump_during(iface: &str, name: &str, run: impl FnOnce()) -> std::path::Pat
     let file = std::fs::File::create(&log).unwrap();
     let mut candump = Proc(
         std::process::Command::new("candump")
+            // 10 000 frames/s of tactile segments: under TCG on a busy host, candump's default
+            // socket buffer overflowed (290 of 300 images logged, sim reporting 0 send errors).
             .args(["-r", "8388608", "-L", iface])
             .stdout(file)
             .spawn()
@@ -866,7 +833,9 @@ fn sim_report(iface: &str, extra: &[&str], sim_s: f64, seed: u64, name: &str) ->
         .status()
         .unwrap();
     assert!(status.success(), "presrs sim {extra:?}: {status}");
-    serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap()
+    let r = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let _ = std::fs::remove_file(&report);
+    r
 }
 
 fn presrs_ok(args: &[&str]) -> String {

@@ -12,6 +12,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use protocol::Stamped;
+use protocol::candump::{format_seconds, parse_seconds};
 use protocol::terrain::{Terrain, TerrainCatalog};
 
 use crate::classifier::PressureImage;
@@ -178,16 +179,15 @@ pub fn parse_labels(
                 ),
             ));
         }
-        let secs = |s: &str, what: &str| -> Result<u64, CaptureError> {
-            match s.parse::<f64>() {
-                Ok(v) if v.is_finite() && v >= 0.0 => Ok((v * 1e6).round() as u64),
-                _ => Err(bad(
+        let secs = |s: &str, what: &str| {
+            parse_seconds(s).ok_or_else(|| {
+                bad(
                     line,
                     format!(
                         "{what} `{s}` is not a time in seconds (as candump -L prints it, e.g. 1700000000.250000)"
                     ),
-                )),
-            }
+                )
+            })
         };
         let (start_us, end_us) = (secs(f[0], "start_s")?, secs(f[1], "end_s")?);
         if end_us <= start_us {
@@ -196,20 +196,7 @@ pub fn parse_labels(
                 format!("end_s {} is not after start_s {}", f[1], f[0]),
             ));
         }
-        let terrain = catalog
-            .by_name(f[2])
-            .filter(|t| !t.is_unknown())
-            .ok_or_else(|| {
-                let known: Vec<&str> = catalog.iter().map(|t| t.name()).collect();
-                bad(
-                    line,
-                    format!(
-                        "`{}` is not a terrain of the catalog (known: {}); add it to a terrains file (--terrains)",
-                        f[2],
-                        known.join(", ")
-                    ),
-                )
-            })?;
+        let terrain = catalog.known(f[2]).map_err(|e| bad(line, e))?;
         let foot = match f.get(3) {
             None | Some(&"") => None,
             Some(s) => Some(
@@ -301,6 +288,13 @@ impl Capture {
         &self.pipeline
     }
 
+    /// One frame with its time: the clock moves on to it first ([`Self::tick`]), then the
+    /// frame is processed, as the node does live and on a replay.
+    pub fn feed(&mut self, st: &Stamped, out: &mut impl FnMut(CapturedStep)) {
+        self.tick(st.t_us, out);
+        self.process(st, out);
+    }
+
     /// One received (or logged) frame; a step it ends goes to `out`.
     pub fn process(&mut self, st: &Stamped, out: &mut impl FnMut(CapturedStep)) {
         let decided = &mut self.decided;
@@ -387,6 +381,8 @@ pub struct CaptureSet {
     keys: HashSet<(String, u8, u16, u64)>,
     /// Images written by this set.
     pub written: u64,
+    /// Of those, per terrain name.
+    pub written_per_terrain: std::collections::BTreeMap<String, u64>,
     /// Steps already in the manifest.
     pub duplicates: u64,
 }
@@ -417,7 +413,7 @@ impl CaptureSet {
             }
             let foot = f[2].parse().map_err(|_| bad("foot"))?;
             let step = f[3].parse().map_err(|_| bad("step"))?;
-            let td = secs_to_us(f[4]).ok_or_else(|| bad("touchdown_s"))?;
+            let td = parse_seconds(f[4]).ok_or_else(|| bad("touchdown_s"))?;
             keys.insert((f[8].to_string(), foot, step, td));
         }
         let mut manifest = std::fs::OpenOptions::new()
@@ -434,6 +430,7 @@ impl CaptureSet {
             manifest,
             keys,
             written: 0,
+            written_per_terrain: Default::default(),
             duplicates: 0,
         })
     }
@@ -444,8 +441,7 @@ impl CaptureSet {
     pub fn add(&mut self, c: &CapturedStep, source: &str) -> Result<bool, CaptureError> {
         // Commas would break the manifest's columns.
         let source = source.replace([',', '\n'], "_");
-        let td = format_secs(c.touchdown_us);
-        let key = (source.clone(), c.foot, c.step, secs_to_us(&td).unwrap_or(0));
+        let key = (source.clone(), c.foot, c.step, c.touchdown_us);
         if self.keys.contains(&key) {
             self.duplicates += 1;
             return Ok(false);
@@ -474,12 +470,13 @@ impl CaptureSet {
         }
         std::fs::rename(&tmp, &path).map_err(|e| io("write", &path, e))?;
         let line = format!(
-            "{}/{name},{},{},{},{td},{},{},{:.1},{source}\n",
+            "{}/{name},{},{},{},{},{},{},{:.1},{source}\n",
             c.terrain.name(),
             c.terrain.name(),
             c.foot,
             c.step,
-            format_secs(c.sample_us),
+            format_seconds(c.touchdown_us),
+            format_seconds(c.sample_us),
             c.load_sum,
             c.damage_pct,
         );
@@ -489,6 +486,10 @@ impl CaptureSet {
             .map_err(|e| io("append to", &self.manifest_path, e))?;
         self.keys.insert(key);
         self.written += 1;
+        *self
+            .written_per_terrain
+            .entry(c.terrain.name().to_string())
+            .or_default() += 1;
         Ok(true)
     }
 
@@ -501,17 +502,6 @@ impl CaptureSet {
     pub fn is_empty(&self) -> bool {
         self.keys.is_empty()
     }
-}
-
-/// µs as candump's seconds (6 decimals).
-fn format_secs(us: u64) -> String {
-    format!("{}.{:06}", us / 1_000_000, us % 1_000_000)
-}
-
-fn secs_to_us(s: &str) -> Option<u64> {
-    let (a, b) = s.split_once('.').unwrap_or((s, "0"));
-    let frac: String = b.chars().chain(std::iter::repeat('0')).take(6).collect();
-    Some(a.parse::<u64>().ok()? * 1_000_000 + frac.parse::<u64>().ok()?)
 }
 
 #[cfg(test)]
@@ -546,13 +536,6 @@ mod tests {
                 .unwrap_err()
                 .to_string();
             assert!(e.contains(want) && e.starts_with("labels.csv"), "{e}");
-        }
-    }
-
-    #[test]
-    fn seconds_round_trip() {
-        for us in [0, 1, 1_700_000_000_070_680, 999_999] {
-            assert_eq!(secs_to_us(&format_secs(us)), Some(us));
         }
     }
 }

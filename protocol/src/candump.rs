@@ -46,6 +46,28 @@ fn parse_hex_bytes(s: &str, out: &mut [u8; 64]) -> Option<usize> {
     Some(b.len() / 2)
 }
 
+/// A log time (µs) as `candump -L` prints it: seconds with six decimals.
+pub fn format_seconds(t_us: u64) -> String {
+    format!("{}.{:06}", t_us / 1_000_000, t_us % 1_000_000)
+}
+
+/// Seconds as `candump -L` prints them (`1700000000.070680`, or whole seconds) to µs; digits
+/// past the sixth decimal are dropped. `None` for anything else (signs, exponents, NaN).
+pub fn parse_seconds(s: &str) -> Option<u64> {
+    let (sec, frac) = s.split_once('.').unwrap_or((s, ""));
+    if sec.is_empty() || !sec.bytes().all(|c| c.is_ascii_digit()) {
+        return None;
+    }
+    if frac.len() > 9 || !frac.bytes().all(|c| c.is_ascii_digit()) {
+        return None;
+    }
+    let frac_us: u64 = format!("{frac:0<6}")[..6].parse().ok()?;
+    sec.parse::<u64>()
+        .ok()?
+        .checked_mul(1_000_000)?
+        .checked_add(frac_us)
+}
+
 /// Parses one log line. `Ok(None)` for blank lines and comments (`#`) and for error frames,
 /// which carry no data for us.
 pub fn parse_line(line: &str, line_no: usize) -> Result<Option<LogRecord>, LogError> {
@@ -135,12 +157,7 @@ pub fn read_log(r: impl BufRead) -> Result<Vec<LogRecord>, LogError> {
 /// Writes one record in `candump -l` format.
 pub fn write_record(w: &mut impl Write, iface: &str, st: &Stamped) -> std::io::Result<()> {
     let f = &st.frame;
-    write!(
-        w,
-        "({}.{:06}) {iface} ",
-        st.t_us / 1_000_000,
-        st.t_us % 1_000_000
-    )?;
+    write!(w, "({}) {iface} ", format_seconds(st.t_us))?;
     if f.is_extended() {
         write!(w, "{:08X}", f.raw_id())?;
     } else {
@@ -167,6 +184,19 @@ pub fn write_record(w: &mut impl Write, iface: &str, st: &Stamped) -> std::io::R
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn seconds_round_trip_as_candump_prints_them() {
+        for us in [0, 1, 999_999, 1_700_000_000_070_680] {
+            assert_eq!(parse_seconds(&format_seconds(us)), Some(us));
+        }
+        assert_eq!(parse_seconds("30"), Some(30_000_000));
+        assert_eq!(parse_seconds("1.5"), Some(1_500_000));
+        assert_eq!(parse_seconds("1.1234567"), Some(1_123_456));
+        for bad in ["", "x", "-1", "1e3", "NaN", "1.2.3", ".5"] {
+            assert_eq!(parse_seconds(bad), None, "{bad}");
+        }
+    }
 
     #[test]
     fn round_trip_all_kinds() {

@@ -114,7 +114,7 @@ where
         let frame = msg
             .to_frame(&self.ids, self.foot)
             .ok_or(FootError::BadId(self.foot))?;
-        self.send(&frame)
+        send(&mut self.can, &frame)
     }
 
     /// Sends one image: a header segment and its data segments, in order. Nothing is buffered:
@@ -132,10 +132,6 @@ where
             }
         })?;
         failed.map_or(Ok(()), Err)
-    }
-
-    fn send(&mut self, frame: &CanFrame) -> Result<(), FootError<C::Error>> {
-        send(&mut self.can, frame)
     }
 }
 

@@ -291,6 +291,21 @@ impl TerrainCatalog {
         self.terrains.iter().find(|t| t.name == name).copied()
     }
 
+    /// The known terrain (never [`Terrain::UNKNOWN`]) with this name, or why not: the error
+    /// lists the catalog and names the fix, for a label a user typed.
+    pub fn known(&self, name: &str) -> Result<Terrain, String> {
+        self.by_name(name)
+            .filter(|t| !t.is_unknown())
+            .ok_or_else(|| {
+                let names: Vec<&str> = self.iter().map(|t| t.name).collect();
+                format!(
+                    "`{name}` is not a terrain of the catalog (known: {}); add it with a terrains \
+                 file (--terrains)",
+                    names.join(", ")
+                )
+            })
+    }
+
     /// For printing an id heard on a bus: its name, or `id N` for one the catalog lacks.
     pub fn describe(&self, id: u8) -> String {
         match self.by_id(id) {

@@ -609,7 +609,6 @@ pub fn record(
 /// touchdown to the next terrain's first touchdown (the last to `end_us`).
 pub fn truth_labels(steps: &[StepTruth], end_us: u64) -> String {
     let mut out = String::from("start_s,end_s,terrain,foot\n");
-    let secs = |us: u64| format!("{}.{:06}", us / 1_000_000, us % 1_000_000);
     let feet = steps.iter().map(|s| s.foot).max().map_or(0, |m| m + 1);
     for foot in 0..feet {
         let mine: Vec<&StepTruth> = steps.iter().filter(|s| s.foot == foot).collect();
@@ -622,8 +621,8 @@ pub fn truth_labels(steps: &[StepTruth], end_us: u64) -> String {
             let end = mine.get(j + 1).map_or(end_us, |s| s.touchdown_us);
             out += &format!(
                 "{},{},{},{foot}\n",
-                secs(mine[i].touchdown_us),
-                secs(end),
+                protocol::candump::format_seconds(mine[i].touchdown_us),
+                protocol::candump::format_seconds(end),
                 mine[i].terrain.name()
             );
             i = j + 1;

@@ -298,8 +298,12 @@ impl Classifier {
     pub fn decide_in_contact(&mut self) -> Decision {
         let m = &self.model;
         // An integer sum: exact, and it vectorises (an f64 running sum is one long dependency
-        // chain).
-        let total = self.work.iter().map(|&p| p as u64).sum::<u64>() as f64;
+        // chain). Only when the model scales or checks the load.
+        let total = if m.normalize_load.is_some() || m.load_ranges.is_some() {
+            self.work.iter().map(|&p| p as u64).sum::<u64>() as f64
+        } else {
+            0.0
+        };
         let scale = match m.normalize_load {
             Some(target) if total > 0.0 => (target / total) as f32,
             _ => 1.0,

@@ -247,12 +247,8 @@ pub fn train(
         }),
     };
     fitted?.install(&mut model);
-    if let Some(imgs) = model.images.as_ref().filter(|_| o.check_load) {
-        model.load_ranges = Some(load_ranges(
-            &imgs.pixels,
-            &model.sample_classes,
-            o.unknown_rate,
-        ));
+    if o.check_load {
+        add_load_check(&mut model);
     }
     Ok((model, split))
 }
