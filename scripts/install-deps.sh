@@ -42,7 +42,7 @@ if [ ${#need_apt[@]} -gt 0 ]; then
   DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq "${need_apt[@]}" >/dev/null
 fi
 
-py_ok() { python3 -c "import cantools, can, numpy, sklearn" 2>/dev/null; }
+py_ok() { python3 -c "import cantools, can, numpy, sklearn, mcap, websockets" 2>/dev/null; }
 if ! py_ok; then
   echo "install-deps: pip install -r tests/requirements.txt"
   python3 -m pip install -q -r "$here/tests/requirements.txt"

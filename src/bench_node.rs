@@ -48,6 +48,10 @@ pub struct BenchNodeArgs {
     /// Print the report as one JSON object.
     #[arg(long)]
     pub json: bool,
+    /// Record the node's traffic to this MCAP file while measuring (`presrs node --mcap`):
+    /// the report adds the recorder's CPU, what it wrote and what it dropped.
+    #[arg(long, value_name = "FILE")]
+    pub mcap: Option<PathBuf>,
 }
 
 pub fn run(a: BenchNodeArgs) -> Result<ExitCode> {
@@ -74,8 +78,20 @@ pub fn run(a: BenchNodeArgs) -> Result<ExitCode> {
     match &a.iface {
         None => {
             let bus = InProcBus::new();
-            let node = node::NodeService::new(cfg.clone(), model)?
-                .start(BusSource::InProc(bus.clone()))?;
+            let live = crate::mcap_cmd::LiveArgs {
+                mcap: a.mcap.clone(),
+                foxglove: None,
+            };
+            let recording = live.start(&ids, &protocol::TerrainCatalog::paper());
+            anyhow::ensure!(
+                a.mcap.is_none() || recording.is_some(),
+                "--mcap: the recording could not start (the log says why)"
+            );
+            let node = node::NodeService::new(cfg.clone(), model)?.start_with_tap(
+                BusSource::InProc(bus.clone()),
+                crate::mcap_cmd::tap(&recording),
+            )?;
+            let rec_cpu_start = task_cpu_ns("self", Some(&["record"]));
             let cpu = || task_cpu_ns("self", Some(&["receive", "pipeline", "send"]));
             let result = load::measure(
                 &mut bus.endpoint(),
@@ -85,13 +101,27 @@ pub fn run(a: BenchNodeArgs) -> Result<ExitCode> {
                 total_us,
                 &cpu,
             );
+            let rec_cpu_end = task_cpu_ns("self", Some(&["record"]));
             let stats = node.stop();
-            let m = result?;
             let mem = memory_mb("self");
+            let m = result?;
+            let recorded = recording.map(|r| {
+                let s = r.finish();
+                serde_json::json!({
+                    "file": a.mcap,
+                    "messages": s.stats.messages,
+                    "images": s.stats.images,
+                    "dropped": s.dropped,
+                    "failed": s.failed,
+                    "recorder_cpu_pct_of_one_core": rec_cpu_start.zip(rec_cpu_end)
+                        .map(|(a0, a1)| a1.saturating_sub(a0) as f64 * 1e-9 / (total_us as f64 * 1e-6) * 100.0),
+                })
+            });
             let extra = serde_json::json!({
                 "node_rx_frames": stats.rx_frames,
                 "node_rx_dropped": stats.rx_dropped,
                 "bus_overruns": bus.overruns(),
+                "mcap": recorded,
             });
             report(
                 &a,
@@ -117,11 +147,15 @@ pub fn run(a: BenchNodeArgs) -> Result<ExitCode> {
             let mut rx = protocol::bus::SocketCanBus::open(iface)
                 .with_context(|| format!("--iface {iface}"))?;
             rx.set_filters(&ids.filters(&[MessageKind::TerrainClass, MessageKind::NodeStatus]))?;
-            let mut child = Command::new(std::env::current_exe()?)
-                .args(["node", "--iface", iface, "--model"])
+            let mut cmd = Command::new(std::env::current_exe()?);
+            cmd.args(["node", "--iface", iface, "--model"])
                 .arg(&model_path)
                 .arg("--config")
-                .arg(&cfg_path)
+                .arg(&cfg_path);
+            if let Some(p) = &a.mcap {
+                cmd.arg("--mcap").arg(p);
+            }
+            let mut child = cmd
                 .stdout(Stdio::null())
                 .spawn()
                 .context("starting presrs node")?;

@@ -52,6 +52,10 @@ pub struct DemoArgs {
     /// For the track's terrain names and the node's and controller's catalogs.
     #[command(flatten)]
     pub terrains: crate::cli::TerrainsArg,
+    /// `--mcap FILE` records every frame on the bus and the simulator's truth; `--foxglove`
+    /// serves them live, with the loop paced to real time so there is something to watch.
+    #[command(flatten)]
+    pub live: crate::mcap_cmd::LiveArgs,
 }
 
 pub fn run(a: DemoArgs) -> Result<ExitCode> {
@@ -94,6 +98,11 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
         seed: a.seed,
     };
     let show = !a.json;
+    let recording = a.live.mcap.is_some() || a.live.foxglove.is_some();
+    anyhow::ensure!(
+        !(recording && a.realtime),
+        "--mcap and --foxglove record the lock-step demo (paced to real time with --foxglove); drop --realtime"
+    );
     let (rows, falls) = if a.realtime {
         if show {
             eprintln!(
@@ -111,11 +120,45 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
         }
         (run.rows, run.falls)
     } else {
-        let run = lab::closed_loop::run(&track, model, &lp, |row| {
-            if show {
-                print_row(row)
+        let live = if recording {
+            a.live.start(&lp.node.ids, &catalog)
+        } else {
+            None
+        };
+        // Ctrl-C ends a recorded run properly (the file's summary written); without a
+        // recording it ends the process as always.
+        let signals = match live {
+            Some(_) => Some(crate::runtime::Signals::install()?),
+            None => None,
+        };
+        let tap = live.as_ref().map(|l| l.tap());
+        let mut truth = |t_us: u64, robot: &sim::runner::SimRobot| {
+            if let (Some(tap), Some(t)) = (&tap, crate::sim_cmd::truth(robot, &track, 0)) {
+                tap.offer_truth(t_us, 0, t);
             }
-        })?;
+        };
+        let rec = tap.as_ref().zip(signals.as_ref()).map(|(tap, signals)| {
+            lab::closed_loop::LoopRecording {
+                tap: tap.as_ref(),
+                epoch_us: crate::runtime::epoch_us(),
+                truth: &mut truth,
+                pace: a.live.foxglove.is_some().then_some(1.0),
+                stop: &signals.stop,
+            }
+        });
+        let run = lab::closed_loop::run_recorded(
+            &track,
+            model,
+            &lp,
+            |row| {
+                if show {
+                    print_row(row)
+                }
+            },
+            rec,
+        );
+        crate::mcap_cmd::finish(live);
+        let run = run?;
         (run.rows, run.falls)
     };
     summarize(&rows, falls, &track, &ctrl_cfg, &known, &a)

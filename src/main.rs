@@ -12,6 +12,7 @@ mod cli;
 mod controller_cmd;
 mod demo;
 mod experiment;
+mod mcap_cmd;
 mod node_cmd;
 mod runtime;
 mod sim_cmd;
@@ -50,6 +51,11 @@ enum Cmd {
     Capture(capture_cmd::CaptureArgs),
     /// The simulated hopper and foot on a CAN interface, in real time.
     Sim(sim_cmd::SimArgs),
+    /// A candump log to an MCAP file (Foxglove, PlotJuggler, rosbag2): each message on its
+    /// own channel per foot, each pressure image a foxglove.RawImage.
+    Mcap(mcap_cmd::McapArgs),
+    /// A recording at a glance: a foot's pressure image beside terrain, gait and speed (PNG).
+    View(mcap_cmd::ViewArgs),
     /// Simulator, node and controller in one process on the in-process bus: the closed loop.
     Demo(demo::DemoArgs),
     /// The node's speed: sampled frame -> TerrainClass latency, CPU and memory with N feet at
@@ -116,6 +122,8 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Cmd::Controller(a) => controller_cmd::run(a),
         Cmd::Sim(a) => sim_cmd::run(a),
         Cmd::Capture(a) => capture_cmd::run(a),
+        Cmd::Mcap(a) => mcap_cmd::run(a),
+        Cmd::View(a) => mcap_cmd::view(a),
         Cmd::Demo(args) => demo::run(args),
         Cmd::BenchNode(args) => bench_node::run(args),
         Cmd::Train(a) => cli::train(&a),

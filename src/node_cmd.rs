@@ -35,6 +35,8 @@ pub struct NodeArgs {
     /// Overrides the config's `terrains` key.
     #[command(flatten)]
     pub terrains: crate::cli::TerrainsArg,
+    #[command(flatten)]
+    pub live: crate::mcap_cmd::LiveArgs,
 }
 
 pub fn run(a: NodeArgs) -> Result<ExitCode> {
@@ -46,6 +48,12 @@ pub fn run(a: NodeArgs) -> Result<ExitCode> {
     let model = Model::load(&a.model).context("--model")?;
     match (&a.replay, &a.iface) {
         (Some(log), _) => {
+            anyhow::ensure!(
+                a.live.mcap.is_none() && a.live.foxglove.is_none(),
+                "--mcap and --foxglove record a live node; for a log, run `presrs mcap {} --out FILE.mcap --model {}`",
+                log.display(),
+                a.model.display()
+            );
             // The same decisions on every replay: a refit lands at the step that asked for it.
             cfg.refit = cfg.refit.reproducible();
             let node = NodeService::new(cfg, model)
@@ -65,7 +73,12 @@ pub fn run(a: NodeArgs) -> Result<ExitCode> {
             );
             let node = NodeService::new(cfg, model)
                 .with_context(|| format!("--model {}", a.model.display()))?;
-            let running = node.start(BusSource::Iface(iface.clone()))?;
+            // After the checks above: a bad model or config is an error before any file exists.
+            let recording = a.live.start(node.ids(), node.catalog());
+            let running = node.start_with_tap(
+                BusSource::Iface(iface.clone()),
+                crate::mcap_cmd::tap(&recording),
+            )?;
             while !signals.stopping() && running.is_running() {
                 if signals.take_reload() {
                     match running.reload_model(&a.model) {
@@ -78,6 +91,7 @@ pub fn run(a: NodeArgs) -> Result<ExitCode> {
                 std::thread::sleep(Duration::from_millis(50));
             }
             running.stop();
+            crate::mcap_cmd::finish(recording);
             Ok(ExitCode::SUCCESS)
         }
         (None, None) => anyhow::bail!("give --iface IFACE or --replay FILE.log"),

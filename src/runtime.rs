@@ -37,3 +37,10 @@ impl Signals {
         self.reload.swap(false, Ordering::Relaxed)
     }
 }
+
+/// The wall clock, µs since the Unix epoch (0 if the clock is before it).
+pub fn epoch_us() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_micros() as u64)
+}

@@ -15,8 +15,13 @@ use sim::faults::FaultParams;
 use sim::runner::SimConfig;
 use sim::service::RunOptions;
 
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
 use crate::runtime::Signals;
-use protocol::bus::BusSource;
+use protocol::bus::{BusSource, Tap, open_with_retry};
+use sim::runner::{SimRobot, Track};
 
 #[derive(clap::Args)]
 pub struct SimArgs {
@@ -54,6 +59,52 @@ pub struct SimArgs {
     /// Track terrains and reported names come from this catalog.
     #[command(flatten)]
     pub terrains: crate::cli::TerrainsArg,
+    /// `--mcap FILE`: every frame on the bus (or, with --log, every frame the robot sends) and
+    /// the simulator's truth per leg (`/sim/legN`: speed, position, true terrain) as MCAP;
+    /// `--foxglove`: the same live.
+    #[command(flatten)]
+    pub live: crate::mcap_cmd::LiveArgs,
+}
+
+/// What the simulator knows of leg `foot` and the robot does not.
+pub fn truth(robot: &SimRobot, track: &Track, foot: u8) -> Option<record::SimTruth> {
+    let (speed, x) = robot.speed_and_position(foot)?;
+    Some(record::SimTruth {
+        speed_m_s: speed,
+        position_m: x,
+        terrain: track.terrain_at(x).id(),
+        gait: robot.gait_in_effect(foot).unwrap_or(0),
+        falls: robot.falls.len() as u32,
+    })
+}
+
+/// Reads every frame on `source` for the recorder until `stop` (a second handle: SocketCAN
+/// delivers the simulator's own frames to it too). Opened before it returns, so the recording
+/// misses none of the robot's first frames.
+fn listen(
+    source: BusSource,
+    tap: Arc<record::LiveTap>,
+    stop: Arc<AtomicBool>,
+) -> Result<std::thread::JoinHandle<()>> {
+    let mut bus = open_with_retry(&source, &stop, "record", &mut || {});
+    Ok(std::thread::Builder::new()
+        .name("record-listen".into())
+        .spawn(move || {
+            while let Some(mut b) = bus.take() {
+                loop {
+                    match b.recv(Duration::from_millis(50)) {
+                        Ok(Some(st)) => tap.offer(&st),
+                        Ok(None) if stop.load(Ordering::Relaxed) => return,
+                        Ok(None) => {}
+                        Err(e) => {
+                            tracing::warn!("recording listener: {e}; reopening");
+                            bus = open_with_retry(&source, &stop, "record", &mut || {});
+                            break;
+                        }
+                    }
+                }
+            }
+        })?)
 }
 
 pub fn run(a: SimArgs) -> Result<ExitCode> {
@@ -66,10 +117,11 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         a.speed
     );
     let (gait, damage) = a.foot.checked()?;
+    let feet = a.feet.max(1);
     let cfg = SimConfig {
         track,
         gait: gait.id,
-        feet: a.feet.max(1),
+        feet,
         faults: FaultParams {
             initial_damage_pct: damage,
             ..Default::default()
@@ -77,8 +129,23 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         sensor: a.foot.sensor,
         ..Default::default()
     };
+    let ids = cfg.ids.clone();
+    let recording = a.live.start(&ids, &catalog);
+    let tap = recording.as_ref().map(|r| r.tap());
+    let track = cfg.track.clone();
+    let mut observe = |t_us: u64, robot: &SimRobot| {
+        if let Some(tap) = &tap {
+            for f in 0..feet {
+                if let Some(t) = truth(robot, &track, f) {
+                    tap.offer_truth(t_us, f, t);
+                }
+            }
+        }
+    };
     if let Some(log) = &a.log {
-        return write_log(cfg, &a, log);
+        let r = write_log(cfg, &a, log, tap.as_deref(), &mut observe);
+        crate::mcap_cmd::finish(recording);
+        return r;
     }
     let opts = RunOptions {
         speed: a.speed,
@@ -90,7 +157,24 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
             .clone()
             .context("give --iface IFACE or --log FILE")?,
     );
-    let r = sim::service::run(cfg, &opts, source, &catalog, &signals.stop);
+    let listener = match &tap {
+        Some(tap) => Some(listen(source.clone(), tap.clone(), signals.stop.clone())?),
+        None => None,
+    };
+    // Robot time is the simulator's own; the recording's clock is the bus's (the wall clock).
+    let r = sim::service::run(
+        cfg,
+        &opts,
+        source,
+        &catalog,
+        &signals.stop,
+        &mut |_, robot| observe(crate::runtime::epoch_us(), robot),
+    );
+    if let Some(l) = listener {
+        signals.stop.store(true, Ordering::Relaxed);
+        let _ = l.join();
+    }
+    crate::mcap_cmd::finish(recording);
     // No gait table: the simulator scores the node, not the controller.
     let sum = lab::Summary::of(&r.steps, &Default::default());
     let (n, correct) = (sum.steps, sum.correct);
@@ -115,14 +199,23 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
 }
 
 /// `presrs sim --log`: the robot's frames to a candump log, and its truth to a labels CSV.
-fn write_log(cfg: SimConfig, a: &SimArgs, log: &std::path::Path) -> Result<ExitCode> {
+fn write_log(
+    cfg: SimConfig,
+    a: &SimArgs,
+    log: &std::path::Path,
+    tap: Option<&record::LiveTap>,
+    observe: &mut dyn FnMut(u64, &SimRobot),
+) -> Result<ExitCode> {
     use std::io::Write;
     let duration_us = (a.duration.unwrap_or(0.0).max(0.0) * 1e6) as u64;
     let file = std::fs::File::create(log).with_context(|| format!("--log {}", log.display()))?;
     let mut w = std::io::BufWriter::new(file);
     let mut err = None;
     let mut frames = 0u64;
-    let steps = sim::runner::record(cfg, a.seed, duration_us, &mut |st| {
+    let steps = sim::runner::record(cfg, a.seed, duration_us, observe, &mut |st| {
+        if let Some(tap) = tap {
+            tap.offer(&st);
+        }
         if err.is_none() {
             frames += 1;
             err = protocol::candump::write_record(&mut w, "can0", &st).err();

@@ -6,37 +6,9 @@ mod common;
 
 use std::process::Command;
 
-use node::classifier::Crop;
-use node::classifier::train::{TrainOptions, train};
 use node::{NodeConfig, StancePipeline};
-use presrs::simdata::TrainingSet;
 use protocol::Stamped;
 use sim::runner::{SimConfig, SimRobot};
-
-fn small_model(dir: &std::path::Path) -> std::path::PathBuf {
-    let samples = sim::dataset::generate(&sim::dataset::Options {
-        kind: sim::dataset::Kind::Dynamic,
-        n: Some(20),
-        gait: controller::Gait::g2(),
-        damage_pct: 0.0,
-        sensor: sim::DEFAULT_SENSOR,
-        seed: 4,
-    });
-    let set = TrainingSet::from_samples(samples, &sim::dataset::Kind::Dynamic.terrains());
-    let opts = TrainOptions {
-        crop: Crop {
-            top: 0,
-            bottom: 3,
-            left: 6,
-            right: 0,
-        },
-        ..Default::default()
-    };
-    let (model, _) = train(&set.labelled(), &set.classes, &opts).unwrap();
-    let path = dir.join("model.json");
-    model.save(&path).unwrap();
-    path
-}
 
 /// `presrs node --replay LOG --model MODEL --json`, its lines parsed.
 fn replay_json(log: &std::path::Path, model: &std::path::Path) -> Vec<serde_json::Value> {
@@ -55,7 +27,7 @@ fn replay_json(log: &std::path::Path, model: &std::path::Path) -> Vec<serde_json
 fn replay_prints_the_pipelines_decisions_with_the_logs_timestamps() {
     let dir = std::env::temp_dir().join(format!("presrs-replay-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let model_path = small_model(&dir);
+    let model_path = common::small_model(&dir);
     // 6 s of the robot on the default track, as candump would have logged it.
     let mut robot = SimRobot::new(SimConfig::default(), 9);
     let mut records = Vec::new();
@@ -148,7 +120,7 @@ fn the_example_configs_parse_and_equal_the_defaults() {
 fn the_firmware_examples_log_is_a_run_the_node_decides() {
     let dir = std::env::temp_dir().join(format!("presrs-firmware-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let model_path = small_model(&dir);
+    let model_path = common::small_model(&dir);
     let log = dir.join("foot.log");
     common::output_ok(
         Command::new(env!("CARGO"))

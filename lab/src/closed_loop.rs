@@ -61,14 +61,42 @@ pub struct LoopRun {
     pub falls: u64,
 }
 
+/// A recording of a [`run`]: every frame on the bus and the simulator's truth.
+pub struct LoopRecording<'a> {
+    /// Gets every frame any of the three sends, stamped `epoch_us` + simulated time.
+    pub tap: &'a dyn protocol::bus::Tap,
+    /// Added to simulated time (from 0) in the stamps: the wall clock at the start, so that
+    /// tools show the run at the time it was made.
+    pub epoch_us: u64,
+    /// Called every 10 ms of simulated time with the stamp and the robot.
+    pub truth: &'a mut dyn FnMut(u64, &SimRobot),
+    /// Simulated time per wall time; `None` runs as fast as the machine can (for a live
+    /// view, 1.0: the robot at its own speed).
+    pub pace: Option<f64>,
+    /// Ends the run early when set (SIGINT on a paced run).
+    pub stop: &'a std::sync::atomic::AtomicBool,
+}
+
 /// Runs the loop on `track` with `model` until `p.steps` steps are decided; `on_step` sees each
 /// row as it comes (to print a live log).
 pub fn run(
     track: &Track,
     model: Model,
     p: &LoopParams,
-    mut on_step: impl FnMut(&StepRecord),
+    on_step: impl FnMut(&StepRecord),
 ) -> Result<LoopRun, LabError> {
+    run_recorded(track, model, p, on_step, None)
+}
+
+/// [`run`], recorded (see [`LoopRecording`]).
+pub fn run_recorded(
+    track: &Track,
+    model: Model,
+    p: &LoopParams,
+    mut on_step: impl FnMut(&StepRecord),
+    mut rec: Option<LoopRecording>,
+) -> Result<LoopRun, LabError> {
+    let wall = std::time::Instant::now();
     let clock = ManualClock::new(0);
     let bus = InProcBus::with_clock(Arc::new(clock.clone()), 1 << 16);
     let (mut sim_ep, mut node_ep, mut ctrl_ep) = (bus.endpoint(), bus.endpoint(), bus.endpoint());
@@ -99,11 +127,34 @@ pub fn run(
     let mut sent = Vec::new();
     let mut said = Vec::new();
     let mut out = Vec::new();
+    let offer = |rec: &Option<LoopRecording>, t_us: u64, frame: &protocol::CanFrame| {
+        if let Some(r) = rec {
+            r.tap.offer(&protocol::Stamped {
+                t_us: r.epoch_us + t_us,
+                frame: *frame,
+            });
+        }
+    };
     while rows.len() < p.steps && t_us < limit_us {
         t_us += 1000;
         clock.set_us(t_us);
+        if let Some(r) = rec.as_mut() {
+            if r.stop.load(std::sync::atomic::Ordering::Relaxed) {
+                break;
+            }
+            if let Some(pace) = r.pace.filter(|p| *p > 0.0) {
+                let due = Duration::from_secs_f64(t_us as f64 * 1e-6 / pace);
+                if let Some(wait) = due.checked_sub(wall.elapsed()) {
+                    std::thread::sleep(wait);
+                }
+            }
+            if t_us.is_multiple_of(10_000) {
+                (r.truth)(r.epoch_us + t_us, &robot);
+            }
+        }
         robot.advance_to(t_us, &mut |f| sent.push(f));
         for f in sent.drain(..) {
+            offer(&rec, t_us, &f);
             sim_ep.send(&f)?;
         }
         // The node: frames, then what is due by now (deadlines, the heartbeat).
@@ -113,6 +164,7 @@ pub fn run(
         node.tick(t_us, &mut |o| said.push(o));
         for o in said.drain(..) {
             if let Some(f) = node.frame(&o) {
+                offer(&rec, t_us, &f);
                 node_ep.send(&f)?;
             }
             let Output::Class { foot, class: tc } = o else {
@@ -135,6 +187,7 @@ pub fn run(
         }
         for m in out.drain(..) {
             if let Some(f) = m.to_frame(&ids, 0) {
+                offer(&rec, t_us, &f);
                 ctrl_ep.send(&f)?;
             }
         }
@@ -189,7 +242,14 @@ pub fn run_realtime(
     };
     sim_cfg.faults.initial_damage_pct = p.damage_pct;
     let catalog = node.catalog().clone();
-    let report = sim::service::run(sim_cfg, &opts, BusSource::InProc(bus), &catalog, &stop);
+    let report = sim::service::run(
+        sim_cfg,
+        &opts,
+        BusSource::InProc(bus),
+        &catalog,
+        &stop,
+        &mut |_, _| {},
+    );
     stop.store(true, Ordering::Relaxed);
     let switches = controller
         .join()

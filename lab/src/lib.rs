@@ -13,7 +13,8 @@
 //! [`model`] (the simulator model the demo caches), [`load`] (the load `presrs bench-node`
 //! plays: feet at 100 Hz on a known schedule, and `/proc` CPU and memory readers) and, with the
 //! default `report` feature, [`report`] (the paper's experiments as Markdown and PNG figures,
-//! on the simulator or on a lab's own dataset).
+//! on the simulator or on a lab's own dataset) and [`view`] (a recording's pressure image,
+//! terrain, gait and speed in one PNG, the panels of `docs/foxglove-layout.json`).
 //!
 //! ```no_run
 //! use presrs_lab::{closed_loop, model, score};
@@ -41,6 +42,8 @@ pub mod report;
 pub mod score;
 pub mod simdata;
 pub mod study;
+#[cfg(feature = "report")]
+pub mod view;
 
 pub use closed_loop::{LoopParams, LoopRun};
 pub use score::{Confusion, Summary};

@@ -96,7 +96,17 @@ pub enum ReportError {
     DemoModel(#[source] Box<dyn std::error::Error + Send + Sync>),
 }
 
-fn pe(e: impl std::fmt::Display) -> ReportError {
+/// Registers the bundled font as "sans-serif" (plotters has no system fonts here).
+pub(crate) fn register_font() -> Result<(), ReportError> {
+    plotters::style::register_font(
+        "sans-serif",
+        FontStyle::Normal,
+        include_bytes!("../assets/fonts/DejaVuSans.ttf"),
+    )
+    .map_err(|_| ReportError::Font)
+}
+
+pub(crate) fn pe(e: impl std::fmt::Display) -> ReportError {
     ReportError::Draw(e.to_string())
 }
 
@@ -124,12 +134,7 @@ impl Report {
             path: figures.clone(),
             source,
         })?;
-        plotters::style::register_font(
-            "sans-serif",
-            FontStyle::Normal,
-            include_bytes!("../assets/fonts/DejaVuSans.ttf"),
-        )
-        .map_err(|_| ReportError::Font)?;
+        register_font()?;
         Ok(Self {
             figures,
             quick,
@@ -822,7 +827,7 @@ where
 }
 
 /// The legend every figure uses: boxed, on a nearly opaque white background.
-fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
+pub(crate) fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
     chart: &mut ChartContext<'a, DB, CT>,
     position: SeriesLabelPosition,
 ) -> Result<(), ReportError>

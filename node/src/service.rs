@@ -26,11 +26,11 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use crossbeam_channel::{Receiver, RecvTimeoutError, Sender, TrySendError, bounded};
-use protocol::bus::{Backoff, BusSource, after_bus_error, open_with_retry};
+use protocol::bus::{Backoff, BusSource, Tap, after_bus_error, open_with_retry};
 use protocol::messages::{Message, NodeState, NodeStatus, TerrainClass};
 use protocol::tactile::ReassemblyStats;
 use protocol::terrain::CatalogError;
-use protocol::{CanFrame, IdConfig, Stamped, TerrainCatalog};
+use protocol::{CanFrame, IdConfig, MessageKind, Stamped, TerrainCatalog};
 use thiserror::Error;
 
 use crate::classifier::Model;
@@ -141,6 +141,8 @@ pub struct NodeStats {
     pub incomplete: u64,
     /// Frames with our ids that did not decode.
     pub decode_errors: u64,
+    /// Frames a recorder tap dropped because it was behind (0 without one).
+    pub record_dropped: u64,
 }
 
 impl Shared {
@@ -174,6 +176,7 @@ impl Shared {
             crc_failures: l(&self.crc_failures),
             incomplete: l(&self.incomplete),
             decode_errors: l(&self.decode_errors),
+            record_dropped: 0,
         }
     }
 
@@ -327,6 +330,18 @@ impl NodeService {
 
     /// Runs the node on `bus` on its own threads until [`RunningNode::stop`].
     pub fn start(self, bus: BusSource) -> Result<RunningNode, ServiceError> {
+        self.start_with_tap(bus, None)
+    }
+
+    /// [`NodeService::start`], offering every frame the pipeline takes in and every frame it
+    /// sends to `tap` (a recorder), in the pipeline's order, each once: TerrainClass and
+    /// NodeStatus are taken as sent (the node is their one sender), not as they come back. The tap never makes the node
+    /// wait: what it cannot take it drops and counts ([`NodeStats::record_dropped`]).
+    pub fn start_with_tap(
+        self,
+        bus: BusSource,
+        tap: Option<Arc<dyn Tap>>,
+    ) -> Result<RunningNode, ServiceError> {
         let shared = self.shared.clone();
         shared.set_state(NodeState::Starting);
         let stop = Arc::new(AtomicBool::new(false));
@@ -355,10 +370,12 @@ impl NodeService {
             threads.push(("receive", h));
         }
         {
-            let (st, sh) = (stop.clone(), shared.clone());
+            let (st, sh, tap) = (stop.clone(), shared.clone(), tap.clone());
             let h = spawn(
                 "pipeline",
-                Box::new(move || pipeline_loop(self, &st, &sh, rx_rx, model_rx, out_tx)),
+                Box::new(move || {
+                    pipeline_loop(self, &st, &sh, tap.as_deref(), rx_rx, model_rx, out_tx)
+                }),
             );
             match h {
                 Ok(h) => threads.push(("pipeline", h)),
@@ -387,6 +404,7 @@ impl NodeService {
             catalog,
             models: model_tx,
             shared,
+            tap,
             threads,
         })
     }
@@ -398,6 +416,7 @@ pub struct RunningNode {
     catalog: TerrainCatalog,
     models: Sender<Model>,
     shared: Arc<Shared>,
+    tap: Option<Arc<dyn Tap>>,
     threads: Vec<(&'static str, JoinHandle<()>)>,
 }
 
@@ -420,7 +439,10 @@ impl RunningNode {
 
     /// The counters now.
     pub fn stats(&self) -> NodeStats {
-        self.shared.snapshot()
+        NodeStats {
+            record_dropped: self.tap.as_ref().map_or(0, |t| t.dropped()),
+            ..self.shared.snapshot()
+        }
     }
 
     /// True while every thread runs.
@@ -433,7 +455,10 @@ impl RunningNode {
     pub fn stop(self) -> NodeStats {
         self.stop.store(true, Ordering::Relaxed);
         join(self.threads);
-        let s = self.shared.snapshot();
+        let s = NodeStats {
+            record_dropped: self.tap.as_ref().map_or(0, |t| t.dropped()),
+            ..self.shared.snapshot()
+        };
         tracing::info!(
             rx_frames = s.rx_frames,
             rx_dropped = s.rx_dropped,
@@ -442,6 +467,7 @@ impl RunningNode {
             bus_errors = s.bus_errors,
             steps = s.steps,
             classified = s.classified,
+            record_dropped = s.record_dropped,
             "presrs node stopped"
         );
         s
@@ -495,6 +521,7 @@ fn pipeline_loop(
     mut node: NodeService,
     stop: &AtomicBool,
     sh: &Shared,
+    tap: Option<&dyn Tap>,
     from_receive: Receiver<Stamped>,
     models: Receiver<Model>,
     to_send: Sender<CanFrame>,
@@ -506,10 +533,16 @@ fn pipeline_loop(
     let mut last_log = Instant::now();
     let mut last_counters = node.counters();
     let ids = node.ids().clone();
-    let mut emit = |o: Output| {
-        if let Some(f) = o.to_frame(&ids)
-            && to_send.try_send(f).is_err()
-        {
+    // Sent frames reach the tap stamped with the node's clock at the decision.
+    let mut t_out = 0u64;
+    let emit = |t_us: u64, o: Output| {
+        let Some(f) = o.to_frame(&ids) else {
+            return;
+        };
+        if let Some(tap) = tap {
+            tap.offer(&Stamped { t_us, frame: f });
+        }
+        if to_send.try_send(f).is_err() {
             sh.tx_dropped.fetch_add(1, Ordering::Relaxed);
         }
     };
@@ -523,7 +556,18 @@ fn pipeline_loop(
         match from_receive.recv_timeout(Duration::from_millis(20)) {
             Ok(st) => {
                 anchor = (st.t_us, Instant::now());
-                node.process(&st, &mut emit);
+                // The node's own frames come back through its receive handle (SocketCAN
+                // loops them to the node's other socket): the tap has them from `emit`.
+                if let Some(tap) = tap
+                    && !matches!(
+                        ids.lookup(st.frame.raw_id(), st.frame.is_extended()),
+                        Some((MessageKind::TerrainClass | MessageKind::NodeStatus, _))
+                    )
+                {
+                    tap.offer(&st);
+                }
+                node.process(&st, &mut |o| emit(st.t_us, o));
+                t_out = st.t_us;
             }
             Err(RecvTimeoutError::Timeout) => {}
             Err(RecvTimeoutError::Disconnected) => {
@@ -542,7 +586,8 @@ fn pipeline_loop(
         let now = anchor.0 + anchor.1.elapsed().as_micros() as u64;
         if now >= next_tick_us || now + 1_000_000 < next_tick_us {
             next_tick_us = now + 1000;
-            node.tick(now, &mut emit);
+            node.tick(now, &mut |o| emit(now, o));
+            t_out = now;
         }
         // A log line every 10 s: never per frame.
         if last_log.elapsed() >= Duration::from_secs(10) {
@@ -558,6 +603,7 @@ fn pipeline_loop(
                 crc_failures = r.crc_failures,
                 incomplete = r.incomplete,
                 rx_dropped = sh.rx_dropped.load(Ordering::Relaxed),
+                record_dropped = tap.map_or(0, |t| t.dropped()),
                 damage_pct = node.damage_pct(),
                 "last 10 s"
             );
@@ -566,7 +612,7 @@ fn pipeline_loop(
         }
     }
     let last = node.status(true);
-    emit(Output::Status(last));
+    emit(t_out, Output::Status(last));
 }
 
 fn send_loop(bus: &BusSource, stop: &AtomicBool, sh: &Shared, from_pipeline: Receiver<CanFrame>) {

@@ -686,3 +686,86 @@ fn stance_tracking_properties_hold_for_random_feet_and_malformed_traffic() {
         "{stances} stances, {decided} decided, {classified} from an image"
     );
 }
+
+/// Keeps every frame offered, and refuses (drops and counts) after `room` frames.
+struct Keep {
+    frames: std::sync::Mutex<Vec<Stamped>>,
+    room: usize,
+    dropped: std::sync::atomic::AtomicU64,
+}
+
+impl protocol::bus::Tap for Keep {
+    fn offer(&self, frame: &Stamped) {
+        let mut f = self.frames.lock().unwrap();
+        if f.len() < self.room {
+            f.push(*frame);
+        } else {
+            self.dropped
+                .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        }
+    }
+    fn dropped(&self) -> u64 {
+        self.dropped.load(std::sync::atomic::Ordering::Relaxed)
+    }
+}
+
+#[test]
+fn a_tap_gets_each_frame_in_and_out_once_and_its_drops_are_counted() {
+    use std::sync::Arc;
+    for room in [usize::MAX, 5] {
+        let bus = InProcBus::new();
+        let mut robot = bus.endpoint();
+        let tap = Arc::new(Keep {
+            frames: Default::default(),
+            room,
+            dropped: Default::default(),
+        });
+        let running = NodeService::new(NodeConfig::default(), model())
+            .unwrap()
+            .start_with_tap(
+                BusSource::InProc(bus.clone()),
+                Some(tap.clone() as Arc<dyn protocol::bus::Tap>),
+            )
+            .unwrap();
+        let sent = FakeFoot::new().stance(2, 1_000_000, 200, |_| true);
+        std::thread::sleep(Duration::from_millis(200));
+        for st in &sent {
+            robot.send(&st.frame).unwrap();
+        }
+        let ids = IdConfig::default();
+        let end = Instant::now() + Duration::from_secs(20);
+        while running.stats().classified == 0 && Instant::now() < end {
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        let stats = running.stop();
+        let got = tap.frames.lock().unwrap().clone();
+        let kind = |st: &Stamped| {
+            ids.lookup(st.frame.raw_id(), st.frame.is_extended())
+                .map(|k| k.0)
+        };
+        let count = |k: protocol::MessageKind| got.iter().filter(|s| kind(s) == Some(k)).count();
+        if room == usize::MAX {
+            assert_eq!(stats.record_dropped, 0);
+            // The foot's frames once each, the node's TerrainClass once (not again as it
+            // comes back through the node's receive handle).
+            let foot_frames = got
+                .iter()
+                .filter(|s| sent.iter().any(|x| x.frame == s.frame))
+                .count();
+            assert_eq!(foot_frames, sent.len());
+            assert_eq!(count(protocol::MessageKind::TerrainClass), 1);
+            assert_eq!(
+                count(protocol::MessageKind::NodeStatus) as u64,
+                stats.tx_frames - 1,
+                "every status sent, once"
+            );
+        } else {
+            assert_eq!(got.len(), 5);
+            assert_eq!(
+                stats.record_dropped,
+                (sent.len() + stats.tx_frames as usize - 5) as u64,
+                "what the tap could not take is counted"
+            );
+        }
+    }
+}

@@ -24,18 +24,59 @@ enum Mux {
     Range(u32, u32),
 }
 
+/// One signal of a message, as the DBC describes it (little-endian, `start` is the first bit).
 #[derive(Clone, Debug)]
-struct Sig {
-    name: String,
-    start: u32,
-    len: u32,
-    signed: bool,
-    factor: f64,
-    min: f64,
-    max: f64,
-    unit: &'static str,
+pub struct Signal {
+    /// The DBC's name (`LegAngle`, `TerrainId`).
+    pub name: String,
+    /// First bit, counted from bit 0 of byte 0.
+    pub start: u32,
+    /// Length in bits.
+    pub len: u32,
+    /// Two's complement.
+    pub signed: bool,
+    /// Physical value per bit.
+    pub factor: f64,
+    /// Smallest physical value.
+    pub min: f64,
+    /// Largest physical value.
+    pub max: f64,
+    /// Physical unit (`m`, `rad`, `%`, `us`; empty for counts and ids).
+    pub unit: &'static str,
     mux: Mux,
-    values: Option<&'static str>,
+    /// The value table naming the signal's values (see [`value_table`]).
+    pub values: Option<&'static str>,
+}
+
+type Sig = Signal;
+
+impl Signal {
+    /// The signal's raw integer in `data` (zero where `data` is short).
+    pub fn raw(&self, data: &[u8]) -> i64 {
+        let mut v = 0u64;
+        for i in 0..self.len {
+            let bit = self.start + i;
+            let byte = data.get((bit / 8) as usize).copied().unwrap_or(0);
+            v |= (((byte >> (bit % 8)) & 1) as u64) << i;
+        }
+        if self.signed && self.len < 64 && v & (1 << (self.len - 1)) != 0 {
+            (v | (!0u64 << self.len)) as i64
+        } else {
+            v as i64
+        }
+    }
+
+    /// The physical value in `data`: raw times factor. A factor of 1/n divides by n, so that
+    /// 3 x 0.1 mrad reads 0.0003 rad, not 0.00030000000000000003.
+    pub fn physical(&self, data: &[u8]) -> f64 {
+        let raw = self.raw(data) as f64;
+        let inv = 1.0 / self.factor;
+        if self.factor < 1.0 && (inv - inv.round()).abs() < 1e-9 {
+            raw / inv.round()
+        } else {
+            raw * self.factor
+        }
+    }
 }
 
 fn sig(name: &str, start: u32, len: u32, signed: bool, factor: f64, unit: &'static str) -> Sig {
@@ -81,7 +122,9 @@ impl Sig {
     }
 }
 
-fn signals(kind: MessageKind) -> Vec<Sig> {
+/// The signals of `kind`'s fixed-layout messages, as in the DBC: what third-party tools name
+/// and scale. For the tactile messages, the multiplexed segment layout.
+pub fn signals(kind: MessageKind) -> Vec<Signal> {
     match kind {
         MessageKind::LegCommand => vec![
             sig("LegLengthSetpoint", 0, 16, false, LENGTH_SCALE_M, "m"),
@@ -217,6 +260,41 @@ fn fmt_num(v: f64) -> String {
     }
 }
 
+/// The names of the DBC's value tables.
+pub const VALUE_TABLES: [&str; 4] = ["Terrain", "Phase", "NodeState", "GaitReason"];
+
+/// The value table `name` (one of [`VALUE_TABLES`]): each value with its label, the catalog's
+/// terrains for `Terrain`. Empty for another name.
+pub fn value_table(name: &str, terrains: &TerrainCatalog) -> Vec<(u32, String)> {
+    let fixed = |v: &[&str]| {
+        v.iter()
+            .enumerate()
+            .map(|(i, l)| (i as u32, l.to_string()))
+            .collect()
+    };
+    match name {
+        "Terrain" => {
+            let mut v: Vec<(u32, String)> = terrains
+                .iter()
+                .map(|t| (t.id() as u32, t.name().to_string()))
+                .collect();
+            v.push((TERRAIN_UNKNOWN as u32, "unknown".to_string()));
+            v
+        }
+        "Phase" => fixed(&["flight", "stance"]),
+        "NodeState" => fixed(&[
+            "starting",
+            "running",
+            "degraded",
+            "no_model",
+            "stopping",
+            "wrong_image_size",
+        ]),
+        "GaitReason" => fixed(&["initial", "terrain", "unknown", "node_lost"]),
+        _ => Vec::new(),
+    }
+}
+
 /// The DBC text for an identifier map, with the catalog's terrains in the TerrainId value table.
 pub fn generate(ids: &IdConfig, terrains: &TerrainCatalog) -> String {
     let mut o = String::new();
@@ -231,24 +309,16 @@ pub fn generate(ids: &IdConfig, terrains: &TerrainCatalog) -> String {
     );
     let _ = writeln!(o, "BS_:\n");
     let _ = writeln!(o, "BU_: Controller Leg Foot Node\n");
-    let mut table = String::new();
-    for t in terrains.iter() {
-        let _ = write!(table, " {} \"{}\"", t.id(), t.name());
-    }
-    let _ = write!(table, " {TERRAIN_UNKNOWN} \"unknown\"");
-    let tables: [(&str, String); 4] = [
-        ("Terrain", table.clone()),
-        ("Phase", " 0 \"flight\" 1 \"stance\"".to_string()),
-        (
-            "NodeState",
-            " 0 \"starting\" 1 \"running\" 2 \"degraded\" 3 \"no_model\" 4 \"stopping\" 5 \"wrong_image_size\""
-                .to_string(),
-        ),
-        (
-            "GaitReason",
-            " 0 \"initial\" 1 \"terrain\" 2 \"unknown\" 3 \"node_lost\"".to_string(),
-        ),
-    ];
+    let tables: Vec<(&str, String)> = VALUE_TABLES
+        .iter()
+        .map(|&name| {
+            let mut vals = String::new();
+            for (v, label) in value_table(name, terrains) {
+                let _ = write!(vals, " {v} \"{label}\"");
+            }
+            (name, vals)
+        })
+        .collect();
     for (name, vals) in &tables {
         let _ = writeln!(o, "VAL_TABLE_ {name}{vals};");
     }

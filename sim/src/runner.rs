@@ -576,17 +576,22 @@ pub const LOG_EPOCH_US: u64 = 1_700_000_000_000_000;
 /// Runs the robot alone (no controller: each leg holds its gait) for `duration_us` of simulated
 /// time and hands every frame it sends to `emit`, stamped on a log clock starting at
 /// [`LOG_EPOCH_US`], as `candump -L` would have recorded it. Returns the ground truth of every
-/// step, touchdown times on the same log clock.
+/// step, touchdown times on the same log clock. `observe` sees the robot every 10 ms, with
+/// the log clock's time.
 pub fn record(
     cfg: SimConfig,
     seed: u64,
     duration_us: u64,
+    observe: &mut dyn FnMut(u64, &SimRobot),
     emit: &mut dyn FnMut(protocol::Stamped),
 ) -> Vec<StepTruth> {
     let mut robot = SimRobot::new(cfg, seed);
     let mut t = 0;
     while t < duration_us {
         t = (t + 1000).min(duration_us);
+        if t.is_multiple_of(10_000) {
+            observe(LOG_EPOCH_US + t, &robot);
+        }
         robot.advance_to(t, &mut |frame| {
             emit(protocol::Stamped {
                 t_us: LOG_EPOCH_US + t,

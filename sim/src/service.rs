@@ -98,13 +98,15 @@ pub struct RunOptions {
 const MAX_LAG_US: u64 = 2_000;
 
 /// Runs the simulated robot on `source` until `opts.duration_s` or `stop`; names terrains the
-/// node reports from `catalog`.
+/// node reports from `catalog`. `observe` sees the robot every 10 ms of robot time (a
+/// recording's ground truth), with that time.
 pub fn run(
     cfg: SimConfig,
     opts: &RunOptions,
     source: BusSource,
     catalog: &TerrainCatalog,
     stop: &AtomicBool,
+    observe: &mut dyn FnMut(u64, &SimRobot),
 ) -> SimReport {
     let ids = cfg.ids.clone();
     let (feet, gait) = (cfg.feet, cfg.gait);
@@ -150,8 +152,12 @@ pub fn run(
         if target > t_us + MAX_LAG_US {
             stretched_us += target - (t_us + MAX_LAG_US);
         }
+        let before = t_us;
         t_us = target.min(t_us + MAX_LAG_US);
         robot.advance_to(t_us, &mut |f| out.push(f));
+        if t_us / 10_000 != before / 10_000 {
+            observe(t_us, &robot);
+        }
         for f in out.drain(..) {
             if let Err(e) = bus.send(&f) {
                 send_errors += 1;

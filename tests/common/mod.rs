@@ -201,3 +201,32 @@ pub fn output_ok(cmd: &mut std::process::Command) -> std::process::Output {
     );
     out
 }
+
+/// A small model (20 dynamic G2 images per terrain, the paper's crop), saved in `dir`.
+pub fn small_model(dir: &std::path::Path) -> std::path::PathBuf {
+    let samples = sim::dataset::generate(&sim::dataset::Options {
+        kind: sim::dataset::Kind::Dynamic,
+        n: Some(20),
+        gait: controller::Gait::g2(),
+        damage_pct: 0.0,
+        sensor: sim::DEFAULT_SENSOR,
+        seed: 4,
+    });
+    let set = presrs::simdata::TrainingSet::from_samples(
+        samples,
+        &sim::dataset::Kind::Dynamic.terrains(),
+    );
+    let opts = node::classifier::train::TrainOptions {
+        crop: node::classifier::Crop {
+            top: 0,
+            bottom: 3,
+            left: 6,
+            right: 0,
+        },
+        ..Default::default()
+    };
+    let (model, _) = node::classifier::train::train(&set.labelled(), &set.classes, &opts).unwrap();
+    let path = dir.join("model.json");
+    model.save(&path).unwrap();
+    path
+}

@@ -38,8 +38,10 @@ export PRESRS_FIRMWARE="$target_dir/release/examples/foot_firmware"
 
 setup='modprobe vcan 2>/dev/null || true
 ip link add dev vcan0 type vcan 2>/dev/null || true; ip link set vcan0 mtu 72 up
-ip link add dev vcan1 type vcan 2>/dev/null || true; ip link set vcan1 mtu 16 up'
+ip link add dev vcan1 type vcan 2>/dev/null || true; ip link set vcan1 mtu 16 up
+ip link set lo up 2>/dev/null || true'
 
+# (lo: the live Foxglove view is served on 127.0.0.1.)
 # PRESRS_VCAN_FILTER: a test-name filter for the vcan binary (while developing; CI runs all).
 log=$(mktemp)
 can_here() {

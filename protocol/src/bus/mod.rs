@@ -55,6 +55,16 @@ impl CanBus for Box<dyn CanBus> {
     }
 }
 
+/// Keeps a copy of the traffic a process sees, for a recorder. Called on the threads that
+/// receive and send, per frame: an implementation never blocks and never allocates (a full
+/// queue drops the frame and counts it).
+pub trait Tap: Send + Sync {
+    /// A frame received from, or sent to, the bus (sent frames stamped with the sender's clock).
+    fn offer(&self, frame: &Stamped);
+    /// Frames dropped so far because the recorder was behind.
+    fn dropped(&self) -> u64;
+}
+
 /// True when a frame passes a filter list (empty list: everything passes).
 pub fn passes(filters: &[(u32, u32)], frame: &CanFrame) -> bool {
     filters.is_empty()

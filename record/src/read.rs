@@ -1,0 +1,48 @@
+//! Reading a recording back: the messages of an MCAP file written by [`crate::McapFile`]
+//! (or any MCAP file with JSON channels), for plots and checks without Foxglove.
+
+use std::path::Path;
+
+use crate::RecordError;
+
+/// One message of a recording.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Recorded {
+    /// Its topic.
+    pub topic: String,
+    /// Log time, ns.
+    pub log_time_ns: u64,
+    /// The message, parsed.
+    pub json: serde_json::Value,
+}
+
+/// Every JSON message of the MCAP file at `path`, in file order (a file cut short by a kill
+/// reads up to its last whole chunk). Channels in other encodings are skipped.
+pub fn read_json(path: &Path) -> Result<Vec<Recorded>, RecordError> {
+    let bytes = std::fs::read(path).map_err(|source| RecordError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let stream = mcap::MessageStream::new(&bytes).map_err(|e| RecordError::mcap(path, e))?;
+    let mut out = Vec::new();
+    for m in stream {
+        let m = match m {
+            Ok(m) => m,
+            // The torn end of a killed recording: what came before stands.
+            Err(_) if !out.is_empty() => break,
+            Err(e) => return Err(RecordError::mcap(path, e)),
+        };
+        if m.channel.message_encoding != "json" {
+            continue;
+        }
+        let Ok(json) = serde_json::from_slice(&m.data) else {
+            continue;
+        };
+        out.push(Recorded {
+            topic: m.channel.topic.clone(),
+            log_time_ns: m.log_time,
+            json,
+        });
+    }
+    Ok(out)
+}

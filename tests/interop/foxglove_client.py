@@ -1,0 +1,75 @@
+#!/usr/bin/env python3
+"""An independent Foxglove WebSocket client (protocol foxglove.sdk.v1, formerly foxglove.websocket.v1, spoken with the
+plain `websockets` package): connects to a presrs live view, subscribes to the topics given,
+and prints one JSON line per topic with the first message received on it, then exits.
+
+    foxglove_client.py ws://127.0.0.1:8765 /foot0/image /foot0/terrain [--timeout 60]
+
+Exits 1 when a topic got nothing before the timeout (the line says which)."""
+import asyncio, json, struct, sys, time
+
+import websockets
+
+
+async def main(url, topics, timeout):
+    deadline = time.monotonic() + timeout
+    ws = None
+    while ws is None:  # the server may still be starting
+        try:
+            ws = await websockets.connect(url, subprotocols=["foxglove.sdk.v1"], max_size=None)
+        except OSError:
+            if time.monotonic() > deadline:
+                print(json.dumps({"error": f"cannot connect to {url}"}))
+                return 1
+            await asyncio.sleep(0.2)
+    subs, got, schemas, next_id = {}, {}, {}, 1
+    async with ws:
+        while len(got) < len(topics):
+            left = deadline - time.monotonic()
+            if left <= 0:
+                break
+            try:
+                msg = await asyncio.wait_for(ws.recv(), left)
+            except asyncio.TimeoutError:
+                break
+            if isinstance(msg, str):
+                m = json.loads(msg)
+                if m.get("op") == "advertise":
+                    new = []
+                    for ch in m["channels"]:
+                        if ch["topic"] in topics and ch["topic"] not in subs.values():
+                            subs[next_id] = ch["topic"]
+                            schemas[ch["topic"]] = (ch["schemaName"], ch["encoding"], ch.get("schema", ""))
+                            new.append({"id": next_id, "channelId": ch["id"]})
+                            next_id += 1
+                    if new:
+                        await ws.send(json.dumps({"op": "subscribe", "subscriptions": new}))
+            else:
+                op = msg[0]
+                if op != 1:  # MessageData
+                    continue
+                sub, log_time = struct.unpack_from("<IQ", msg, 1)
+                topic = subs.get(sub)
+                if topic and topic not in got:
+                    name, enc, schema = schemas[topic]
+                    got[topic] = {
+                        "topic": topic,
+                        "schema_name": name,
+                        "encoding": enc,
+                        "schema_is_json": bool(json.loads(schema)) if schema else False,
+                        "log_time": log_time,
+                        "message": json.loads(msg[13:].decode()),
+                    }
+    for t in topics:
+        print(json.dumps(got.get(t, {"topic": t, "error": "nothing received"})))
+    return 0 if len(got) == len(topics) else 1
+
+
+if __name__ == "__main__":
+    args = sys.argv[1:]
+    timeout = 60.0
+    if "--timeout" in args:
+        i = args.index("--timeout")
+        timeout = float(args[i + 1])
+        del args[i : i + 2]
+    sys.exit(asyncio.run(main(args[0], args[1:], timeout)))
