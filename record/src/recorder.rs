@@ -519,6 +519,37 @@ mod tests {
     }
 
     #[test]
+    fn a_16_bit_image_is_mono16_little_endian() {
+        let ids = IdConfig::default();
+        let mut r = Recorder::new(ids.clone(), TerrainCatalog::paper());
+        let mut m = Memory::default();
+        let px: Vec<u16> = (0..16 * 12).map(|i| 0x0100 * i as u16 + 7).collect();
+        let img = ImageRef {
+            rows: 12,
+            cols: 16,
+            bits: 16,
+            timestamp_us: 0,
+            pixels: &px,
+        };
+        let mut frames = Vec::new();
+        Segmenter::new(Variant::Fd, ids)
+            .frames(0, 3, &img, |f| frames.push(f))
+            .unwrap();
+        for f in frames {
+            r.frame(&Stamped { t_us: 9, frame: f }, &mut m).unwrap();
+        }
+        let i = &json(&m, "/foot0/image")[0];
+        assert_eq!(i["encoding"], "mono16");
+        assert_eq!(
+            (i["width"].as_u64(), i["height"].as_u64()),
+            (Some(16), Some(12))
+        );
+        assert_eq!(i["step"], 32, "two bytes per pixel");
+        // Pixels 7, 0x0107, 0x0207 little-endian: 07 00 07 01 07 02 -> "BwAHAQcC".
+        assert!(i["data"].as_str().unwrap().starts_with("BwAHAQcC"));
+    }
+
+    #[test]
     fn foreign_and_malformed_frames_are_counted_not_recorded() {
         let ids = IdConfig::default();
         let mut r = Recorder::new(ids.clone(), TerrainCatalog::paper());
