@@ -316,8 +316,8 @@ impl Skin {
             // force is piecewise linear, convex and falling in z: Newton's method from a depth
             // with too much force never overshoots and is exact once in the root's segment
             // (a few passes over the cells where a 40-step bisection took about 50): `presrs sim
-            // --log F --duration 20` 1.80 s -> 0.80 s, the same images to the bit (the vcan
-            // suite runs the simulator under emulation, where this was its bottleneck).
+            // --log F --duration 20` 1.80 s -> 0.80 s on the host, the same images to the bit.
+            // (In the vcan VM the simulator's pace is set by its loop, not by this: unchanged.)
             let depth = if contact.k_lo > 0.0 {
                 self.hinges.clear();
                 for i in 0..contact.lo.len() {
