@@ -46,10 +46,7 @@ pub struct CaptureArgs {
 }
 
 pub fn run(a: CaptureArgs) -> Result<ExitCode> {
-    let mut cfg = crate::cli::load_node_config(a.config.as_deref())?;
-    if a.terrains.terrains.is_some() {
-        cfg.terrains = a.terrains.terrains.clone();
-    }
+    let cfg = crate::cli::load_node_config(a.config.as_deref(), &a.terrains)?;
     let catalog = cfg.catalog()?;
     let labelling = match (&a.label, &a.labels) {
         (Some(name), _) => Labelling::All(

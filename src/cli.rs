@@ -41,12 +41,17 @@ pub fn load_track(
     }
 }
 
-/// `--config FILE` of the node (defaults without one).
-pub fn load_node_config(path: Option<&Path>) -> Result<NodeConfig> {
-    let Some(p) = path else {
-        return Ok(NodeConfig::default());
+/// `--config FILE` of the node (defaults without one), its `terrains` key overridden by
+/// `--terrains` when given.
+pub fn load_node_config(path: Option<&Path>, terrains: &TerrainsArg) -> Result<NodeConfig> {
+    let mut cfg = match path {
+        Some(p) => NodeConfig::load(p).context("--config")?,
+        None => NodeConfig::default(),
     };
-    NodeConfig::load(p).context("--config")
+    if terrains.terrains.is_some() {
+        cfg.terrains = terrains.terrains.clone();
+    }
+    Ok(cfg)
 }
 
 /// The model given, or the cached simulator model (trained on first run), saying which.

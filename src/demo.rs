@@ -71,10 +71,9 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
     }
     let known: Vec<String> = model.classes.iter().map(|c| c.name.clone()).collect();
     let mut ctrl_cfg = ControllerConfig::default();
-    let mut node_cfg = crate::cli::load_node_config(a.node_config.as_deref())?;
+    let node_cfg = crate::cli::load_node_config(a.node_config.as_deref(), &a.terrains)?;
     if a.terrains.terrains.is_some() {
         ctrl_cfg.terrains = a.terrains.terrains.clone();
-        node_cfg.terrains = a.terrains.terrains.clone();
     }
     model.check_catalog(&node_cfg.catalog()?)?;
     let fixed = match &a.fixed_gait {

@@ -34,10 +34,7 @@ pub struct McapArgs {
 }
 
 pub fn run(a: McapArgs) -> Result<ExitCode> {
-    let mut cfg = crate::cli::load_node_config(a.config.as_deref())?;
-    if a.terrains.terrains.is_some() {
-        cfg.terrains = a.terrains.terrains.clone();
-    }
+    let mut cfg = crate::cli::load_node_config(a.config.as_deref(), &a.terrains)?;
     let catalog = cfg.catalog().context("--config terrains")?;
     let ids = cfg.ids.clone();
     let mut node = match &a.model {
@@ -60,16 +57,13 @@ pub fn run(a: McapArgs) -> Result<ExitCode> {
         let st = &r.stamped;
         rec.frame(st, &mut out).context("--out")?;
         if let Some(node) = node.as_mut() {
-            // The node on the log's clock, as `presrs node --replay` runs it.
-            let t = st.t_us;
-            let mut take = |o: Output| {
+            // The node on the log's clock, one record at a time, as `presrs node --replay`.
+            node.replay(std::iter::once(st), &mut |t, o| {
                 if let Output::Class { foot, class } = o {
-                    decided.push((foot, class));
+                    decided.push((t, foot, class));
                 }
-            };
-            node.tick(t, &mut take);
-            node.process(st, &mut take);
-            for (foot, class) in decided.drain(..) {
+            });
+            for (t, foot, class) in decided.drain(..) {
                 rec.model_decision(t, foot, &class, &mut out)
                     .context("--out")?;
             }

@@ -40,10 +40,7 @@ pub struct NodeArgs {
 }
 
 pub fn run(a: NodeArgs) -> Result<ExitCode> {
-    let mut cfg = crate::cli::load_node_config(a.config.as_deref())?;
-    if a.terrains.terrains.is_some() {
-        cfg.terrains = a.terrains.terrains.clone();
-    }
+    let mut cfg = crate::cli::load_node_config(a.config.as_deref(), &a.terrains)?;
     // The error names the file already.
     let model = Model::load(&a.model).context("--model")?;
     match (&a.replay, &a.iface) {

@@ -15,12 +15,10 @@ use sim::faults::FaultParams;
 use sim::runner::SimConfig;
 use sim::service::RunOptions;
 
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Duration;
+use std::sync::atomic::Ordering;
 
 use crate::runtime::Signals;
-use protocol::bus::{BusSource, Tap, open_with_retry};
+use protocol::bus::{BusSource, Tap};
 use sim::runner::{SimRobot, Track};
 
 #[derive(clap::Args)]
@@ -78,35 +76,6 @@ pub fn truth(robot: &SimRobot, track: &Track, foot: u8) -> Option<record::SimTru
     })
 }
 
-/// Reads every frame on `source` for the recorder until `stop` (a second handle: SocketCAN
-/// delivers the simulator's own frames to it too). Opened before it returns, so the recording
-/// misses none of the robot's first frames.
-fn listen(
-    source: BusSource,
-    tap: Arc<record::LiveTap>,
-    stop: Arc<AtomicBool>,
-) -> Result<std::thread::JoinHandle<()>> {
-    let mut bus = open_with_retry(&source, &stop, "record", &mut || {});
-    Ok(std::thread::Builder::new()
-        .name("record-listen".into())
-        .spawn(move || {
-            while let Some(mut b) = bus.take() {
-                loop {
-                    match b.recv(Duration::from_millis(50)) {
-                        Ok(Some(st)) => tap.offer(&st),
-                        Ok(None) if stop.load(Ordering::Relaxed) => return,
-                        Ok(None) => {}
-                        Err(e) => {
-                            tracing::warn!("recording listener: {e}; reopening");
-                            bus = open_with_retry(&source, &stop, "record", &mut || {});
-                            break;
-                        }
-                    }
-                }
-            }
-        })?)
-}
-
 pub fn run(a: SimArgs) -> Result<ExitCode> {
     let signals = Signals::install()?;
     let catalog = a.terrains.catalog()?;
@@ -158,7 +127,11 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
             .context("give --iface IFACE or --log FILE")?,
     );
     let listener = match &tap {
-        Some(tap) => Some(listen(source.clone(), tap.clone(), signals.stop.clone())?),
+        Some(tap) => Some(record::listen(
+            source.clone(),
+            tap.clone(),
+            signals.stop.clone(),
+        )?),
         None => None,
     };
     // Robot time is the simulator's own; the recording's clock is the bus's (the wall clock).

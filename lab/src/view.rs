@@ -32,47 +32,6 @@ struct Image {
     px: Vec<u8>,
 }
 
-fn decode_image(v: &serde_json::Value) -> Option<(usize, usize, Vec<u8>)> {
-    if v["encoding"] != "mono8" {
-        return None;
-    }
-    let (w, h) = (
-        v["width"].as_u64()? as usize,
-        v["height"].as_u64()? as usize,
-    );
-    let px = base64_decode(v["data"].as_str()?)?;
-    (px.len() == w * h).then_some((w, h, px))
-}
-
-fn base64_decode(s: &str) -> Option<Vec<u8>> {
-    let val = |c: u8| -> Option<u32> {
-        Some(match c {
-            b'A'..=b'Z' => c - b'A',
-            b'a'..=b'z' => c - b'a' + 26,
-            b'0'..=b'9' => c - b'0' + 52,
-            b'+' => 62,
-            b'/' => 63,
-            _ => return None,
-        } as u32)
-    };
-    let b = s.trim_end_matches('=').as_bytes();
-    let mut out = Vec::with_capacity(b.len() * 3 / 4);
-    for c in b.chunks(4) {
-        let mut n = 0u32;
-        for (i, &x) in c.iter().enumerate() {
-            n |= val(x)? << (18 - 6 * i);
-        }
-        out.push((n >> 16) as u8);
-        if c.len() > 2 {
-            out.push((n >> 8) as u8);
-        }
-        if c.len() > 3 {
-            out.push(n as u8);
-        }
-    }
-    Some(out)
-}
-
 /// Pressure 0..1 to colour: dark blue through green to yellow-red, as Foxglove's "turbo".
 fn heat(v: f64) -> RGBColor {
     let v = v.clamp(0.0, 1.0);
@@ -102,7 +61,9 @@ pub fn render(
     };
     let images: Vec<Image> = on(format!("/foot{foot}/image"))
         .into_iter()
-        .filter_map(|m| decode_image(&m.json).map(|(w, h, px)| Image { t: t(m), w, h, px }))
+        .filter_map(|m| {
+            record::read::mono8_image(&m.json).map(|(w, h, px)| Image { t: t(m), w, h, px })
+        })
         .collect();
     let classes = on(format!("/foot{foot}/terrain"));
     let model = on(format!("/foot{foot}/terrain/model"));
@@ -328,14 +289,6 @@ pub fn render(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn base64_round_trips_the_recorders_encoding() {
-        assert_eq!(base64_decode("Zm9vYmFy").unwrap(), b"foobar");
-        assert_eq!(base64_decode("Zm8=").unwrap(), b"fo");
-        assert_eq!(base64_decode("Zg==").unwrap(), b"f");
-        assert!(base64_decode("Zm9v!").is_none());
-    }
 
     #[test]
     fn heat_runs_from_dark_to_bright() {

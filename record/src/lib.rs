@@ -30,6 +30,7 @@
 
 use std::path::{Path, PathBuf};
 
+pub mod base64;
 #[cfg(feature = "foxglove")]
 mod foxglove_server;
 mod live;
@@ -40,7 +41,7 @@ pub mod schema;
 
 #[cfg(feature = "foxglove")]
 pub use foxglove_server::{DEFAULT_ADDR, FoxgloveServer};
-pub use live::{LiveRecorder, LiveSummary, LiveTap};
+pub use live::{LiveRecorder, LiveSummary, LiveTap, listen};
 pub use mcap_file::McapFile;
 pub use recorder::{Channel, RecordStats, Recorder, SimTruth, Sink, Topic};
 

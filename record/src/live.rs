@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 
 use crossbeam_channel::{Receiver, Sender, TryRecvError, TrySendError, bounded};
 use protocol::Stamped;
-use protocol::bus::Tap;
+use protocol::bus::{BusSource, Tap, open_with_retry};
 
 use crate::RecordError;
 use crate::recorder::{Channel, RecordStats, Recorder, SimTruth, Sink};
@@ -125,6 +125,37 @@ impl LiveRecorder {
         s.dropped = self.tap.dropped();
         s
     }
+}
+
+/// Reads every frame on `source` into `tap` on a thread of its own until `stop`: a recorder
+/// beside a process that does not record itself (SocketCAN delivers that process's frames to
+/// this second socket too). Opened before it returns, so no early frame is missed; reopened
+/// after a bus error.
+pub fn listen(
+    source: BusSource,
+    tap: Arc<LiveTap>,
+    stop: Arc<AtomicBool>,
+) -> Result<JoinHandle<()>, RecordError> {
+    let mut bus = open_with_retry(&source, &stop, "record", &mut || {});
+    std::thread::Builder::new()
+        .name("record-listen".into())
+        .spawn(move || {
+            while let Some(mut b) = bus.take() {
+                loop {
+                    match b.recv(Duration::from_millis(50)) {
+                        Ok(Some(st)) => tap.offer(&st),
+                        Ok(None) if stop.load(Ordering::Relaxed) => return,
+                        Ok(None) => {}
+                        Err(e) => {
+                            tracing::warn!("recording listener: {e}; reopening");
+                            bus = open_with_retry(&source, &stop, "record", &mut || {});
+                            break;
+                        }
+                    }
+                }
+            }
+        })
+        .map_err(RecordError::Spawn)
 }
 
 impl Drop for LiveRecorder {

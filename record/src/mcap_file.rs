@@ -19,8 +19,8 @@ pub struct McapFile {
     path: PathBuf,
     writer: Option<mcap::Writer<BufWriter<File>>>,
     schemas: HashMap<String, u16>,
-    channels: Vec<u16>,
-    sequence: Vec<u32>,
+    /// Per recorder channel index: the file's channel id and its last sequence number.
+    channels: Vec<(u16, u32)>,
 }
 
 impl McapFile {
@@ -47,7 +47,6 @@ impl McapFile {
             writer: Some(writer),
             schemas: HashMap::new(),
             channels: Vec::new(),
-            sequence: Vec::new(),
         })
     }
 
@@ -86,22 +85,19 @@ impl Sink for McapFile {
             .add_channel(schema_id, &channel.topic, "json", &Default::default())
             .map_err(|e| RecordError::mcap(&path, e))?;
         if self.channels.len() <= index {
-            self.channels.resize(index + 1, 0);
-            self.sequence.resize(index + 1, 0);
+            self.channels.resize(index + 1, (0, 0));
         }
-        self.channels[index] = id;
+        self.channels[index] = (id, 0);
         Ok(())
     }
 
     fn write(&mut self, index: usize, log_time_ns: u64, data: &[u8]) -> Result<(), RecordError> {
-        let (Some(&channel_id), Some(seq)) =
-            (self.channels.get(index), self.sequence.get_mut(index))
-        else {
+        let Some((channel_id, seq)) = self.channels.get_mut(index) else {
             return Err(RecordError::Internal("a message on a channel never added"));
         };
         *seq = seq.wrapping_add(1);
         let header = mcap::records::MessageHeader {
-            channel_id,
+            channel_id: *channel_id,
             sequence: *seq,
             log_time: log_time_ns,
             publish_time: log_time_ns,

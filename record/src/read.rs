@@ -46,3 +46,17 @@ pub fn read_json(path: &Path) -> Result<Vec<Recorded>, RecordError> {
     }
     Ok(out)
 }
+
+/// A `foxglove.RawImage` message's mono8 pixels: (width, height, row-major bytes); `None` for
+/// another encoding or a malformed message.
+pub fn mono8_image(json: &serde_json::Value) -> Option<(usize, usize, Vec<u8>)> {
+    if json["encoding"] != "mono8" {
+        return None;
+    }
+    let (w, h) = (
+        json["width"].as_u64()? as usize,
+        json["height"].as_u64()? as usize,
+    );
+    let px = crate::base64::decode(json["data"].as_str()?)?;
+    (px.len() == w * h).then_some((w, h, px))
+}
