@@ -4,7 +4,8 @@
 //!
 //! `cargo bench --bench classify`. The same figures, per image, come from `presrs eval --json`.
 //!
-//! Each classify bench runs twice, with the native kernels (AVX2/FMA/F16C on such an x86-64
+//! Each classify bench runs with the novelty score and without it (the density rule of older
+//! model files), and twice, with the native kernels (AVX2/FMA/F16C on such an x86-64
 //! CPU) and with the portable ones (the target's baseline SIMD: SSE2 here, NEON on an ARM
 //! computer), in one run, so that their ratio is measured on one machine at one time.
 
@@ -53,11 +54,22 @@ fn bench(c: &mut Criterion) {
     assert_eq!(model.n_samples(), 80);
     assert_eq!(model.h, 52);
     let test: Vec<&PressureImage> = split.test.iter().map(|&i| &images[i]).collect();
-    for kernels in [Kernels::Native, Kernels::Portable] {
-        let mut classifier = Classifier::with_kernels(model.clone(), kernels);
+    assert!(model.novelty.is_some());
+    // Each kernel set with the novelty score (kNN distance and PCA residual, issue 25) and
+    // without (a model file from before it: the density rule), in one run: the issue's budget
+    // is 20% over the classify of before.
+    let mut without = model.clone();
+    without.novelty = None;
+    for (kernels, m, what) in [
+        (Kernels::Native, &model, "novelty"),
+        (Kernels::Native, &without, "density only"),
+        (Kernels::Portable, &model, "novelty"),
+        (Kernels::Portable, &without, "density only"),
+    ] {
+        let mut classifier = Classifier::with_kernels(m.clone(), kernels);
         let mut i = 0;
         let name = format!(
-            "classify 44x44 -> 40x40, PCA 52, 80 samples [{}]",
+            "classify 44x44 -> 40x40, PCA 52, 80 samples, {what} [{}]",
             kernels.describe()
         );
         c.bench_function(&name, |b| {

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Installs what the tests need on a fresh Debian machine: Python cantools/python-can (the
-# independent CAN clients), can-utils, and for kernels without CAN the VM runner (qemu, a Debian
+# independent CAN clients), jiku-data (real plantar-pressure images for the open-set test),
+# can-utils, and for kernels without CAN the VM runner (qemu, a Debian
 # kernel with the vcan module, busybox, virtme-ng). Idempotent; quick when all is there.
 #   --vm           also the VM runner
 #   --cross arm64  also the arm64 cross toolchain (Debian's gcc-aarch64-linux-gnu, qemu-user to
@@ -42,7 +43,7 @@ if [ ${#need_apt[@]} -gt 0 ]; then
   DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq "${need_apt[@]}" >/dev/null
 fi
 
-py_ok() { python3 -c "import cantools, can, numpy, sklearn, mcap, websockets" 2>/dev/null; }
+py_ok() { python3 -c "import cantools, can, numpy, sklearn, mcap, websockets, jikudata" 2>/dev/null; }
 if ! py_ok; then
   echo "install-deps: pip install -r tests/requirements.txt"
   python3 -m pip install -q -r "$here/tests/requirements.txt"

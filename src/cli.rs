@@ -111,6 +111,12 @@ pub struct TrainArgs {
     /// images do not show.
     #[arg(long)]
     pub check_load: bool,
+    /// Calibrate the unknown-terrain rejection on this dataset (DIR/<terrain>/<images>: another
+    /// run of terrains the model knows, e.g. a second `presrs capture`). Without it, a --data
+    /// folder whose manifest names two or more runs of a terrain calibrates on its last run;
+    /// else on the training run's unused images, with a measured margin.
+    #[arg(long, value_name = "DIR")]
+    pub calibrate: Option<PathBuf>,
     #[command(flatten)]
     pub terrains: TerrainsArg,
 }
@@ -138,15 +144,99 @@ pub fn train(a: &TrainArgs) -> Result<ExitCode> {
         );
     }
     let set = presrs::simdata::TrainingSet::from_dataset(ds, &catalog)?;
-    let classes = &set.classes;
-    let labelled = set.labelled();
+    // Whole runs held out for calibration where the manifest names them (not with --calibrate,
+    // which brings its own run, nor without rejection).
+    let runs = if a.calibrate.is_none() && a.unknown_rate > 0.0 {
+        set.split_runs(1)
+    } else {
+        presrs::simdata::RunSplit {
+            train: set.clone(),
+            calibration: set.subset(&[]),
+            fresh: set.subset(&[]),
+        }
+    };
+    let classes = &runs.train.classes;
+    let labelled = runs.train.labelled();
     if labelled.is_empty() {
         bail!("{}: no images found", data.display());
     }
     let t0 = Instant::now();
-    let (model, split) = train_model(&labelled, classes, &opts)?;
+    let (mut model, split) = train_model(&labelled, classes, &opts)?;
+    let cal_set = match &a.calibrate {
+        Some(dir) if a.unknown_rate > 0.0 => {
+            let ds = load_dataset(dir, a.skip_bad).with_context(|| {
+                format!("reading the calibration run --calibrate {}", dir.display())
+            })?;
+            let s = presrs::simdata::TrainingSet::from_dataset(ds, &catalog)
+                .with_context(|| format!("the calibration run --calibrate {}", dir.display()))?;
+            let name = dir.display().to_string();
+            Some((s, vec![name]))
+        }
+        Some(dir) => bail!(
+            "--calibrate {} with --unknown-rate 0: a model that rejects nothing has nothing to \
+             calibrate; drop one of them",
+            dir.display()
+        ),
+        None if !runs.calibration.images.is_empty() => {
+            let names = runs.calibration.run_names();
+            Some((runs.calibration.clone(), names))
+        }
+        None => None,
+    };
+    if let Some((cal, names)) = &cal_set {
+        cal.calibrate(&mut model, names)?;
+        let cap = node::classifier::train::MAX_CALIBRATION_PER_CLASS;
+        let over: usize = (0..cal.classes.len())
+            .map(|k| {
+                cal.labels
+                    .iter()
+                    .filter(|&&l| l == k)
+                    .count()
+                    .saturating_sub(cap)
+            })
+            .sum();
+        if over > 0 {
+            println!(
+                "calibration run: {over} of its {} images not used (at most {cap} per terrain, \
+                 the first ones)",
+                cal.images.len()
+            );
+        }
+    }
     let took = t0.elapsed();
     model.save(out)?;
+    match &model.novelty {
+        Some(nv) => {
+            let c = &nv.calibration;
+            println!(
+                "unknown terrain: calibrated on {} ({} images{}) to --unknown-rate {}: the check \
+                 calls {:.1}% of them unknown ({:.1}% were taken for another terrain){}",
+                c.source.describe(),
+                c.images,
+                if c.runs.is_empty() {
+                    String::new()
+                } else {
+                    format!(" of {}", c.runs.join(", "))
+                },
+                c.rate,
+                100.0 * c.called_unknown,
+                100.0 * c.misclassified,
+                if c.margin > 1.0 {
+                    format!(
+                        " before the margin (x{}); with one run only, calibrate on a second one \
+                         (--calibrate DIR) for thresholds that fit the robot's next run",
+                        c.margin
+                    )
+                } else {
+                    String::new()
+                }
+            );
+        }
+        None if a.unknown_rate > 0.0 => println!(
+            "unknown terrain: no calibration image showed contact; the density rule decides"
+        ),
+        None => println!("unknown terrain: rejection off (--unknown-rate 0)"),
+    }
     println!(
         "trained on {} + {} images ({} classes), h = {}, kernel width {:.4}, {:.1} ms; {} images left for testing; wrote {}",
         split.train.len(),
@@ -293,7 +383,12 @@ pub fn eval(
     Ok(ExitCode::SUCCESS)
 }
 
-pub fn classify(model_path: &Path, files: &[PathBuf], terrains: &TerrainsArg) -> Result<ExitCode> {
+pub fn classify(
+    model_path: &Path,
+    files: &[PathBuf],
+    json: bool,
+    terrains: &TerrainsArg,
+) -> Result<ExitCode> {
     let model = Model::load(model_path)?;
     model.check_catalog(&terrains.catalog()?)?;
     let names: Vec<String> = model.classes.iter().map(|c| c.name.clone()).collect();
@@ -314,7 +409,22 @@ pub fn classify(model_path: &Path, files: &[PathBuf], terrains: &TerrainsArg) ->
             } else {
                 String::new()
             };
-            println!("{}{frame}\t{name}\t{:.3}", f.display(), d.confidence);
+            if json {
+                // JSON has no infinity: an image without contact has no novelty to give.
+                let num = |v: f64| v.is_finite().then_some(v);
+                let v = serde_json::json!({
+                    "file": format!("{}{frame}", f.display()),
+                    "terrain": name,
+                    "contact": d.contact,
+                    "best": d.contact.then(|| names[d.best].as_str()),
+                    "confidence": d.confidence,
+                    "novelty": num(d.novelty),
+                    "threshold": num(d.threshold),
+                });
+                println!("{v}");
+            } else {
+                println!("{}{frame}\t{name}\t{:.3}", f.display(), d.confidence);
+            }
         }
     }
     Ok(ExitCode::SUCCESS)

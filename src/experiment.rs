@@ -47,7 +47,12 @@ pub struct ExperimentArgs {
     /// With `--data`: go on past unreadable images and count them.
     #[arg(long, requires = "data")]
     pub skip_bad: bool,
-    /// With `--data`: the catalog its class folders are named in.
+    /// More datasets for the open-set section (repeatable), each split by the runs of its
+    /// capture manifest: e.g. the real SpeedPP2D pressure maps that `scripts/speedpp2d.py`
+    /// writes (with `--terrains DIR/terrains.toml`).
+    #[arg(long, value_name = "DIR")]
+    pub extra_source: Vec<PathBuf>,
+    /// With `--data` or `--extra-source`: the catalog its class folders are named in.
     #[command(flatten)]
     pub terrains: crate::cli::TerrainsArg,
 }
@@ -72,7 +77,18 @@ pub fn run(a: ExperimentArgs) -> Result<ExitCode> {
         }
         None => None,
     };
-    let ctx = Report::new(a.out.join("figures"), a.quick, a.seed, user)?;
+    let mut extra = Vec::new();
+    for dir in &a.extra_source {
+        let ds = node::classifier::dataset::load_dataset(dir, a.skip_bad)
+            .with_context(|| format!("reading --extra-source {}", dir.display()))?;
+        extra.push(UserData {
+            dir: dir.clone(),
+            set: TrainingSet::from_dataset(ds, &a.terrains.catalog()?)?,
+            crop: Crop::default(),
+        });
+    }
+    let mut ctx = Report::new(a.out.join("figures"), a.quick, a.seed, user)?;
+    ctx.extra = extra;
     let t0 = std::time::Instant::now();
     let list: Vec<Experiment> = match a.which {
         Which::All => Experiment::ALL.to_vec(),
@@ -103,6 +119,12 @@ pub fn run(a: ExperimentArgs) -> Result<ExitCode> {
     if a.quick {
         command.push_str(" --quick");
     }
+    for d in &a.extra_source {
+        let _ = write!(command, " --extra-source {}", d.display());
+    }
+    if let Some(t) = &a.terrains.terrains {
+        let _ = write!(command, " --terrains {}", t.display());
+    }
     let source = match &ctx.user {
         None => "# Reproducing the paper on simulated data\n\n\
                  Every number and figure below comes from the simulator in `sim/` (hopper, \
@@ -132,6 +154,20 @@ pub fn run(a: ExperimentArgs) -> Result<ExitCode> {
             )
         }
     };
+    let mut source = source;
+    if !a.extra_source.is_empty() {
+        let _ = write!(
+            source,
+            " The unknown-terrain section also runs on {} (data this project did not make: the \
+             SpeedPP2D folder is the `jiku-data` package's real plantar-pressure maps, written \
+             by `python3 scripts/speedpp2d.py --out DIR`).",
+            a.extra_source
+                .iter()
+                .map(|d| format!("`{}`", d.display()))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
     let head = format!(
         "{source} The paper's numbers are given beside ours. Regenerate with `{command}` \
          (this run: {:.0} s).\n\n",

@@ -74,11 +74,17 @@ enum Cmd {
         #[command(flatten)]
         terrains: cli::TerrainsArg,
     },
-    /// Classify image files: one line per image (file, terrain, confidence).
+    /// Classify image files: one line per image (file, terrain, confidence), or with --json one
+    /// object per image (file, terrain, confidence, novelty, threshold).
     Classify {
         #[arg(long)]
         model: PathBuf,
         files: Vec<PathBuf>,
+        /// One JSON object per line: `file`, `terrain`, `confidence`, `novelty` (larger = less
+        /// like any known terrain) and `threshold` (above it: unknown), so that the score's
+        /// ROC can be drawn on your own images.
+        #[arg(long)]
+        json: bool,
         #[command(flatten)]
         terrains: cli::TerrainsArg,
     },
@@ -136,8 +142,9 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Cmd::Classify {
             model,
             files,
+            json,
             terrains,
-        } => cli::classify(&model, &files, &terrains),
+        } => cli::classify(&model, &files, json, &terrains),
         Cmd::Features { file, crop, json } => cli::features(&file, &crop, json),
         Cmd::Repair { file, out } => cli::repair(&file, &out),
         Cmd::Dataset(a) => cli::dataset(&a),

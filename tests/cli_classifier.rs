@@ -211,3 +211,79 @@ fn train_eval_classify_features_repair() {
     let (ok, _, err) = presrs(&["experiment", "tables"]);
     assert!(!ok && err.contains("invalid value 'tables'"), "{err}");
 }
+
+/// Issue 25: `train --calibrate DIR` calibrates the unknown-terrain rejection on another run,
+/// refuses a run of terrains the model does not know and an empty one (naming the run and the
+/// fix), and `classify --json` gives each image's novelty and the threshold it was held to.
+#[test]
+fn calibration_runs_and_classify_json() {
+    let dir = std::env::temp_dir().join(format!("presrs-cal-test-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let (set, run2) = (dir.join("set"), dir.join("run2"));
+    write_dataset(&set);
+    write_dataset(&run2);
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    let model = dir.join("m.json");
+    // `presrs train` on the set into `out`, calibrated on `cal` when given.
+    let train = |out: &Path, cal: Option<&Path>| {
+        let (set_s, out_s) = (s(&set), s(out));
+        let mut args = vec![
+            "train", "--data", &set_s, "--out", &out_s, "--crop", "2,2,2,2",
+        ];
+        let cal_s = cal.map(s);
+        if let Some(c) = &cal_s {
+            args.extend(["--calibrate", c]);
+        }
+        presrs(&args)
+    };
+    let (ok, out, err) = train(&model, None);
+    assert!(ok, "{err}");
+    assert!(
+        out.contains("margin") && out.contains("second one"),
+        "{out}"
+    );
+    let (ok, out, err) = train(&model, Some(&run2));
+    assert!(ok, "{err}");
+    assert!(
+        out.contains("held-out runs") && out.contains("run2"),
+        "{out}"
+    );
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&model).unwrap()).unwrap();
+    assert_eq!(m["novelty"]["calibration"]["source"], "held-out-runs");
+    assert_eq!(m["novelty"]["score"], "knn-residual");
+    // A run with a terrain the model does not know (sand: in the catalog, not in the model).
+    std::fs::rename(run2.join("grass"), run2.join("sand")).unwrap();
+    let refused = dir.join("x.json");
+    let (ok, _, err) = train(&refused, Some(&run2));
+    assert!(!ok);
+    assert!(
+        err.contains("`sand`") && err.contains("run2") && err.contains("not trained on"),
+        "{err}"
+    );
+    assert!(!refused.exists(), "a refused calibration writes no model");
+    // An empty run.
+    let empty = dir.join("empty");
+    std::fs::create_dir_all(&empty).unwrap();
+    let (ok, _, err) = train(&refused, Some(&empty));
+    assert!(!ok);
+    assert!(
+        err.contains("empty") && err.contains("no class sub-directories"),
+        "{err}"
+    );
+    // classify --json: one object per image, a known image below its threshold.
+    let img = set.join("wood/003.pgm");
+    let (ok, out, err) = presrs(&["classify", "--json", "--model", &s(&model), &s(&img)]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    assert_eq!(v["terrain"], "wood");
+    let (nov, thr) = (
+        v["novelty"].as_f64().unwrap(),
+        v["threshold"].as_f64().unwrap(),
+    );
+    assert!(nov > 0.0 && nov <= thr, "{v}");
+    assert!(
+        v["confidence"].as_f64().unwrap() > 0.5 && v["file"].as_str().unwrap().ends_with("003.pgm")
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -10,6 +10,8 @@
 //! thing wherever it is printed.
 //!
 //! Also here: [`study`] (the damage study, the per-gait tables, speeds: data, not text),
+//! [`open_set`] (unknown ground: leave one class out per source of images, judged on a fresh
+//! run),
 //! [`model`] (the simulator model the demo caches), [`load`] (the load `presrs bench-node`
 //! plays: feet at 100 Hz on a known schedule, and `/proc` CPU and memory readers) and, with the
 //! default `report` feature, [`report`] (the paper's experiments as Markdown and PNG figures,
@@ -37,6 +39,7 @@
 pub mod closed_loop;
 pub mod load;
 pub mod model;
+pub mod open_set;
 #[cfg(feature = "report")]
 pub mod report;
 pub mod score;
@@ -64,6 +67,9 @@ pub enum LabError {
     /// Training a model.
     #[error("training: {0}")]
     Train(#[from] node::classifier::train::TrainError),
+    /// Calibrating a model's rejection on another run.
+    #[error("calibrating: {0}")]
+    Calibrate(#[from] node::classifier::train::CalibrateError),
     /// A model file.
     #[error(transparent)]
     Model(#[from] node::classifier::model::ModelError),

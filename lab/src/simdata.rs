@@ -31,6 +31,20 @@ pub struct TrainingSet {
     pub images: Vec<PressureImage>,
     /// Each image's class, an index into `classes`.
     pub labels: Vec<usize>,
+    /// Each image's run (the recording it came from: the capture manifest's `source`), or
+    /// `None` when not known (no manifest; simulated sets are one run each).
+    pub runs: Vec<Option<String>>,
+}
+
+/// What each run of a set is used for, per class: see [`TrainingSet::split_runs`].
+#[derive(Clone)]
+pub struct RunSplit {
+    /// The images the model is trained on.
+    pub train: TrainingSet,
+    /// Images of other runs than `train`'s, to calibrate the rejection on (may be empty).
+    pub calibration: TrainingSet,
+    /// Images of a run seen by neither (may be empty): the robot's next run.
+    pub fresh: TrainingSet,
 }
 
 impl TrainingSet {
@@ -43,17 +57,19 @@ impl TrainingSet {
                 terrain_id: t.id(),
             })
             .collect();
-        let (images, labels) = samples
+        let (images, labels): (Vec<PressureImage>, Vec<usize>) = samples
             .into_iter()
             .filter_map(|s| {
                 let k = terrains.iter().position(|t| *t == s.terrain)?;
                 Some((PressureImage::new(s.rows, s.cols, 8, s.pixels), k))
             })
             .unzip();
+        let runs = vec![None; labels.len()];
         Self {
             classes,
             images,
             labels,
+            runs,
         }
     }
 
@@ -74,12 +90,96 @@ impl TrainingSet {
                 }),
             })
             .collect::<Result<_, _>>()?;
+        let runs_of = node::capture::read_runs(&ds.root).ok().flatten();
+        let runs = ds
+            .samples
+            .iter()
+            .map(|s| {
+                let rel = s.path.strip_prefix(&ds.root).ok()?;
+                runs_of.as_ref()?.get(rel).cloned()
+            })
+            .collect();
         let (images, labels) = ds.samples.into_iter().map(|s| (s.image, s.class)).unzip();
         Ok(Self {
             classes,
             images,
             labels,
+            runs,
         })
+    }
+
+    /// The images at `idx`, with the same classes.
+    pub fn subset(&self, idx: &[usize]) -> TrainingSet {
+        TrainingSet {
+            classes: self.classes.clone(),
+            images: idx.iter().map(|&i| self.images[i].clone()).collect(),
+            labels: idx.iter().map(|&i| self.labels[i]).collect(),
+            runs: idx.iter().map(|&i| self.runs[i].clone()).collect(),
+        }
+    }
+
+    /// Per class, its runs sorted by name; `roles` runs at the end are set aside, the last for
+    /// `fresh` (when `roles` is 2) and the one before it for `calibration`, as far as the class
+    /// has runs to spare (the first run always trains). Images without a run are one run.
+    ///
+    /// `presrs train` sets one run aside (`roles` 1: calibration on the next recording);
+    /// `presrs experiment open-set` two (calibrate on one, judge on a run nobody saw).
+    pub fn split_runs(&self, roles: usize) -> RunSplit {
+        let (mut t, mut c, mut f) = (Vec::new(), Vec::new(), Vec::new());
+        for k in 0..self.classes.len() {
+            let idx: Vec<usize> = (0..self.labels.len())
+                .filter(|&i| self.labels[i] == k)
+                .collect();
+            let mut names: Vec<Option<&String>> =
+                idx.iter().map(|&i| self.runs[i].as_ref()).collect();
+            names.sort();
+            names.dedup();
+            let spare = roles.min(names.len().saturating_sub(1));
+            let kept = names.len() - spare;
+            for &i in &idx {
+                let r = names
+                    .iter()
+                    .position(|n| *n == self.runs[i].as_ref())
+                    .unwrap_or(0);
+                if r < kept {
+                    t.push(i);
+                } else if roles == 2 && r == names.len() - 1 {
+                    f.push(i);
+                } else {
+                    c.push(i);
+                }
+            }
+        }
+        RunSplit {
+            train: self.subset(&t),
+            calibration: self.subset(&c),
+            fresh: self.subset(&f),
+        }
+    }
+
+    /// Calibrates `model`'s unknown-terrain rejection on this set, a run (or runs) the model's
+    /// stored samples did not come from; `runs` names them (in the model and in errors).
+    /// Returns the calibration's check (the share of these images called unknown).
+    pub fn calibrate(
+        &self,
+        model: &mut node::classifier::Model,
+        runs: &[String],
+    ) -> Result<f64, node::classifier::train::CalibrateError> {
+        let images: Vec<(&PressureImage, &str)> = self
+            .images
+            .iter()
+            .zip(&self.labels)
+            .map(|(im, &k)| (im, self.classes[k].name.as_str()))
+            .collect();
+        node::classifier::train::calibrate_on_runs(model, &images, runs)
+    }
+
+    /// The distinct runs of the set's images (named ones only), sorted.
+    pub fn run_names(&self) -> Vec<String> {
+        let mut v: Vec<String> = self.runs.iter().flatten().cloned().collect();
+        v.sort();
+        v.dedup();
+        v
     }
 
     /// The images with their classes, as `node::classifier::train::train` takes them.

@@ -25,16 +25,31 @@ pub type Curves = Vec<(f64, [f64; 4])>;
 
 /// `n` simulated stances (or presses) per terrain of `kind` on `gait`, labelled.
 pub fn dataset(kind: Kind, n: usize, gait: controller::Gait, seed: u64) -> TrainingSet {
-    TrainingSet::from_samples(samples(kind, n, gait, seed), &kind.terrains())
+    dataset_on(kind, n, gait, seed, sim::DEFAULT_SENSOR)
+}
+
+/// [`dataset`] recorded by the sensor of serial `sensor` (its own gain pattern and faults).
+pub fn dataset_on(
+    kind: Kind,
+    n: usize,
+    gait: controller::Gait,
+    seed: u64,
+    sensor: u64,
+) -> TrainingSet {
+    TrainingSet::from_samples(samples_on(kind, n, gait, seed, sensor), &kind.terrains())
 }
 
 fn samples(kind: Kind, n: usize, gait: controller::Gait, seed: u64) -> Vec<Sample> {
+    samples_on(kind, n, gait, seed, sim::DEFAULT_SENSOR)
+}
+
+fn samples_on(kind: Kind, n: usize, gait: controller::Gait, seed: u64, sensor: u64) -> Vec<Sample> {
     generate(&Options {
         kind,
         n: Some(n),
         gait,
         damage_pct: 0.0,
-        sensor: sim::DEFAULT_SENSOR,
+        sensor,
         seed,
     })
 }
@@ -251,127 +266,6 @@ pub fn cadence(gait: &controller::Gait, horizon_s: f64) -> Option<(f64, f64)> {
     Some((period_s, m_per_step))
 }
 
-/// One row of the leave-one-terrain-out study: a model trained without `held_out` meets it.
-#[derive(Clone, Debug)]
-pub struct OpenSetRow {
-    /// The terrain the model never saw.
-    pub held_out: Terrain,
-    /// Share of its images the model called unknown (the goal: most).
-    pub unknown_held_out: f64,
-    /// Share of the known terrains' test images called unknown (the goal: few).
-    pub unknown_known: f64,
-    /// Area under the ROC curve of the rejection score (the best class's log density less its
-    /// threshold, lower = more unknown) separating the held-out terrain from the known test images: 1 perfect,
-    /// 0.5 chance. Independent of where the threshold sits.
-    pub auroc: f64,
-    /// Share of the known test images classified right (unknown counts as wrong).
-    pub known_accuracy: f64,
-    /// Images of the held-out terrain.
-    pub n_held_out: usize,
-    /// Known test images.
-    pub n_known: usize,
-}
-
-/// Leave-one-terrain-out: for each terrain of `set`, a model trained on the others with the
-/// paper's split and a calibrated rejection (`opts.unknown_rate`) classifies every image of the
-/// held-out terrain and the known terrains' test images. Every terrain's images go through the
-/// same crop, repair (off) and contact check as in the node; an image without contact counts as
-/// unknown.
-pub fn leave_one_terrain_out(
-    set: &TrainingSet,
-    opts: &TrainOptions,
-) -> Result<Vec<OpenSetRow>, LabError> {
-    let mut rows = Vec::new();
-    for (out_k, out_class) in set.classes.iter().enumerate() {
-        let keep: Vec<usize> = (0..set.classes.len()).filter(|&k| k != out_k).collect();
-        let classes: Vec<_> = keep.iter().map(|&k| set.classes[k].clone()).collect();
-        let known: Vec<usize> = (0..set.images.len())
-            .filter(|&i| set.labels[i] != out_k)
-            .collect();
-        let labelled: Vec<_> = known
-            .iter()
-            .map(|&i| node::classifier::train::Labelled {
-                image: &set.images[i],
-                class: keep.iter().position(|&k| k == set.labels[i]).unwrap_or(0),
-            })
-            .collect();
-        let (model, split) = train(&labelled, &classes, opts)?;
-        let thresholds = model.unknown_thresholds.clone();
-        let overall = model.unknown_threshold;
-        let mut cls = Classifier::new(model);
-        // The rejection score: how far the image's density under its best class lies above
-        // that class's threshold (below 0: unknown).
-        let mut score = |img: &PressureImage| {
-            cls.classify(&img.pixels, img.rows, img.cols, false)
-                .ok()
-                .filter(|d| d.contact)
-                .map(|d| {
-                    let t = thresholds.as_ref().map_or(overall, |t| t[d.best]);
-                    (d.class, d.log_density - t)
-                })
-        };
-        // (is the held-out terrain, its score, called unknown)
-        let mut scored: Vec<(bool, f64, bool)> = Vec::new();
-        let mut right = 0;
-        for &t in &split.test {
-            let s = score(labelled[t].image);
-            right += (s.and_then(|s| s.0) == Some(labelled[t].class)) as usize;
-            scored.push((
-                false,
-                s.map_or(f64::NEG_INFINITY, |s| s.1),
-                s.is_none_or(|s| s.0.is_none()),
-            ));
-        }
-        let n_known = scored.len();
-        for i in (0..set.images.len()).filter(|&i| set.labels[i] == out_k) {
-            let s = score(&set.images[i]);
-            scored.push((
-                true,
-                s.map_or(f64::NEG_INFINITY, |s| s.1),
-                s.is_none_or(|s| s.0.is_none()),
-            ));
-        }
-        let share = |novel: bool| {
-            let v: Vec<_> = scored.iter().filter(|s| s.0 == novel).collect();
-            v.iter().filter(|s| s.2).count() as f64 / v.len().max(1) as f64
-        };
-        rows.push(OpenSetRow {
-            held_out: protocol::TerrainCatalog::paper()
-                .by_id(out_class.terrain_id)
-                .unwrap_or(Terrain::UNKNOWN),
-            unknown_held_out: share(true),
-            unknown_known: share(false),
-            auroc: auroc(&scored),
-            known_accuracy: right as f64 / n_known.max(1) as f64,
-            n_held_out: scored.len() - n_known,
-            n_known,
-        });
-    }
-    Ok(rows)
-}
-
-/// P(a known image scores above a novel one), ties counting half (the Mann-Whitney statistic).
-fn auroc(scored: &[(bool, f64, bool)]) -> f64 {
-    let novel: Vec<f64> = scored.iter().filter(|s| s.0).map(|s| s.1).collect();
-    let known: Vec<f64> = scored.iter().filter(|s| !s.0).map(|s| s.1).collect();
-    if novel.is_empty() || known.is_empty() {
-        return f64::NAN;
-    }
-    let mut wins = 0.0;
-    for &k in &known {
-        for &n in &novel {
-            wins += if k > n {
-                1.0
-            } else if k == n {
-                0.5
-            } else {
-                0.0
-            };
-        }
-    }
-    wins / (novel.len() * known.len()) as f64
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -427,26 +321,5 @@ mod tests {
             assert!(row.iter().all(|a| (0.0..=1.0).contains(a)));
             assert!(acc[g][g] >= 0.75, "C{} on G{}: {acc:?}", g + 1, g + 1);
         }
-    }
-
-    #[test]
-    fn a_static_terrain_left_out_is_unknown_and_the_known_ones_are_not() {
-        let set = dataset(Kind::Static, 30, controller::Gait::g2(), 41);
-        let opts = TrainOptions {
-            crop: Crop {
-                top: 2,
-                bottom: 2,
-                left: 2,
-                right: 2,
-            },
-            ..Default::default()
-        };
-        let rows = leave_one_terrain_out(&set, &opts).unwrap();
-        assert_eq!(rows.len(), 4);
-        let mean = |f: fn(&OpenSetRow) -> f64| rows.iter().map(f).sum::<f64>() / 4.0;
-        // Measured (presrs experiment openset, 60 per terrain): 99.6% and 0.8%.
-        assert!(mean(|r| r.unknown_held_out) >= 0.9, "{rows:?}");
-        assert!(mean(|r| r.unknown_known) <= 0.05, "{rows:?}");
-        assert!(rows.iter().all(|r| r.n_held_out == 30 && r.n_known > 0));
     }
 }

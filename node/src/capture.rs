@@ -368,6 +368,36 @@ impl Capture {
     }
 }
 
+/// Each image's run (the manifest's `source`: the candump log or interface it was captured
+/// from), by its path relative to the training-set folder (`terrain/name.pgm`). `Ok(None)` when
+/// `dir` has no manifest (a folder not written by `presrs capture`).
+pub fn read_runs(
+    dir: &Path,
+) -> Result<Option<std::collections::HashMap<PathBuf, String>>, CaptureError> {
+    let path = dir.join("manifest.csv");
+    let text = match std::fs::read_to_string(&path) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(io("read", &path, e)),
+    };
+    let mut runs = std::collections::HashMap::new();
+    for (i, l) in text.lines().enumerate() {
+        if l.is_empty() || l == MANIFEST_HEADER {
+            continue;
+        }
+        let f: Vec<&str> = l.split(',').collect();
+        if f.len() != 9 {
+            return Err(CaptureError::Manifest {
+                path: path.clone(),
+                line: i + 1,
+                reason: "want 9 fields".into(),
+            });
+        }
+        runs.insert(PathBuf::from(f[0]), f[8].to_string());
+    }
+    Ok(Some(runs))
+}
+
 /// The manifest's header line.
 pub const MANIFEST_HEADER: &str =
     "file,terrain,foot,step,touchdown_s,sample_s,load_sum,damage_pct,source";

@@ -418,3 +418,160 @@ fn training_rejects_bad_requests() {
         "{e}"
     );
 }
+
+/// The novelty's parts as the classifier computes them (its SIMD kernels, half-precision PCA)
+/// against a plain f64 computation from the model file: the residual outside the PCA subspace
+/// and the mean distance to the best class's three nearest stored samples.
+#[test]
+fn novelty_parts_match_a_direct_computation() {
+    use presrs_node::classifier::features::FeatureExtractor;
+    let (model, imgs, ..) = trained();
+    let nv = model
+        .novelty
+        .clone()
+        .expect("a model trained with a rate has a novelty score");
+    assert_eq!(nv.k, 3);
+    let (h, n) = (model.h, model.feature_len());
+    let crop: Crop = "2,2,2,2".parse().unwrap();
+    let mut fx = FeatureExtractor::new(40 * 40);
+    for kernels in [Kernels::Native, Kernels::Portable] {
+        let mut c = Classifier::with_kernels(model.clone(), kernels);
+        for img in imgs.iter().step_by(7) {
+            let d = c.classify(&img.pixels, 44, 44, false).unwrap();
+            let (knn, res) = c.novelty_parts();
+            let work = img.crop(&crop).unwrap().pixels;
+            let f = fx.features(&work, 1.0);
+            let cen: Vec<f64> = f
+                .iter()
+                .zip(&model.pca_mean)
+                .map(|(a, b)| (*a - *b) as f64)
+                .collect();
+            let q: Vec<f64> = (0..h)
+                .map(|j| {
+                    (0..n)
+                        .map(|k| model.pca_matrix[j * n + k] as f64 * cen[k])
+                        .sum()
+                })
+                .collect();
+            let c2: f64 = cen.iter().map(|v| v * v).sum();
+            let q2: f64 = q.iter().map(|v| v * v).sum();
+            let want_res = (c2 - q2).max(0.0).sqrt();
+            let mut dist: Vec<f64> = (0..model.n_samples())
+                .filter(|&i| model.sample_classes[i] == d.best)
+                .map(|i| {
+                    (0..h)
+                        .map(|j| (model.samples[i * h + j] as f64 - q[j]).powi(2))
+                        .sum::<f64>()
+                        .sqrt()
+                })
+                .collect();
+            dist.sort_by(f64::total_cmp);
+            let want_knn = dist[..3].iter().sum::<f64>() / 3.0;
+            // Against the f32 weights' subspace: the half-precision rows span one turned by
+            // about 5e-4 rad (pwe.rs's half_matrix), which moves the residual by less than that
+            // share of |F - mean|.
+            assert!(
+                (res - want_res).abs() <= 0.01 * want_res + 5e-4 * c2.sqrt(),
+                "{kernels:?}: residual {res} vs {want_res}"
+            );
+            assert!(
+                (knn - want_knn).abs() <= 1e-3 * want_knn.max(1.0),
+                "{kernels:?}: kNN {knn} vs {want_knn}"
+            );
+            let want = nv.score_of(d.best, knn, res);
+            assert_eq!(d.novelty, want);
+            assert_eq!(d.threshold, nv.thresholds[d.best]);
+            assert_eq!(d.class.is_none(), d.novelty > d.threshold);
+        }
+    }
+}
+
+/// A model file written before the novelty score loads and decides as it did: by the density
+/// and its per-class thresholds, the novelty being the negated log density.
+#[test]
+fn a_model_without_a_novelty_score_decides_by_density_as_before() {
+    let (mut model, imgs, ..) = trained();
+    model.novelty = None;
+    let text = serde_json::to_string(&model).unwrap();
+    assert!(!text.contains("novelty"));
+    let model = Model::from_json(&text, "old.json").unwrap();
+    let t = model.unknown_thresholds.clone().unwrap();
+    let mut c = Classifier::new(model);
+    for img in &imgs {
+        let d = c.classify(&img.pixels, 44, 44, false).unwrap();
+        assert_eq!(d.novelty, -d.log_density);
+        assert_eq!(d.threshold, -t[d.best]);
+        assert_eq!(d.class.is_none(), d.log_density < t[d.best]);
+        assert!(c.novelty_parts().0.is_nan());
+    }
+}
+
+/// Calibration on another run: the thresholds move to that run's images, the model says where
+/// they came from, and bad runs are refused naming the run and the fix.
+#[test]
+fn calibration_on_another_run_and_its_bad_inputs() {
+    use presrs_node::classifier::novelty::CalibrationSource;
+    use presrs_node::classifier::train::{CalibrateError, calibrate_on_runs};
+    let (mut model, ..) = trained();
+    let same = model.novelty.clone().unwrap();
+    assert_eq!(same.calibration.source, CalibrationSource::SameRun);
+    assert_eq!(same.calibration.margin, 1.15);
+    // Another run of the same three textures.
+    let (imgs, labels) = dataset(9, 30);
+    let names = ["wood", "carpet", "grass"];
+    let run: Vec<(&PressureImage, &str)> = imgs
+        .iter()
+        .zip(&labels)
+        .map(|(i, &k)| (i, names[k]))
+        .collect();
+    let check = calibrate_on_runs(&mut model, &run, &["run2.log".into()]).unwrap();
+    let nv = model.novelty.clone().unwrap();
+    assert_eq!(nv.calibration.source, CalibrationSource::HeldOutRuns);
+    assert_eq!(nv.calibration.runs, vec!["run2.log".to_string()]);
+    assert_eq!(nv.calibration.margin, 1.0);
+    // 90 images of the other run and up to 60 unused ones of the training run.
+    assert!(nv.calibration.images >= 90, "{}", nv.calibration.images);
+    assert!(check <= 0.05, "the check called {check} unknown");
+    // The model with its calibration survives the file.
+    let text = serde_json::to_string(&model).unwrap();
+    assert_eq!(Model::from_json(&text, "m.json").unwrap(), model);
+    // Bad runs: nothing, a terrain the model does not know, another sensor size.
+    let e = calibrate_on_runs(&mut model.clone(), &[], &["empty/".into()]).unwrap_err();
+    assert!(matches!(e, CalibrateError::Empty { .. }));
+    assert!(e.to_string().contains("empty/") && e.to_string().contains("terrains the model knows"));
+    let e = calibrate_on_runs(&mut model.clone(), &[(&imgs[0], "sand")], &["r3".into()])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("`sand`") && e.contains("r3"), "{e}");
+    let small = PressureImage::new(40, 40, 8, vec![0; 1600]);
+    let e = calibrate_on_runs(&mut model.clone(), &[(&small, "wood")], &["r4".into()])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("40x40") && e.contains("44x44"), "{e}");
+    // A hand-edited novelty entry is refused by name.
+    let mut bad = model.clone();
+    bad.novelty.as_mut().unwrap().thresholds.pop();
+    let e = Model::from_json(&serde_json::to_string(&bad).unwrap(), "bad.json")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("novelty") && e.contains("bad.json"), "{e}");
+}
+
+/// The refit to dead sensor lines calibrates the novelty again on the same images with the same
+/// lines dead, and keeps the undamaged ones for the next refit.
+#[test]
+fn a_refit_recalibrates_the_novelty() {
+    use presrs_node::classifier::train::refit;
+    let (model, ..) = trained();
+    let mut dead_rows = vec![false; 40];
+    let dead_cols = vec![false; 40];
+    dead_rows[10] = true;
+    dead_rows[25] = true;
+    let m = refit(&model, &dead_rows, &dead_cols).unwrap();
+    let (a, b) = (model.novelty.as_ref().unwrap(), m.novelty.as_ref().unwrap());
+    assert_ne!(a.thresholds, b.thresholds);
+    assert_eq!(a.calibration.pixels, b.calibration.pixels);
+    assert_eq!(a.calibration.margin, b.calibration.margin);
+    assert_eq!(m.images, model.images);
+    assert!(b.calibration.called_unknown <= 0.1);
+}

@@ -166,6 +166,11 @@ pub struct Model {
     /// any depth.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bits: Option<u8>,
+    /// The novelty score that decides "unknown" and its calibration (see
+    /// [`super::novelty`]). Absent in older model files: the per-class density thresholds
+    /// (`unknown_thresholds`) decide, as they did.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub novelty: Option<super::novelty::Novelty>,
 }
 
 /// The working images of the stored samples, in the order of `Model::samples`: the training
@@ -453,6 +458,19 @@ impl Model {
                 "pca_matrix",
                 "non-finite numbers in the PCA or samples",
             ));
+        }
+        if let Some(nv) = &self.novelty {
+            nv.validate(self.classes.len())
+                .map_err(|msg| Invalid::new("novelty", msg))?;
+            if let Some(i) = nv.calibration.pixels.iter().position(|p| p.len() != r * c) {
+                return Err(Invalid::new(
+                    "novelty",
+                    format!(
+                        "calibration image {i} has {} pixels, expected {r}x{c}",
+                        nv.calibration.pixels[i].len()
+                    ),
+                ));
+            }
         }
         if let Some(im) = &self.images {
             if im.pixels.len() != self.n_samples()

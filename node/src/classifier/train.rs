@@ -12,6 +12,10 @@ use super::image::{Crop, PressureImage};
 use super::model::{
     ClassInfo, MAX_CLASSES, MAX_DOWNSAMPLE, MODEL_VERSION, MinContact, Model, StoredImages,
 };
+use super::novelty::{
+    Calibration, CalibrationSource, NOVELTY_K, Novelty, NoveltyScore, SAME_RUN_MARGIN,
+    SHRINK_IMAGES, median, upper_quantile,
+};
 
 /// How to train: the paper's split and the preprocessing.
 #[derive(Clone, Debug)]
@@ -245,12 +249,385 @@ pub fn train(
             n_train: split.train.len(),
             pixels: work,
         }),
+        novelty: None,
     };
     fitted?.install(&mut model);
     if o.check_load {
         add_load_check(&mut model);
     }
+    // The paper's classifier had no rejection: a rate of 0 keeps the density rule, which
+    // rejects almost nothing.
+    if o.unknown_rate > 0.0 {
+        // The training run's images the model does not store, as many per class as fit in the
+        // file; with too few, the stored samples themselves, each left out in turn.
+        let mut per_class = vec![0usize; classes.len()];
+        let mut cal = Vec::new();
+        for &i in &split.test {
+            let k = data[i].class;
+            if per_class[k] < MAX_CALIBRATION_PER_CLASS {
+                per_class[k] += 1;
+                cal.push((prep(i)?.pixels, k));
+            }
+        }
+        let source = if per_class.iter().all(|&n| n >= MIN_SAME_RUN_PER_CLASS) {
+            CalibrationSource::SameRun
+        } else {
+            cal.clear();
+            CalibrationSource::LeaveOneOut
+        };
+        let (pixels, cls): (Vec<_>, Vec<_>) = cal.into_iter().unzip();
+        set_novelty(&mut model, pixels, cls, source, Vec::new(), SAME_RUN_MARGIN);
+    }
     Ok((model, split))
+}
+
+/// Most calibration images per class kept in a model file (each is a working image: 41x38
+/// pixels are about 6 kB of JSON).
+pub const MAX_CALIBRATION_PER_CLASS: usize = 40;
+
+/// Fewest unused images of the training run per class for `SameRun` calibration; below, the
+/// stored samples calibrate, each left out of its own neighbours.
+const MIN_SAME_RUN_PER_CLASS: usize = 5;
+
+/// Why calibration images cannot calibrate a model.
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+pub enum CalibrateError {
+    /// No images.
+    #[error(
+        "calibration run {run} holds no images of the model's terrains: give a run (a capture \
+         folder or candump capture) of terrains the model knows"
+    )]
+    Empty {
+        /// The run(s), as named by the caller.
+        run: String,
+    },
+    /// An image of a terrain the model does not know.
+    #[error(
+        "calibration run {run} has images of `{class}`, which the model was not trained on: \
+         calibrate only on terrains the model knows (remove that folder, or retrain with it)"
+    )]
+    UnknownClass {
+        /// The run(s).
+        run: String,
+        /// The class.
+        class: String,
+    },
+    /// An image of another size or depth.
+    #[error(
+        "calibration run {run}: a {rows}x{cols} {bits}-bit image, but the model takes \
+         {want_rows}x{want_cols} {want_bits}-bit images: calibrate on the robot's own sensor"
+    )]
+    Size {
+        /// The run(s).
+        run: String,
+        /// Rows of the image.
+        rows: usize,
+        /// Columns.
+        cols: usize,
+        /// Bits.
+        bits: u8,
+        /// Rows the model takes.
+        want_rows: usize,
+        /// Columns the model takes.
+        want_cols: usize,
+        /// Bits the model takes.
+        want_bits: u8,
+    },
+    /// No image shows contact.
+    #[error(
+        "calibration run {run}: none of its {n} images shows a foot on the ground (the model's \
+         minimum contact): are they stance images of the same foot?"
+    )]
+    NoContact {
+        /// The run(s).
+        run: String,
+        /// Images given.
+        n: usize,
+    },
+}
+
+/// Calibrates `model`'s novelty thresholds on images of other runs than its stored samples (the
+/// robot's next recording of the same terrains): `images` with their class names, `runs` the
+/// runs' names (kept in the model and named in errors). The thresholds are the model's
+/// `unknown_rate` quantile of these images' novelty and of the training run's unused ones, with
+/// no margin; at most [`MAX_CALIBRATION_PER_CLASS`] images per terrain are used (the model
+/// file keeps them), the first ones given. Returns the calibration's check (the share of the
+/// images classified right that are called unknown).
+pub fn calibrate_on_runs(
+    model: &mut Model,
+    images: &[(&PressureImage, &str)],
+    runs: &[String],
+) -> Result<f64, CalibrateError> {
+    let run = if runs.is_empty() {
+        "(unnamed)".to_string()
+    } else {
+        runs.join(", ")
+    };
+    if images.is_empty() {
+        return Err(CalibrateError::Empty { run });
+    }
+    let want_bits = model.bits.unwrap_or(images[0].0.bits);
+    let o = TrainOptions {
+        crop: model.crop,
+        downsample: model.downsample,
+        ..Default::default()
+    };
+    let mut pixels = Vec::with_capacity(images.len());
+    let mut classes = Vec::with_capacity(images.len());
+    let mut per_class = vec![0usize; model.classes.len()];
+    for (img, name) in images {
+        let k = model
+            .classes
+            .iter()
+            .position(|c| c.name == *name)
+            .ok_or_else(|| CalibrateError::UnknownClass {
+                run: run.clone(),
+                class: name.to_string(),
+            })?;
+        let size_err = || CalibrateError::Size {
+            run: run.clone(),
+            rows: img.rows,
+            cols: img.cols,
+            bits: img.bits,
+            want_rows: model.input_rows,
+            want_cols: model.input_cols,
+            want_bits,
+        };
+        if (img.rows, img.cols, img.bits) != (model.input_rows, model.input_cols, want_bits) {
+            return Err(size_err());
+        }
+        if per_class[k] >= MAX_CALIBRATION_PER_CLASS {
+            continue;
+        }
+        per_class[k] += 1;
+        pixels.push(preprocess(img, &o).ok_or_else(size_err)?.pixels);
+        classes.push(k);
+    }
+    // With the training run's unused images too: more images for the tails, and both kinds
+    // of spread (within a run, across runs) in one calibration. (Not again after an earlier
+    // calibration on runs: those images would count twice.)
+    if let Some(nv) = model
+        .novelty
+        .as_ref()
+        .filter(|n| n.calibration.source == CalibrationSource::SameRun)
+    {
+        pixels.extend(nv.calibration.pixels.iter().cloned());
+        classes.extend(nv.calibration.classes.iter().copied());
+    }
+    let n = pixels.len();
+    set_novelty(
+        model,
+        pixels,
+        classes,
+        CalibrationSource::HeldOutRuns,
+        runs.to_vec(),
+        1.0,
+    );
+    match &model.novelty {
+        Some(nv) => Ok(nv.calibration.called_unknown),
+        None => Err(CalibrateError::NoContact { run, n }),
+    }
+}
+
+/// Fits the novelty score of `model` (class spreads from its stored samples) and calibrates its
+/// thresholds on the working images `pixels` of classes `classes` (empty with `LeaveOneOut`: the
+/// stored images, each left out of its own neighbours). Images without contact are left out;
+/// with none left, the model keeps no novelty score (the density rule decides).
+fn set_novelty(
+    model: &mut Model,
+    pixels: Vec<Vec<u16>>,
+    classes: Vec<usize>,
+    source: CalibrationSource,
+    runs: Vec<String>,
+    margin: f64,
+) {
+    let n_classes = model.classes.len();
+    let k = NOVELTY_K;
+    let spread = class_spreads(model, k);
+    let rate = model.unknown_rate.unwrap_or(0.0);
+    let provisional = Novelty {
+        score: NoveltyScore::KnnResidual,
+        k,
+        class_spread: spread,
+        residual_scale: vec![1.0; n_classes],
+        thresholds: vec![f64::MAX; n_classes],
+        calibration: Calibration {
+            source,
+            runs,
+            images: 0,
+            rate,
+            margin,
+            called_unknown: 0.0,
+            misclassified: 0.0,
+            pixels: Vec::new(),
+            classes: Vec::new(),
+        },
+    };
+    let mut m = model.clone();
+    m.novelty = Some(provisional.clone());
+    m.images = None;
+    let mut cls = super::Classifier::new(m);
+    // (best class, kNN distance, residual) per calibration image in contact and classified
+    // right. A known image taken for another terrain is an error of the classifier, not a
+    // known image that looks unusual: kept, it set its wrong class's threshold (measured: a
+    // fresh sandpaper_220 run decided as sandpaper_150 raised 150's threshold from 1.0 to 2.9,
+    // and a left-out grit passed as 150 unseen).
+    let mut parts: Vec<(usize, f64, f64)> = Vec::new();
+    let mut wrong = 0usize;
+    let loo = source == CalibrationSource::LeaveOneOut;
+    let labels: &[usize] = if loo { &model.sample_classes } else { &classes };
+    let stored;
+    let images: &[Vec<u16>] = if loo {
+        stored = model
+            .images
+            .as_ref()
+            .map(|i| i.pixels.clone())
+            .unwrap_or_default();
+        &stored
+    } else {
+        &pixels
+    };
+    for (i, p) in images.iter().enumerate() {
+        cls.exclude_sample(loo.then_some(i));
+        let d = cls.classify_work(p);
+        if d.contact && d.best != labels[i] {
+            wrong += 1;
+        } else if d.contact {
+            let (knn, res) = cls.novelty_parts();
+            if knn.is_finite() && res.is_finite() {
+                parts.push((d.best, knn, res));
+            }
+        }
+    }
+    if parts.is_empty() {
+        model.novelty = None;
+        return;
+    }
+    let mut nv = provisional;
+    let of_class = |k: usize, f: &dyn Fn(&(usize, f64, f64)) -> f64| -> Vec<f64> {
+        parts.iter().filter(|p| p.0 == k).map(f).collect()
+    };
+    let mut all_res: Vec<f64> = parts.iter().map(|p| p.2).collect();
+    let pooled_res = median(&mut all_res);
+    for kk in 0..n_classes {
+        let mut r = of_class(kk, &|p| p.2);
+        let m = if r.len() >= 3 {
+            median(&mut r)
+        } else {
+            pooled_res
+        };
+        nv.residual_scale[kk] = positive(m, pooled_res);
+    }
+    // Each part's unit is then stretched to its own tail, so that the `1 - rate` quantile of
+    // either part alone is 1: neither decides by its tail alone. Measured (presrs experiment
+    // open-set, seeds 2-4): without it, the residual's long tail on a new sensor serial set the
+    // pooled threshold and a left-out static terrain went unnoticed (75% called unknown, 100%
+    // with it).
+    {
+        let q = 1.0 - rate;
+        let mut zk: Vec<f64> = parts
+            .iter()
+            .map(|&(b, knn, _)| knn / nv.class_spread[b])
+            .collect();
+        let mut zr: Vec<f64> = parts
+            .iter()
+            .map(|&(b, _, r)| r / nv.residual_scale[b])
+            .collect();
+        let (qk, qr) = (upper_quantile(&mut zk, q), upper_quantile(&mut zr, q));
+        for v in nv.class_spread.iter_mut() {
+            *v *= positive(qk, 1.0);
+        }
+        for v in nv.residual_scale.iter_mut() {
+            *v *= positive(qr, 1.0);
+        }
+    }
+    let scores: Vec<f64> = parts
+        .iter()
+        .map(|&(b, knn, res)| nv.score_of(b, knn, res))
+        .collect();
+    let q = 1.0 - rate;
+    let pooled = upper_quantile(&mut scores.clone(), q);
+    for kk in 0..n_classes {
+        let mut v: Vec<f64> = parts
+            .iter()
+            .zip(&scores)
+            .filter(|(p, _)| p.0 == kk)
+            .map(|(_, s)| *s)
+            .collect();
+        // The class's own quantile, shrunk toward the pooled one by its count: with 30
+        // images, the 98% quantile is the largest one, and a class's threshold was then as
+        // noisy as its one most unusual image (measured: per-class quantiles alone called
+        // 8.9% of a fresh static run unknown, the blend 2.5%).
+        let t = if v.is_empty() {
+            pooled
+        } else {
+            let w = v.len() as f64 / (v.len() as f64 + SHRINK_IMAGES);
+            w * upper_quantile(&mut v, q) + (1.0 - w) * pooled
+        };
+        nv.thresholds[kk] = margin * positive(t, 1.0);
+    }
+    let above = parts
+        .iter()
+        .zip(&scores)
+        .filter(|(p, s)| **s > nv.thresholds[p.0])
+        .count();
+    nv.calibration.images = parts.len() + wrong;
+    nv.calibration.called_unknown = above as f64 / parts.len() as f64;
+    nv.calibration.misclassified = wrong as f64 / (parts.len() + wrong) as f64;
+    if !loo {
+        nv.calibration.pixels = pixels;
+        nv.calibration.classes = classes;
+    }
+    model.novelty = Some(nv);
+}
+
+/// `v` when it is a positive number, else `fallback` (else 1).
+fn positive(v: f64, fallback: f64) -> f64 {
+    if v.is_finite() && v > 0.0 {
+        v
+    } else if fallback.is_finite() && fallback > 0.0 {
+        fallback
+    } else {
+        1.0
+    }
+}
+
+/// Per class, the median over its stored samples of the mean distance to the `k` nearest other
+/// stored samples of the class (the kNN ratio's unit).
+fn class_spreads(m: &Model, k: usize) -> Vec<f64> {
+    let h = m.h;
+    let n = m.n_samples();
+    let mut per: Vec<Vec<f64>> = vec![Vec::new(); m.classes.len()];
+    let mut d = Vec::with_capacity(n);
+    for i in 0..n {
+        let c = m.sample_classes[i];
+        d.clear();
+        d.extend(
+            (0..n)
+                .filter(|&j| j != i && m.sample_classes[j] == c)
+                .map(|j| {
+                    sq_dist(
+                        &m.samples[i * h..(i + 1) * h],
+                        &m.samples[j * h..(j + 1) * h],
+                    )
+                    .sqrt()
+                }),
+        );
+        if d.is_empty() {
+            continue;
+        }
+        d.sort_by(f64::total_cmp);
+        let kk = k.min(d.len());
+        per[c].push(d[..kk].iter().sum::<f64>() / kk as f64);
+    }
+    let mut all: Vec<f64> = per.iter().flatten().copied().collect();
+    let pooled = median(&mut all);
+    per.iter_mut()
+        .map(|v| {
+            let md = median(v);
+            positive(md, pooled)
+        })
+        .collect()
 }
 
 /// The model refitted to a sensor with dead lines: its stored images get the same dead rows and
@@ -267,26 +644,23 @@ pub fn refit(model: &Model, dead_rows: &[bool], dead_cols: &[bool]) -> Result<Mo
     if dead_rows.len() != rows || dead_cols.len() != cols {
         return Err(RefitError::Size);
     }
-    let work: Vec<Vec<u16>> = images
-        .pixels
-        .iter()
-        .map(|p| {
-            let mut img = p.clone();
-            for (r, line) in img.chunks_exact_mut(cols).enumerate() {
-                if dead_rows[r] {
-                    line.fill(0);
-                } else {
-                    for (v, &d) in line.iter_mut().zip(dead_cols) {
-                        if d {
-                            *v = 0;
-                        }
+    let damage = |p: &Vec<u16>| {
+        let mut img = p.clone();
+        for (r, line) in img.chunks_exact_mut(cols).enumerate() {
+            if dead_rows[r] {
+                line.fill(0);
+            } else {
+                for (v, &d) in line.iter_mut().zip(dead_cols) {
+                    if d {
+                        *v = 0;
                     }
                 }
             }
-            super::repair::repair_lines(&mut img, rows, cols, dead_rows, dead_cols, None);
-            img
-        })
-        .collect();
+        }
+        super::repair::repair_lines(&mut img, rows, cols, dead_rows, dead_cols, None);
+        img
+    };
+    let work: Vec<Vec<u16>> = images.pixels.iter().map(damage).collect();
     let fitted = fit(
         &work,
         &model.sample_classes,
@@ -306,6 +680,30 @@ pub fn refit(model: &Model, dead_rows: &[bool], dead_cols: &[bool]) -> Result<Mo
             m.unknown_rate.unwrap_or(0.0),
         ));
     }
+    m.images = Some(StoredImages {
+        n_train: images.n_train,
+        pixels: work,
+    });
+    // The novelty is calibrated again, on the same calibration images with the same lines dead
+    // (the new PCA and samples move every distance), then the undamaged images are put back:
+    // a later refit starts from them again.
+    if let Some(nv) = model.novelty.clone() {
+        let c = nv.calibration;
+        let damaged: Vec<Vec<u16>> = c.pixels.iter().map(damage).collect();
+        set_novelty(
+            &mut m,
+            damaged,
+            c.classes.clone(),
+            c.source,
+            c.runs,
+            c.margin,
+        );
+        if let Some(n) = m.novelty.as_mut() {
+            n.calibration.pixels = c.pixels;
+            n.calibration.classes = c.classes;
+        }
+    }
+    m.images = model.images.clone();
     Ok(m)
 }
 

@@ -1,0 +1,375 @@
+//! Unknown ground: leave one class out, per source of images, and judge the rejection where it
+//! matters: on a left-out class (called unknown: the goal) and on a *fresh* run of the known
+//! classes (called unknown: the cost, a robot sent to the safe gait on ground it knows).
+//!
+//! A source is up to three runs of the same classes: the run the model is trained on, a run to
+//! calibrate the rejection on ([`node::classifier::train::calibrate_on_runs`]), and a run
+//! neither saw. Without a calibration run the model calibrates on its training run's unused
+//! images (with the measured margin); without a fresh run the known test images are the
+//! training run's unused ones (and the "fresh" figure is a same-run figure: the report says so).
+//!
+//! Beside our novelty score each row gives two others on the same images, so that a reader
+//! sees what the score is worth: the Parzen log density of the earlier models (the best
+//! class's density less its threshold), and the plain nearest-neighbour distance in the model's
+//! PCA space (no calibration: the ceiling a simple distance reaches on the source).
+
+use node::classifier::features::FeatureExtractor;
+use node::classifier::pwe::Classifier;
+use node::classifier::train::{TrainOptions, train};
+use node::classifier::{Model, PressureImage};
+
+use crate::LabError;
+use crate::simdata::TrainingSet;
+
+/// One source of images for the study.
+#[derive(Clone)]
+pub struct OpenSetSource {
+    /// How the report names it.
+    pub name: String,
+    /// The run the models are trained on.
+    pub train: TrainingSet,
+    /// Another run of the same classes, to calibrate on (`None`: the training run calibrates).
+    pub calibration: Option<TrainingSet>,
+    /// A run neither saw, whose known-class images are the known test images (`None`: the
+    /// training run's unused images).
+    pub fresh: Option<TrainingSet>,
+    /// Training options (crop, normalisation, unknown rate).
+    pub opts: TrainOptions,
+}
+
+impl OpenSetSource {
+    /// A lab's set whose images carry runs (a capture manifest): per class, the last run is
+    /// the fresh one and the one before it calibrates, as far as the class has runs
+    /// ([`TrainingSet::split_runs`]).
+    pub fn from_runs(name: String, set: &TrainingSet, opts: TrainOptions) -> Self {
+        let s = set.split_runs(2);
+        let some = |t: crate::simdata::TrainingSet| (!t.images.is_empty()).then_some(t);
+        Self {
+            name,
+            train: s.train,
+            calibration: some(s.calibration),
+            fresh: some(s.fresh),
+            opts,
+        }
+    }
+}
+
+/// One row: a model trained without `held_out` meets it.
+#[derive(Clone, Debug)]
+pub struct OpenSetRow {
+    /// The class the model never saw.
+    pub held_out: String,
+    /// Share of its images called unknown (the goal: most).
+    pub unknown_held_out: f64,
+    /// Share of the known test images called unknown (the goal: few).
+    pub unknown_known: f64,
+    /// AUROC of the novelty (less its class's threshold) separating the left-out class from
+    /// the known test images: 1 perfect, 0.5 chance, whatever the threshold.
+    pub auroc: f64,
+    /// The same for the Parzen log density (the rule of earlier models).
+    pub density_auroc: f64,
+    /// The same for the plain nearest-neighbour distance in the model's PCA space.
+    pub nn_auroc: f64,
+    /// Known test images classified right with the rejection (unknown counts as wrong).
+    pub known_accuracy: f64,
+    /// Known test images classified right without it (the best class).
+    pub known_accuracy_open: f64,
+    /// The calibration's own check: the share of its images above their threshold.
+    pub calibration_unknown: f64,
+    /// Images of the left-out class.
+    pub n_held_out: usize,
+    /// Known test images.
+    pub n_known: usize,
+}
+
+/// Means over a source's rows.
+#[derive(Clone, Debug)]
+pub struct OpenSetMeans {
+    /// Mean of each field, in [`OpenSetRow`]'s order (held_out is "mean").
+    pub row: OpenSetRow,
+    /// Lowest and highest AUROC of the rows.
+    pub auroc_range: (f64, f64),
+}
+
+impl OpenSetMeans {
+    /// The means of `rows`.
+    pub fn of(rows: &[OpenSetRow]) -> Self {
+        let n = rows.len().max(1) as f64;
+        let m = |f: fn(&OpenSetRow) -> f64| rows.iter().map(f).sum::<f64>() / n;
+        let lo = rows.iter().map(|r| r.auroc).fold(f64::INFINITY, f64::min);
+        let hi = rows
+            .iter()
+            .map(|r| r.auroc)
+            .fold(f64::NEG_INFINITY, f64::max);
+        Self {
+            row: OpenSetRow {
+                held_out: "mean".into(),
+                unknown_held_out: m(|r| r.unknown_held_out),
+                unknown_known: m(|r| r.unknown_known),
+                auroc: m(|r| r.auroc),
+                density_auroc: m(|r| r.density_auroc),
+                nn_auroc: m(|r| r.nn_auroc),
+                known_accuracy: m(|r| r.known_accuracy),
+                known_accuracy_open: m(|r| r.known_accuracy_open),
+                calibration_unknown: m(|r| r.calibration_unknown),
+                n_held_out: rows.iter().map(|r| r.n_held_out).sum(),
+                n_known: rows.iter().map(|r| r.n_known).sum(),
+            },
+            auroc_range: (lo, hi),
+        }
+    }
+}
+
+/// Leave-one-class-out on `src`: for each class, a model trained on the others (paper's split,
+/// rejection calibrated as the source allows) classifies every image of the left-out class and
+/// the known test images. Every image goes through the crop and contact check as in the node
+/// (repair off); an image without contact counts as unknown.
+pub fn leave_one_class_out(src: &OpenSetSource) -> Result<Vec<OpenSetRow>, LabError> {
+    let set = &src.train;
+    let mut rows = Vec::new();
+    for (out_k, out_class) in set.classes.iter().enumerate() {
+        let keep: Vec<usize> = (0..set.classes.len()).filter(|&k| k != out_k).collect();
+        let without = |s: &TrainingSet| -> TrainingSet {
+            let idx: Vec<usize> = (0..s.labels.len())
+                .filter(|&i| s.labels[i] != out_k)
+                .collect();
+            let mut t = s.subset(&idx);
+            t.classes = keep.iter().map(|&k| s.classes[k].clone()).collect();
+            for l in t.labels.iter_mut() {
+                *l = keep.iter().position(|&k| k == *l).unwrap_or(0);
+            }
+            t
+        };
+        let known = without(set);
+        let (mut model, split) = train(&known.labelled(), &known.classes, &src.opts)?;
+        if let Some(cal) = &src.calibration {
+            let cal = without(cal);
+            cal.calibrate(&mut model, &cal.run_names())?;
+        }
+        let calibration_unknown = model
+            .novelty
+            .as_ref()
+            .map_or(f64::NAN, |n| n.calibration.called_unknown);
+        let mut judge = Judge::new(model);
+        // The known test images: a fresh run's, or the training run's unused ones.
+        let fresh = src.fresh.as_ref().map(without);
+        let known_test: Vec<(&PressureImage, usize)> = match &fresh {
+            Some(f) => f.images.iter().zip(f.labels.iter().copied()).collect(),
+            None => split
+                .test
+                .iter()
+                .map(|&i| (&known.images[i], known.labels[i]))
+                .collect(),
+        };
+        let mut scored: Vec<Scored> = Vec::new();
+        let (mut right, mut right_open) = (0usize, 0usize);
+        for &(img, truth) in &known_test {
+            let s = judge.score(img, false);
+            right += (s.class == Some(truth)) as usize;
+            right_open += (s.best == Some(truth)) as usize;
+            scored.push(s);
+        }
+        let n_known = scored.len();
+        // The left-out class as the robot meets it: in the fresh run when there is one (a
+        // score that only told runs apart would otherwise look good), else in the training run.
+        let novel_from = match &src.fresh {
+            Some(f) if f.labels.contains(&out_k) => f,
+            _ => set,
+        };
+        for i in (0..novel_from.images.len()).filter(|&i| novel_from.labels[i] == out_k) {
+            scored.push(judge.score(&novel_from.images[i], true));
+        }
+        let share = |novel: bool| {
+            let v: Vec<_> = scored.iter().filter(|s| s.novel == novel).collect();
+            v.iter().filter(|s| s.class.is_none()).count() as f64 / v.len().max(1) as f64
+        };
+        rows.push(OpenSetRow {
+            held_out: out_class.name.clone(),
+            unknown_held_out: share(true),
+            unknown_known: share(false),
+            auroc: auroc(&scored, |s| s.novelty),
+            density_auroc: auroc(&scored, |s| s.density),
+            nn_auroc: auroc(&scored, |s| s.nn),
+            known_accuracy: right as f64 / n_known.max(1) as f64,
+            known_accuracy_open: right_open as f64 / n_known.max(1) as f64,
+            calibration_unknown,
+            n_held_out: scored.len() - n_known,
+            n_known,
+        });
+    }
+    Ok(rows)
+}
+
+/// One image's scores, each larger = more novel.
+struct Scored {
+    /// Of the left-out class.
+    novel: bool,
+    /// Decided class (`None`: unknown or no contact).
+    class: Option<usize>,
+    /// Best class (`None`: no contact).
+    best: Option<usize>,
+    novelty: f64,
+    density: f64,
+    nn: f64,
+}
+
+/// A model's three scores for images.
+struct Judge {
+    cls: Classifier,
+    fx: FeatureExtractor,
+    feat: Vec<f32>,
+    density_thresholds: Vec<f64>,
+}
+
+impl Judge {
+    fn new(model: Model) -> Self {
+        let (r, c) = model.work_size().unwrap_or((1, 1));
+        let density_thresholds = model
+            .unknown_thresholds
+            .clone()
+            .unwrap_or_else(|| vec![model.unknown_threshold; model.classes.len()]);
+        Self {
+            fx: FeatureExtractor::new(r * c),
+            feat: vec![0.0; model.feature_len()],
+            density_thresholds,
+            cls: Classifier::new(model),
+        }
+    }
+
+    fn score(&mut self, img: &PressureImage, novel: bool) -> Scored {
+        let d = match self.cls.classify(&img.pixels, img.rows, img.cols, false) {
+            Ok(d) if d.contact => d,
+            // No contact (or an image of another size): unknown, and the most novel.
+            _ => {
+                return Scored {
+                    novel,
+                    class: None,
+                    best: None,
+                    novelty: f64::INFINITY,
+                    density: f64::INFINITY,
+                    nn: f64::INFINITY,
+                };
+            }
+        };
+        let nn = self.nearest(img);
+        Scored {
+            novel,
+            class: d.class,
+            best: Some(d.best),
+            novelty: d.novelty - d.threshold,
+            density: self.density_thresholds[d.best] - d.log_density,
+            nn,
+        }
+    }
+
+    /// The distance from the image to the nearest stored sample in the model's PCA space.
+    fn nearest(&mut self, img: &PressureImage) -> f64 {
+        if self.cls.prepare(&img.pixels, img.rows, img.cols).is_err() {
+            return f64::INFINITY;
+        }
+        let work = self.cls.work_mut().to_vec();
+        let m = self.cls.model();
+        let scale = match m.normalize_load {
+            Some(t) => {
+                let total: f64 = work.iter().map(|&p| p as f64).sum();
+                if total > 0.0 { (t / total) as f32 } else { 1.0 }
+            }
+            None => 1.0,
+        };
+        self.fx.extract(&work, scale, &mut self.feat);
+        let (h, n) = (m.h, m.feature_len());
+        let q: Vec<f64> = (0..h)
+            .map(|j| {
+                m.pca_matrix[j * n..(j + 1) * n]
+                    .iter()
+                    .zip(self.feat.iter().zip(&m.pca_mean))
+                    .map(|(w, (f, mu))| *w as f64 * (*f - *mu) as f64)
+                    .sum()
+            })
+            .collect();
+        m.samples
+            .chunks_exact(h)
+            .map(|s| {
+                s.iter()
+                    .zip(&q)
+                    .map(|(a, b)| (*a as f64 - b).powi(2))
+                    .sum::<f64>()
+            })
+            .fold(f64::INFINITY, f64::min)
+            .sqrt()
+    }
+}
+
+/// P(a novel image scores above a known one), ties counting half (the Mann-Whitney statistic).
+fn auroc(scored: &[Scored], f: impl Fn(&Scored) -> f64) -> f64 {
+    let mut novel: Vec<f64> = scored.iter().filter(|s| s.novel).map(&f).collect();
+    let known: Vec<f64> = scored.iter().filter(|s| !s.novel).map(&f).collect();
+    if novel.is_empty() || known.is_empty() {
+        return f64::NAN;
+    }
+    novel.sort_by(f64::total_cmp);
+    // For each known score, the novel ones above it and tied with it, by binary search.
+    let mut wins = 0.0;
+    for &k in &known {
+        let below = novel.partition_point(|&v| v < k);
+        let not_above = novel.partition_point(|&v| v <= k);
+        wins += (novel.len() - not_above) as f64 + 0.5 * (not_above - below) as f64;
+    }
+    wins / (novel.len() * known.len()) as f64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::study::dataset_on;
+    use node::classifier::image::Crop;
+    use sim::dataset::Kind;
+
+    fn s(novel: bool, v: f64) -> Scored {
+        Scored {
+            novel,
+            class: None,
+            best: None,
+            novelty: v,
+            density: 0.0,
+            nn: 0.0,
+        }
+    }
+
+    #[test]
+    fn auroc_counts_pairs_and_ties() {
+        let v = [s(false, 1.0), s(false, 2.0), s(true, 3.0), s(true, 2.0)];
+        // Pairs (known, novel): (1,3) (1,2) (2,3) win, (2,2) ties: 3.5 of 4.
+        assert_eq!(auroc(&v, |s| s.novelty), 0.875);
+        assert_eq!(auroc(&v, |s| s.density), 0.5);
+        assert!(auroc(&v[..2], |s| s.novelty).is_nan());
+    }
+
+    #[test]
+    fn a_static_terrain_left_out_is_unknown_and_a_fresh_run_is_known() {
+        let crop = Crop {
+            top: 2,
+            bottom: 2,
+            left: 2,
+            right: 2,
+        };
+        let g2 = controller::Gait::g2();
+        let src = OpenSetSource {
+            name: "static".into(),
+            train: dataset_on(Kind::Static, 30, g2.clone(), 41, 1),
+            calibration: Some(dataset_on(Kind::Static, 20, g2.clone(), 42, 2)),
+            fresh: Some(dataset_on(Kind::Static, 20, g2, 43, 3)),
+            opts: TrainOptions {
+                crop,
+                ..Default::default()
+            },
+        };
+        let rows = leave_one_class_out(&src).unwrap();
+        assert_eq!(rows.len(), 4);
+        let m = OpenSetMeans::of(&rows).row;
+        assert!(m.auroc >= 0.9, "{rows:?}");
+        assert!(m.unknown_held_out >= 0.75, "{rows:?}");
+        assert!(m.unknown_known <= 0.08, "{rows:?}");
+        assert!(rows.iter().all(|r| r.n_held_out == 20 && r.n_known == 60));
+    }
+}

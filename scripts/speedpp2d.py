@@ -1,0 +1,75 @@
+#!/usr/bin/env python3
+"""Writes the real plantar-pressure images of the `jiku-data` package's SpeedPP2D set (Pataky
+et al. 2008: 10 subjects x 3 walking speeds x 20 trials, 63x33 peak-pressure maps) as a
+presrs dataset, from the installed package (its files are GPL: they are read here, never copied
+into this repository):
+
+    OUT/subjNN/speedS_trialTT.pgm   16-bit PGM, one class per subject
+    OUT/manifest.csv                the `presrs capture` manifest; `source` = the block of trials
+                                    (0-9, 10-14, 15-19 of each speed, in recording order), so
+                                    that `presrs train` and `presrs experiment open-set` hold
+                                    out later trials as the "next run". (Not the speeds: a
+                                    subject's walk changes more between speeds than between
+                                    subjects, measured: 38% of subjects right across speeds.)
+    OUT/terrains.toml               a terrains file naming the subjects (ids 100-109)
+
+    python3 scripts/speedpp2d.py --out DIR
+
+Needs `pip install jiku-data` (scripts/install-deps.sh installs it with the test requirements).
+"""
+import argparse
+import os
+import sys
+
+
+def run(trial):
+    return "trials00-09" if trial < 10 else "trials10-14" if trial < 15 else "trials15-19"
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", required=True, help="dataset folder to write")
+    a = ap.parse_args()
+    try:
+        import jikudata
+        import numpy as np
+    except ImportError as e:
+        sys.exit(f"speedpp2d: {e}: install it with `python3 -m pip install jiku-data`")
+    d = jikudata.SpeedPP2D()
+    y = np.asarray(d.y)
+    subj, cond = np.asarray(d.x["subj"]), np.asarray(d.x["cond"])
+    if y.ndim != 3 or len(y) != len(subj):
+        sys.exit(f"speedpp2d: unexpected SpeedPP2D shape {y.shape}")
+    if y.min() < 0 or y.max() > 65535:
+        sys.exit("speedpp2d: pressures outside 0..65535 cannot be a 16-bit image")
+    os.makedirs(a.out, exist_ok=True)
+    lines = ["file,terrain,foot,step,touchdown_s,sample_s,load_sum,damage_pct,source"]
+    trial = {}
+    for i in range(len(y)):
+        s, c = int(subj[i]), int(cond[i])
+        t = trial.get((s, c), 0)
+        trial[(s, c)] = t + 1
+        cls = f"subj{s:02d}"
+        os.makedirs(os.path.join(a.out, cls), exist_ok=True)
+        name = f"speed{c}_trial{t:02d}.pgm"
+        img = y[i].astype(">u2")
+        rows, cols = img.shape
+        with open(os.path.join(a.out, cls, name), "wb") as f:
+            f.write(f"P5\n{cols} {rows}\n65535\n".encode())
+            f.write(img.tobytes())
+        step = c * 100 + t
+        lines.append(
+            f"{cls}/{name},{cls},0,{step},{step}.000000,{step}.070000,"
+            f"{int(y[i].sum())},0.0,{run(t)}"
+        )
+    with open(os.path.join(a.out, "manifest.csv"), "w") as f:
+        f.write("\n".join(lines) + "\n")
+    with open(os.path.join(a.out, "terrains.toml"), "w") as f:
+        f.write("# SpeedPP2D's subjects as classes (written by scripts/speedpp2d.py)\n")
+        for s in sorted({int(v) for v in subj}):
+            f.write(f'[[terrain]]\nid = {100 + s}\nname = "subj{s:02d}"\n\n')
+    print(f"wrote {len(y)} images of {len(set(subj.tolist()))} subjects to {a.out}")
+
+
+if __name__ == "__main__":
+    main()
