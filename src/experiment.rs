@@ -44,6 +44,11 @@ pub struct ExperimentArgs {
     /// Crop of the `--data` images (top,bottom,left,right); default none.
     #[arg(long, value_name = "T,B,L,R", requires = "data")]
     pub crop: Option<Crop>,
+    /// With `--data` or `--extra-source`: scale each image to the set's mean load before its
+    /// features (stance images of a hopping foot, as `train --normalize-load`). Used by the
+    /// open-set section.
+    #[arg(long)]
+    pub normalize_load: bool,
     /// With `--data`: go on past unreadable images and count them.
     #[arg(long, requires = "data")]
     pub skip_bad: bool,
@@ -73,6 +78,7 @@ pub fn run(a: ExperimentArgs) -> Result<ExitCode> {
                 dir: dir.clone(),
                 set: TrainingSet::from_dataset(ds, &a.terrains.catalog()?)?,
                 crop: a.crop.unwrap_or_default(),
+                normalize_load: a.normalize_load,
             })
         }
         None => None,
@@ -85,6 +91,7 @@ pub fn run(a: ExperimentArgs) -> Result<ExitCode> {
             dir: dir.clone(),
             set: TrainingSet::from_dataset(ds, &a.terrains.catalog()?)?,
             crop: Crop::default(),
+            normalize_load: a.normalize_load,
         });
     }
     let mut ctx = Report::new(a.out.join("figures"), a.quick, a.seed, user)?;
@@ -118,6 +125,9 @@ pub fn run(a: ExperimentArgs) -> Result<ExitCode> {
     );
     if a.quick {
         command.push_str(" --quick");
+    }
+    if a.normalize_load {
+        command.push_str(" --normalize-load");
     }
     for d in &a.extra_source {
         let _ = write!(command, " --extra-source {}", d.display());

@@ -66,6 +66,8 @@ pub struct UserData {
     pub set: TrainingSet,
     /// The crop its images get.
     pub crop: Crop,
+    /// Scale each image to the set's mean load (the paper's intensity scaling; foot stances).
+    pub normalize_load: bool,
 }
 
 /// Why a report could not be made.
@@ -866,7 +868,7 @@ fn open_set(ctx: &Report) -> Result<String, ReportError> {
         sources.push(OpenSetSource::from_runs(
             format!("`{}`", u.dir.display()),
             &u.set,
-            opts(u.crop, false),
+            opts(u.crop, u.normalize_load),
         ));
     }
     if ctx.user.is_none() {
