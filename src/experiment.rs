@@ -168,9 +168,9 @@ pub fn run(a: ExperimentArgs) -> Result<ExitCode> {
     if !a.extra_source.is_empty() {
         let _ = write!(
             source,
-            " The unknown-terrain section also runs on {} (data this project did not make: the \
-             SpeedPP2D folder is the `jiku-data` package's real plantar-pressure maps, written \
-             by `python3 scripts/speedpp2d.py --out DIR`).",
+            " One exception: the unknown-terrain section also runs on {}, data this project did \
+             not make (a SpeedPP2D folder holds the `jiku-data` package's real plantar-pressure \
+             maps, written by `python3 scripts/speedpp2d.py --out DIR`).",
             a.extra_source
                 .iter()
                 .map(|d| format!("`{}`", d.display()))
