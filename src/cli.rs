@@ -8,7 +8,7 @@ use anyhow::{Context, Result, bail};
 use lab::score::percentile;
 use node::NodeConfig;
 use node::classifier::dataset::{load_dataset, read_image, read_images, write_pgm};
-use node::classifier::train::{TrainOptions, train as train_model};
+use node::classifier::train::TrainOptions;
 use node::classifier::{Classifier, Crop, Kernels, Model, repair as repair_mod};
 use protocol::TerrainCatalog;
 use sim::runner::Track;
@@ -144,64 +144,35 @@ pub fn train(a: &TrainArgs) -> Result<ExitCode> {
         );
     }
     let set = presrs::simdata::TrainingSet::from_dataset(ds, &catalog)?;
-    // Whole runs held out for calibration where the manifest names them (not with --calibrate,
-    // which brings its own run, nor without rejection).
-    let runs = if a.calibrate.is_none() && a.unknown_rate > 0.0 {
-        set.split_runs(1)
-    } else {
-        presrs::simdata::RunSplit {
-            train: set.clone(),
-            calibration: set.subset(&[]),
-            fresh: set.subset(&[]),
-        }
-    };
-    let classes = &runs.train.classes;
-    let labelled = runs.train.labelled();
-    if labelled.is_empty() {
+    if set.images.is_empty() {
         bail!("{}: no images found", data.display());
     }
-    let t0 = Instant::now();
-    let (mut model, split) = train_model(&labelled, classes, &opts)?;
-    let cal_set = match &a.calibrate {
+    let cal = match &a.calibrate {
         Some(dir) if a.unknown_rate > 0.0 => {
             let ds = load_dataset(dir, a.skip_bad).with_context(|| {
                 format!("reading the calibration run --calibrate {}", dir.display())
             })?;
             let s = presrs::simdata::TrainingSet::from_dataset(ds, &catalog)
                 .with_context(|| format!("the calibration run --calibrate {}", dir.display()))?;
-            let name = dir.display().to_string();
-            Some((s, vec![name]))
+            Some((s, vec![dir.display().to_string()]))
         }
         Some(dir) => bail!(
             "--calibrate {} with --unknown-rate 0: a model that rejects nothing has nothing to \
              calibrate; drop one of them",
             dir.display()
         ),
-        None if !runs.calibration.images.is_empty() => {
-            let names = runs.calibration.run_names();
-            Some((runs.calibration.clone(), names))
-        }
         None => None,
     };
-    if let Some((cal, names)) = &cal_set {
-        cal.calibrate(&mut model, names)?;
-        let cap = node::classifier::train::MAX_CALIBRATION_PER_CLASS;
-        let over: usize = (0..cal.classes.len())
-            .map(|k| {
-                cal.labels
-                    .iter()
-                    .filter(|&&l| l == k)
-                    .count()
-                    .saturating_sub(cap)
-            })
-            .sum();
-        if over > 0 {
-            println!(
-                "calibration run: {over} of its {} images not used (at most {cap} per terrain, \
-                 the first ones)",
-                cal.images.len()
-            );
-        }
+    let t0 = Instant::now();
+    let trained = set.train_calibrated(&opts, cal.as_ref().map(|(s, n)| (s, n.as_slice())))?;
+    let (model, split) = (&trained.model, &trained.split);
+    let classes = &model.classes;
+    if trained.unused_calibration > 0 {
+        println!(
+            "calibration run: {} images not used (at most {} per terrain, the first ones)",
+            trained.unused_calibration,
+            node::classifier::train::MAX_CALIBRATION_PER_CLASS
+        );
     }
     let took = t0.elapsed();
     model.save(out)?;

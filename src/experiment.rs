@@ -63,37 +63,33 @@ pub struct ExperimentArgs {
 }
 
 pub fn run(a: ExperimentArgs) -> Result<ExitCode> {
-    let user = match &a.data {
-        Some(dir) => {
-            let ds = node::classifier::dataset::load_dataset(dir, a.skip_bad)
-                .with_context(|| format!("reading the dataset --data {}", dir.display()))?;
-            if !ds.bad.is_empty() {
-                eprintln!(
-                    "skipped {} bad files (--skip-bad); first: {}",
-                    ds.bad.len(),
-                    ds.bad[0]
-                );
-            }
-            Some(UserData {
-                dir: dir.clone(),
-                set: TrainingSet::from_dataset(ds, &a.terrains.catalog()?)?,
-                crop: a.crop.unwrap_or_default(),
-                normalize_load: a.normalize_load,
-            })
-        }
-        None => None,
-    };
-    let mut extra = Vec::new();
-    for dir in &a.extra_source {
+    // One dataset folder (`--data` or an `--extra-source`), named by its flag in errors.
+    let load = |flag: &str, dir: &PathBuf, crop: Crop| -> Result<UserData> {
         let ds = node::classifier::dataset::load_dataset(dir, a.skip_bad)
-            .with_context(|| format!("reading --extra-source {}", dir.display()))?;
-        extra.push(UserData {
+            .with_context(|| format!("reading {flag} {}", dir.display()))?;
+        if !ds.bad.is_empty() {
+            eprintln!(
+                "skipped {} bad files (--skip-bad); first: {}",
+                ds.bad.len(),
+                ds.bad[0]
+            );
+        }
+        Ok(UserData {
             dir: dir.clone(),
             set: TrainingSet::from_dataset(ds, &a.terrains.catalog()?)?,
-            crop: Crop::default(),
+            crop,
             normalize_load: a.normalize_load,
-        });
-    }
+        })
+    };
+    let user = match &a.data {
+        Some(dir) => Some(load("the dataset --data", dir, a.crop.unwrap_or_default())?),
+        None => None,
+    };
+    let extra = a
+        .extra_source
+        .iter()
+        .map(|dir| load("--extra-source", dir, Crop::default()))
+        .collect::<Result<Vec<_>>>()?;
     let mut ctx = Report::new(a.out.join("figures"), a.quick, a.seed, user)?;
     ctx.extra = extra;
     let t0 = std::time::Instant::now();

@@ -70,6 +70,9 @@ pub enum LabError {
     /// Calibrating a model's rejection on another run.
     #[error("calibrating: {0}")]
     Calibrate(#[from] node::classifier::train::CalibrateError),
+    /// Training a model and calibrating it.
+    #[error(transparent)]
+    TrainCalibrated(#[from] crate::simdata::TrainCalibratedError),
     /// A model file.
     #[error(transparent)]
     Model(#[from] node::classifier::model::ModelError),

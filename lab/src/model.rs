@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use node::classifier::train::{TrainOptions, train};
+use node::classifier::train::TrainOptions;
 use node::classifier::{Crop, Model};
 
 use crate::LabError;
@@ -64,12 +64,9 @@ pub fn sim_model(seed: u64) -> Result<Model, LabError> {
         seed,
         ..Default::default()
     };
-    let mut model = train(&set.labelled(), &set.classes, &opts)?.0;
-    run(seed + 1000, 15).calibrate(
-        &mut model,
-        &[format!("simulator run, seed {}", seed + 1000)],
-    )?;
-    Ok(model)
+    let cal = run(seed + 1000, 15);
+    let names = [format!("simulator run, seed {}", seed + 1000)];
+    Ok(set.train_calibrated(&opts, Some((&cal, &names)))?.model)
 }
 
 /// Where [`load_or_train`]'s model came from.

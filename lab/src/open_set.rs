@@ -13,9 +13,8 @@
 //! class's density less its threshold), and the plain nearest-neighbour distance in the model's
 //! PCA space (no calibration: the ceiling a simple distance reaches on the source).
 
-use node::classifier::features::FeatureExtractor;
 use node::classifier::pwe::Classifier;
-use node::classifier::train::{TrainOptions, train};
+use node::classifier::train::TrainOptions;
 use node::classifier::{Model, PressureImage};
 
 use crate::LabError;
@@ -141,11 +140,14 @@ pub fn leave_one_class_out(src: &OpenSetSource) -> Result<Vec<OpenSetRow>, LabEr
             t
         };
         let known = without(set);
-        let (mut model, split) = train(&known.labelled(), &known.classes, &src.opts)?;
-        if let Some(cal) = &src.calibration {
-            let cal = without(cal);
-            cal.calibrate(&mut model, &cal.run_names())?;
-        }
+        let cal = src.calibration.as_ref().map(|c| {
+            let c = without(c);
+            let names = c.run_names();
+            (c, names)
+        });
+        let trained =
+            known.train_calibrated(&src.opts, cal.as_ref().map(|(c, n)| (c, n.as_slice())))?;
+        let (model, split) = (trained.model, trained.split);
         let calibration_unknown = model
             .novelty
             .as_ref()
@@ -216,21 +218,16 @@ struct Scored {
 /// A model's three scores for images.
 struct Judge {
     cls: Classifier,
-    fx: FeatureExtractor,
-    feat: Vec<f32>,
     density_thresholds: Vec<f64>,
 }
 
 impl Judge {
     fn new(model: Model) -> Self {
-        let (r, c) = model.work_size().unwrap_or((1, 1));
         let density_thresholds = model
             .unknown_thresholds
             .clone()
             .unwrap_or_else(|| vec![model.unknown_threshold; model.classes.len()]);
         Self {
-            fx: FeatureExtractor::new(r * c),
-            feat: vec![0.0; model.feature_len()],
             density_thresholds,
             cls: Classifier::new(model),
         }
@@ -251,52 +248,14 @@ impl Judge {
                 };
             }
         };
-        let nn = self.nearest(img);
         Scored {
             novel,
             class: d.class,
             best: Some(d.best),
             novelty: d.novelty - d.threshold,
             density: self.density_thresholds[d.best] - d.log_density,
-            nn,
+            nn: self.cls.nearest_sample_distance(),
         }
-    }
-
-    /// The distance from the image to the nearest stored sample in the model's PCA space.
-    fn nearest(&mut self, img: &PressureImage) -> f64 {
-        if self.cls.prepare(&img.pixels, img.rows, img.cols).is_err() {
-            return f64::INFINITY;
-        }
-        let work = self.cls.work_mut().to_vec();
-        let m = self.cls.model();
-        let scale = match m.normalize_load {
-            Some(t) => {
-                let total: f64 = work.iter().map(|&p| p as f64).sum();
-                if total > 0.0 { (t / total) as f32 } else { 1.0 }
-            }
-            None => 1.0,
-        };
-        self.fx.extract(&work, scale, &mut self.feat);
-        let (h, n) = (m.h, m.feature_len());
-        let q: Vec<f64> = (0..h)
-            .map(|j| {
-                m.pca_matrix[j * n..(j + 1) * n]
-                    .iter()
-                    .zip(self.feat.iter().zip(&m.pca_mean))
-                    .map(|(w, (f, mu))| *w as f64 * (*f - *mu) as f64)
-                    .sum()
-            })
-            .collect();
-        m.samples
-            .chunks_exact(h)
-            .map(|s| {
-                s.iter()
-                    .zip(&q)
-                    .map(|(a, b)| (*a as f64 - b).powi(2))
-                    .sum::<f64>()
-            })
-            .fold(f64::INFINITY, f64::min)
-            .sqrt()
     }
 }
 

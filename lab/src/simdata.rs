@@ -2,7 +2,7 @@
 //! and `node` crates, which do not depend on each other) or from a dataset directory.
 
 use node::classifier::dataset::Dataset;
-use node::classifier::train::Labelled;
+use node::classifier::train::{Labelled, Split, TrainOptions, train};
 use node::classifier::{ClassInfo, PressureImage};
 use protocol::terrain::{Terrain, TerrainCatalog};
 use sim::dataset::Sample;
@@ -34,6 +34,29 @@ pub struct TrainingSet {
     /// Each image's run (the recording it came from: the capture manifest's `source`), or
     /// `None` when not known (no manifest; simulated sets are one run each).
     pub runs: Vec<Option<String>>,
+}
+
+/// A model from [`TrainingSet::train_calibrated`].
+pub struct Trained {
+    /// The model.
+    pub model: node::classifier::Model,
+    /// Which of the training images went where (indices into the images trained on).
+    pub split: Split,
+    /// Images trained on (the set less any run held out for calibration).
+    pub train_images: usize,
+    /// Calibration images not used: beyond `MAX_CALIBRATION_PER_CLASS` of a terrain.
+    pub unused_calibration: usize,
+}
+
+/// Why [`TrainingSet::train_calibrated`] failed: training or the calibration, as they say it.
+#[derive(Debug, thiserror::Error)]
+pub enum TrainCalibratedError {
+    /// Training.
+    #[error(transparent)]
+    Train(#[from] node::classifier::train::TrainError),
+    /// Calibrating on the other run.
+    #[error(transparent)]
+    Calibrate(#[from] node::classifier::train::CalibrateError),
 }
 
 /// What each run of a set is used for, per class: see [`TrainingSet::split_runs`].
@@ -172,6 +195,50 @@ impl TrainingSet {
             .map(|(im, &k)| (im, self.classes[k].name.as_str()))
             .collect();
         node::classifier::train::calibrate_on_runs(model, &images, runs)
+    }
+
+    /// A model trained on this set (`train` with `opts`), its unknown-terrain rejection
+    /// calibrated on another run where there is one: `calibration` (a set and its runs'
+    /// names), else, with rejection on, this set's own last run per terrain
+    /// ([`TrainingSet::split_runs`]), else the training run's unused images (`train`'s own).
+    pub fn train_calibrated(
+        &self,
+        opts: &TrainOptions,
+        calibration: Option<(&TrainingSet, &[String])>,
+    ) -> Result<Trained, TrainCalibratedError> {
+        let own;
+        let (train_set, calibration) = match calibration {
+            Some(c) => (self, Some(c)),
+            None if opts.unknown_rate > 0.0 => {
+                let s = self.split_runs(1);
+                let names = s.calibration.run_names();
+                own = (s.train, s.calibration, names);
+                let cal = (!own.1.images.is_empty()).then_some((&own.1, own.2.as_slice()));
+                (&own.0, cal)
+            }
+            None => (self, None),
+        };
+        let (mut model, split) = train(&train_set.labelled(), &train_set.classes, opts)?;
+        let mut unused_calibration = 0;
+        if let Some((cal, names)) = calibration {
+            cal.calibrate(&mut model, names)?;
+            let cap = node::classifier::train::MAX_CALIBRATION_PER_CLASS;
+            unused_calibration = (0..cal.classes.len())
+                .map(|k| {
+                    cal.labels
+                        .iter()
+                        .filter(|&&l| l == k)
+                        .count()
+                        .saturating_sub(cap)
+                })
+                .sum();
+        }
+        Ok(Trained {
+            model,
+            split,
+            train_images: train_set.images.len(),
+            unused_calibration,
+        })
     }
 
     /// The distinct runs of the set's images (named ones only), sorted.

@@ -491,6 +491,18 @@ impl Classifier {
         self.parts
     }
 
+    /// The last decision's distance, in PCA space, to the nearest stored sample of any class
+    /// (the plain nearest-neighbour score reports compare the novelty with); NaN before a
+    /// decision in contact. From the decision's own distances: nothing is computed again.
+    pub fn nearest_sample_distance(&self) -> f64 {
+        let e = self
+            .log_kernel
+            .iter()
+            .copied()
+            .fold(f64::NEG_INFINITY, f64::max);
+        (-e / self.inv_two_s2).max(0.0).sqrt()
+    }
+
     /// Leaves stored sample `i` out of the kNN distances of the decisions that follow
     /// (`None`: none left out), to score a stored sample as if it were new.
     pub fn exclude_sample(&mut self, i: Option<usize>) {

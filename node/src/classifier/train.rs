@@ -137,10 +137,11 @@ pub struct Split {
     pub test: Vec<usize>,
 }
 
-fn preprocess(img: &PressureImage, o: &TrainOptions) -> Option<PressureImage> {
-    let c = img.crop(&o.crop)?;
-    Some(if o.downsample > 1 {
-        c.downsample(o.downsample)
+/// Crop, then keep every `downsample`-th row and column: the working image.
+fn preprocess(img: &PressureImage, crop: &Crop, downsample: usize) -> Option<PressureImage> {
+    let c = img.crop(crop)?;
+    Some(if downsample > 1 {
+        c.downsample(downsample)
     } else {
         c
     })
@@ -192,7 +193,7 @@ pub fn train(
         split.test.extend_from_slice(&idx[o.per_class..]);
     }
     let prep = |i: usize| {
-        preprocess(data[i].image, o).ok_or(TrainError::Crop {
+        preprocess(data[i].image, &o.crop, o.downsample).ok_or(TrainError::Crop {
             crop: o.crop,
             rows,
             cols,
@@ -367,11 +368,6 @@ pub fn calibrate_on_runs(
         return Err(CalibrateError::Empty { run });
     }
     let want_bits = model.bits.unwrap_or(images[0].0.bits);
-    let o = TrainOptions {
-        crop: model.crop,
-        downsample: model.downsample,
-        ..Default::default()
-    };
     let mut pixels = Vec::with_capacity(images.len());
     let mut classes = Vec::with_capacity(images.len());
     let mut per_class = vec![0usize; model.classes.len()];
@@ -400,7 +396,11 @@ pub fn calibrate_on_runs(
             continue;
         }
         per_class[k] += 1;
-        pixels.push(preprocess(img, &o).ok_or_else(size_err)?.pixels);
+        pixels.push(
+            preprocess(img, &model.crop, model.downsample)
+                .ok_or_else(size_err)?
+                .pixels,
+        );
         classes.push(k);
     }
     // With the training run's unused images too: more images for the tails, and both kinds
@@ -476,16 +476,10 @@ fn set_novelty(
     let mut wrong = 0usize;
     let loo = source == CalibrationSource::LeaveOneOut;
     let labels: &[usize] = if loo { &model.sample_classes } else { &classes };
-    let stored;
-    let images: &[Vec<u16>] = if loo {
-        stored = model
-            .images
-            .as_ref()
-            .map(|i| i.pixels.clone())
-            .unwrap_or_default();
-        &stored
-    } else {
-        &pixels
+    let images: &[Vec<u16>] = match (&model.images, loo) {
+        (Some(stored), true) => &stored.pixels,
+        (None, true) => &[],
+        (_, false) => &pixels,
     };
     for (i, p) in images.iter().enumerate() {
         cls.exclude_sample(loo.then_some(i));
