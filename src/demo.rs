@@ -95,6 +95,7 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
         damage_pct: a.damage,
         steps: a.steps,
         seed: a.seed,
+        controller_restart: None,
     };
     let show = !a.json;
     let recording = a.live.mcap.is_some() || a.live.foxglove.is_some();

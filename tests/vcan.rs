@@ -344,8 +344,48 @@ fn sim_traffic_is_recorded_by_candump_and_decoded_by_cantools() {
     );
 }
 
+/// A fault of the drill below, at robot times (s).
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Fault {
+    /// `ip link set IFACE down`, then up.
+    LinkDown,
+    /// Error frames: error-passive, then bus-off, then the controller restarted.
+    ErrorFrames,
+    /// The node stopped (SIGSTOP), then continued.
+    NodeStop,
+    /// The node killed, then started again.
+    NodeRestart,
+    /// The controller killed, then started again.
+    ControllerRestart,
+}
+
+/// `kill -SIG pid` (the test runs as root in the VM, or as the processes' owner).
+fn signal(p: &Proc, sig: &str) {
+    let ok = std::process::Command::new("kill")
+        .args([sig, &p.0.id().to_string()])
+        .status()
+        .is_ok_and(|s| s.success());
+    assert!(ok, "kill {sig} {}", p.0.id());
+}
+
+fn ip_link(iface: &str, state: &str) {
+    let ok = std::process::Command::new("ip")
+        .args(["link", "set", iface, state])
+        .status()
+        .is_ok_and(|s| s.success());
+    assert!(ok, "ip link set {iface} {state} (needs root)");
+}
+
+/// Issues 6 and 28: simulator, node and controller as processes on vcan, in a 50 s run with one
+/// fault at a time: the link down 1 s, error frames (error-passive, bus-off, restarted), the
+/// node stopped 1.5 s, the node killed for 3 s, the controller killed for 1 s. Asserts survival
+/// (every process answers after each fault), recovery (the first TerrainClass within 2 steps of
+/// each fault's end, the safe gait while the node is silent past the controller's timeout, the
+/// node's state and BusErrors from the error frames, a LatencyUs that shows the stall), the
+/// terrain switches outside the faults, and no fall.
 #[test]
-fn sim_node_and_controller_as_processes_classify_steps_and_survive_a_node_restart() {
+fn sim_node_and_controller_as_processes_classify_steps_and_survive_bus_and_process_faults() {
+    use protocol::messages::{GaitReason, NodeState};
     let iface = fd_iface();
     let ids = IdConfig::default();
     let model = system_model();
@@ -356,19 +396,15 @@ fn sim_node_and_controller_as_processes_classify_steps_and_survive_a_node_restar
     // cannot keep real time (3 s simulated took 5.4 s alone). The node runs on the foot's
     // timestamps; the controller is told the rate. Times below are in robot time.
     let speed = system_speed();
+    let speed_s = speed.to_string();
     let wall = |robot_s: f64| Duration::from_secs_f64(robot_s / speed);
     let mut node = spawn(&["node", "--iface", &iface, "--model", model_s]);
     // The controller runs the simulator's leg (foot 0): it sends the stance law and the
     // touchdown angle, and switches gait per the node's terrain.
-    let _controller = spawn(&[
-        "controller",
-        "--iface",
-        &iface,
-        "--time-scale",
-        &speed.to_string(),
-    ]);
+    let controller_args = ["controller", "--iface", &iface, "--time-scale", &speed_s];
+    let mut controller = spawn(&controller_args);
     std::thread::sleep(Duration::from_millis(1500));
-    let sim_s = 40.0;
+    let sim_s = 50.0;
     let mut sim = spawn(&[
         "sim",
         "--iface",
@@ -378,54 +414,136 @@ fn sim_node_and_controller_as_processes_classify_steps_and_survive_a_node_restar
         "--seed",
         "3",
         "--speed",
-        &speed.to_string(),
+        &speed_s,
         "--report",
         report.to_str().unwrap(),
     ]);
+    // (fault, start, end), robot time from the simulator's start.
+    let schedule = [
+        (Fault::LinkDown, 12.0, 13.0),
+        (Fault::ErrorFrames, 16.0, 17.5),
+        (Fault::NodeStop, 20.0, 21.5),
+        (Fault::NodeRestart, 25.0, 28.0),
+        (Fault::ControllerRestart, 35.0, 36.0),
+    ];
+    // Per fault: wall time it started and ended.
+    let mut began: Vec<Option<Instant>> = vec![None; schedule.len()];
+    let mut ended: Vec<Option<Instant>> = vec![None; schedule.len()];
+    // Per fault: time from its end to the first TerrainClass, robot s.
+    let mut first_class: Vec<Option<f64>> = vec![None; schedule.len()];
+    let mut node_lost_in: Vec<bool> = vec![false; schedule.len()];
+    let mut states_seen: Vec<NodeState> = Vec::new();
+    let mut bus_errors: Option<(u8, u8)> = None;
+    let mut stall_latency_us = 0u32;
+    let mut commands_after_controller_restart = 0usize;
+    let mut classes_before_first_fault = 0usize;
     let t0 = Instant::now();
-    let (kill_at, restart_at) = (wall(24.0), wall(27.0));
-    let mut killed: Option<Instant> = None;
-    let mut restarted: Option<Instant> = None;
-    let mut node_lost_after: Option<Duration> = None;
-    let mut first_class_after_restart: Option<Duration> = None;
-    let mut classes_before_kill = 0usize;
     let mut sim_done = false;
-    let mut robot_s = 0.0;
-    let (mut killed_robot_s, mut restarted_robot_s) = (f64::NAN, f64::NAN);
+    let mut watch_errors = 0u64;
+    let mut bus_off_sent = false;
     while !sim_done {
-        if let Some(st) = watch.recv(Duration::from_millis(5)).unwrap() {
+        let robot_now = t0.elapsed().as_secs_f64() * speed;
+        let got = match watch.recv(Duration::from_millis(5)) {
+            Ok(g) => g,
+            Err(_) => {
+                // The link fault: our own socket sees it too; reopen.
+                watch_errors += 1;
+                std::thread::sleep(Duration::from_millis(20));
+                if let Ok(w) = SocketCanBus::open(&iface) {
+                    watch = w;
+                }
+                None
+            }
+        };
+        if let Some(st) = got {
             match decode(&st.frame, &ids) {
-                // The robot's clock, from the leg's own timestamps (the simulator slows it
-                // down when the machine cannot keep up).
-                Ok(Some((_, Message::LegState(ls)))) => robot_s = ls.timestamp_us as f64 * 1e-6,
-                Ok(Some((_, Message::TerrainClass(_)))) => {
-                    if killed.is_none() {
-                        classes_before_kill += 1;
+                Ok(Some((_, Message::TerrainClass(tc)))) => {
+                    if began[0].is_none() {
+                        classes_before_first_fault += 1;
                     }
-                    if let (Some(r), None) = (restarted, first_class_after_restart) {
-                        first_class_after_restart = Some(r.elapsed().mul_f64(speed));
+                    for k in 0..schedule.len() {
+                        if let (Some(e), None) = (ended[k], first_class[k]) {
+                            first_class[k] = Some(e.elapsed().as_secs_f64() * speed);
+                        }
+                        // The decisions of the backlog the stopped node takes up.
+                        if schedule[k].0 == Fault::NodeStop
+                            && ended[k].is_some_and(|e| e.elapsed() < wall(1.0))
+                        {
+                            stall_latency_us = stall_latency_us.max(tc.latency_us);
+                        }
                     }
                 }
                 Ok(Some((_, Message::GaitStatus(g)))) => {
-                    if let (Some(k), None, None) = (killed, node_lost_after, restarted)
-                        && g.reason == protocol::messages::GaitReason::NodeLost
-                    {
-                        node_lost_after = Some(k.elapsed().mul_f64(speed));
+                    for (k, lost) in node_lost_in.iter_mut().enumerate() {
+                        if began[k].is_some()
+                            && ended[k].is_none()
+                            && g.reason == GaitReason::NodeLost
+                        {
+                            *lost = true;
+                        }
                     }
+                }
+                Ok(Some((_, Message::NodeStatus(s)))) => {
+                    let k = 1; // the error frames
+                    if began[k].is_some() && ended[k].is_none_or(|e| e.elapsed() < wall(2.0)) {
+                        if states_seen.last() != Some(&s.state) {
+                            states_seen.push(s.state);
+                        }
+                        bus_errors = Some((bus_errors.map_or(s.bus_errors, |b| b.0), s.bus_errors));
+                    }
+                }
+                Ok(Some((_, Message::LegCommand(_)))) if ended[4].is_some() => {
+                    commands_after_controller_restart += 1;
                 }
                 _ => {}
             }
         }
-        if killed.is_none() && t0.elapsed() >= kill_at {
-            let _ = node.0.kill();
-            let _ = node.0.wait();
-            killed = Some(Instant::now());
-            killed_robot_s = robot_s;
-        }
-        if restarted.is_none() && t0.elapsed() >= restart_at {
-            node = spawn(&["node", "--iface", &iface, "--model", model_s]);
-            restarted = Some(Instant::now());
-            restarted_robot_s = robot_s;
+        for (k, &(fault, start, end)) in schedule.iter().enumerate() {
+            if began[k].is_none() && robot_now >= start {
+                began[k] = Some(Instant::now());
+                match fault {
+                    Fault::LinkDown => ip_link(&iface, "down"),
+                    Fault::ErrorFrames => {
+                        // CAN_ERR_CRTL with rx and tx error-passive (linux/can/error.h).
+                        protocol::bus::send_error_frame(&iface, 0x4, &[0, 0x30]).unwrap();
+                    }
+                    Fault::NodeStop => signal(&node, "-STOP"),
+                    Fault::NodeRestart => {
+                        let _ = node.0.kill();
+                        let _ = node.0.wait();
+                    }
+                    Fault::ControllerRestart => {
+                        let _ = controller.0.kill();
+                        let _ = controller.0.wait();
+                    }
+                }
+            }
+            let active = began[k].is_some() && ended[k].is_none();
+            if fault == Fault::ErrorFrames
+                && active
+                && !bus_off_sent
+                && began[k].is_some_and(|b| b.elapsed() >= wall(0.5))
+                && states_seen.contains(&NodeState::ErrorPassive)
+            {
+                // CAN_ERR_BUSOFF, once the node has said error-passive.
+                protocol::bus::send_error_frame(&iface, 0x40, &[]).unwrap();
+                bus_off_sent = true;
+            }
+            if active && robot_now >= end {
+                match fault {
+                    Fault::LinkDown => ip_link(&iface, "up"),
+                    // CAN_ERR_RESTARTED.
+                    Fault::ErrorFrames => {
+                        protocol::bus::send_error_frame(&iface, 0x100, &[]).unwrap()
+                    }
+                    Fault::NodeStop => signal(&node, "-CONT"),
+                    Fault::NodeRestart => {
+                        node = spawn(&["node", "--iface", &iface, "--model", model_s]);
+                    }
+                    Fault::ControllerRestart => controller = spawn(&controller_args),
+                }
+                ended[k] = Some(Instant::now());
+            }
         }
         if let Ok(Some(status)) = sim.0.try_wait() {
             assert!(status.success(), "presrs sim exited with {status}");
@@ -433,7 +551,12 @@ fn sim_node_and_controller_as_processes_classify_steps_and_survive_a_node_restar
         }
         assert!(t0.elapsed() < wall(sim_s) * 3, "presrs sim did not finish");
     }
+    assert!(
+        node.0.try_wait().unwrap().is_none() && controller.0.try_wait().unwrap().is_none(),
+        "the node or the controller exited"
+    );
     drop(node);
+    drop(controller);
     let r: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
     let steps = r["steps"].as_array().unwrap();
@@ -443,16 +566,30 @@ fn sim_node_and_controller_as_processes_classify_steps_and_survive_a_node_restar
         .filter(|s| s["truth"] == s["classified"])
         .count();
     let accuracy = correct as f64 / steps.len().max(1) as f64;
-    // Steps from each terrain change to that terrain's gait (the controller's default table).
+    // Robot time of each fault, from the wall clock (the simulator keeps `speed`; it slows
+    // down only when the machine cannot keep up, which makes these times early, never late).
+    let robot = |i: Instant| (i - t0).as_secs_f64() * speed;
+    let windows: Vec<(f64, f64)> = (0..schedule.len())
+        .map(|k| {
+            (
+                began[k].map_or(f64::NAN, robot),
+                ended[k].map_or(f64::NAN, robot),
+            )
+        })
+        .collect();
+    // Steps from each terrain change to that terrain's gait (the controller's default table),
+    // for changes outside the faults: from half a second before each until 3 s after it (the
+    // 2 steps a switch needs, and the robot's clock running behind ours).
     let table = controller::ControllerConfig::default().terrain_gaits;
-    // Terrain changes while the node was up: from the kill until its first TerrainClass after
-    // the restart, plus the 2 steps a switch needs (robot time).
-    let node_down = |t: f64| (killed_robot_s - 0.5..restarted_robot_s + 3.0).contains(&t);
+    let in_fault = |t: f64| {
+        windows
+            .iter()
+            .any(|&(a, b)| (a - 0.5..b + 3.0).contains(&t))
+    };
     let mut delays = Vec::new();
     for i in 1..steps.len() {
-        if steps[i]["truth"] != steps[i - 1]["truth"]
-            && !node_down(steps[i]["t_s"].as_f64().unwrap())
-        {
+        let t = |k: usize| steps[k]["t_s"].as_f64().unwrap_or(f64::NAN);
+        if steps[i]["truth"] != steps[i - 1]["truth"] && !in_fault(t(i)) {
             let truth = steps[i]["truth"].as_str().unwrap();
             let want = table.get(truth).copied().map(u64::from);
             let run = (i..steps.len())
@@ -463,15 +600,12 @@ fn sim_node_and_controller_as_processes_classify_steps_and_survive_a_node_restar
                 // the first on a new terrain): too soon to judge the switch.
                 continue;
             }
-            let t = |k: usize| steps[k]["t_s"].as_f64().unwrap_or(f64::NAN);
             let switch = (i..steps.len())
                 .take_while(|&j| steps[j]["truth"] == steps[i]["truth"])
                 .find(|&j| steps[j]["gait"].as_u64() == want);
-            // The kill fell between this change and its switch (one CI run: two carpet
-            // steps, the kill, then two more after the restart before the controller,
-            // which forgets its count on NodeLost, switched): not the controller's delay.
+            // A fault fell between this change and its switch: not the controller's delay.
             let until = t(switch.unwrap_or(i + run - 1));
-            if (t(i)..=until).contains(&killed_robot_s) {
+            if windows.iter().any(|&(a, _)| (t(i)..=until).contains(&a)) {
                 continue;
             }
             if let Some(j) = switch {
@@ -510,40 +644,84 @@ fn sim_node_and_controller_as_processes_classify_steps_and_survive_a_node_restar
     );
     eprintln!(
         "closed loop over vcan, 3 processes, robot time at {speed} x wall: {:.1} s simulated in {:.1} s wall; {touchdowns} touchdowns, {falls} falls, \
-         {} TerrainClass, per-step accuracy {:.1}% ({correct}/{}); steps from a terrain change to its gait {delays:?}; \
-         node killed: controller reported NodeLost after {node_lost_after:?}; restarted node's first TerrainClass after {first_class_after_restart:?}",
+         {} TerrainClass, per-step accuracy {:.1}% ({correct}/{}); steps from a terrain change to its gait {delays:?}\n\
+         faults (robot s) {windows:.1?}: first TerrainClass after each fault's end {first_class:.2?} robot s; \
+         safe gait (NodeLost) during each {node_lost_in:?}; node states around the error frames {states_seen:?}, \
+         BusErrors {bus_errors:?}; largest LatencyUs in the second after the stop {stall_latency_us}; \
+         LegCommand frames after the controller restart {commands_after_controller_restart}; watcher socket errors {watch_errors}",
         r["simulated_s"].as_f64().unwrap(),
         r["wall_s"].as_f64().unwrap(),
         steps.len(),
         accuracy * 100.0,
         steps.len()
     );
-    // The node answered every step it was up for: touchdowns minus about 5 s (of 40) of downtime.
-    assert!(classes_before_kill > 0);
+    assert!(classes_before_first_fault > 0);
+    // The node answered the steps it was up for: touchdowns minus about 6 s (of 50) of faults.
     assert!(
         steps.len() * 10 >= touchdowns * 7,
         "{} TerrainClass for {touchdowns} touchdowns",
         steps.len()
     );
-    let lost = node_lost_after.expect("the controller never reported NodeLost after the kill");
+    // Recovery: a TerrainClass within 2 steps (0.8 s of robot time at the slowest gait) of
+    // the end of every fault that silenced the node or the bus.
+    for (k, &(fault, _, _)) in schedule.iter().enumerate() {
+        if matches!(
+            fault,
+            Fault::LinkDown | Fault::NodeStop | Fault::NodeRestart
+        ) {
+            let back = first_class[k].unwrap_or_else(|| panic!("no TerrainClass after {fault:?}"));
+            // A restarted node loads its model first (about 1 s of wall time in the VM).
+            let limit = if fault == Fault::NodeRestart {
+                0.8 + 1.0 * speed * 2.0
+            } else {
+                0.8
+            };
+            assert!(
+                back <= limit,
+                "{fault:?}: first TerrainClass {back:.2} robot s after its end"
+            );
+        }
+    }
+    // The safe gait while the node was silent past the controller's timeout (0.5 s).
+    for (k, &(fault, a, b)) in schedule.iter().enumerate() {
+        if matches!(fault, Fault::NodeStop | Fault::NodeRestart) {
+            assert!(
+                b - a > 0.5 && node_lost_in[k],
+                "{fault:?}: no NodeLost GaitStatus"
+            );
+        }
+    }
+    // The error frames: error-passive, bus-off, then running again, and counted.
+    let order = [
+        NodeState::ErrorPassive,
+        NodeState::BusOff,
+        NodeState::Running,
+    ];
+    let mut it = states_seen.iter();
     assert!(
-        lost <= Duration::from_millis(600),
-        "NodeLost after {lost:?}"
+        order.iter().all(|s| it.any(|x| x == s)),
+        "node states around the error frames: {states_seen:?}"
     );
-    let back = first_class_after_restart.expect("no TerrainClass after the node restarted");
+    // Three error frames; the first may already be in the first heartbeat seen.
+    let (b0, b1) = bus_errors.expect("NodeStatus during the error frames");
     assert!(
-        back <= Duration::from_secs(4),
-        "first TerrainClass {back:?} after restart"
+        (2..=3).contains(&b1.wrapping_sub(b0)),
+        "BusErrors {b0} -> {b1}"
     );
-    // Issue 6: the controller keeps the hopper on its feet and adopts each terrain's gait
-    // within 3 steps of the change, before the kill and again after the restart.
-    assert_eq!(
-        falls, 0,
-        "the hopper fell {falls} times under the controller"
+    // A stalled node says so: the decisions it took up after 1.5 s stopped were late.
+    assert!(
+        stall_latency_us >= 50_000,
+        "LatencyUs after the stop: {stall_latency_us}"
     );
     assert!(
-        delays.len() >= 4,
-        "terrain changes seen while the node was up: {delays:?}"
+        commands_after_controller_restart > 0,
+        "the restarted controller never commanded"
+    );
+    // Issue 6 and 28: no fall, through the faults and the controller's restart included.
+    assert_eq!(falls, 0, "the hopper fell {falls} times");
+    assert!(
+        delays.len() >= 3,
+        "terrain changes seen outside the faults: {delays:?}"
     );
     // Within 3 steps of every change, plus one step for each step the node misclassified in
     // between: the controller's part is exact, the node's is ~97% per step (one CI run had a
@@ -551,13 +729,6 @@ fn sim_node_and_controller_as_processes_classify_steps_and_survive_a_node_restar
     assert!(
         delays.iter().all(|&(d, wrong)| d <= 3 + wrong),
         "(steps from a terrain change to its gait, misclassified steps before it): {delays:?}"
-    );
-    assert!(
-        steps
-            .iter()
-            .any(|s| s["t_s"].as_f64().unwrap() > restarted_robot_s + 3.0
-                && s["truth"] != steps[0]["truth"]),
-        "no step on another terrain after the restart"
     );
     assert!(accuracy >= 0.9, "per-step accuracy {accuracy}");
 }

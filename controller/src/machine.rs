@@ -41,6 +41,11 @@ pub struct ControllerConfig {
     pub min_confidence_pct: f64,
     /// Node heartbeat timeout, ms.
     pub heartbeat_timeout_ms: u64,
+    /// Bumpless start: how long the controller listens before it commands, ms (0: command at
+    /// once). A controller (re)started on a bus where the leg already hops takes over at the
+    /// next touchdown it hears, from what the bus says (see [`Controller`]); when no
+    /// touchdown comes within this time it starts as on a fresh robot.
+    pub takeover_ms: u64,
     /// LegCommand rate, Hz.
     pub command_hz: f64,
     /// GaitStatus rate, Hz (and at every switch).
@@ -77,6 +82,7 @@ impl Default for ControllerConfig {
             switch_after_steps: 2,
             min_confidence_pct: 60.0,
             heartbeat_timeout_ms: 500,
+            takeover_ms: 2000,
             command_hz: 500.0,
             status_hz: 10.0,
             foot: 0,
@@ -155,6 +161,7 @@ impl ControllerConfig {
             50.0,
             60_000.0,
         )?;
+        range("takeover_ms", self.takeover_ms as f64, 0.0, 10_000.0)?;
         range("command_hz", self.command_hz, 10.0, 5_000.0)?;
         // Longer than a stance, every edge would be taken for bounce.
         range("lockout_us", self.lockout_us as f64, 0.0, 100_000.0)?;
@@ -203,7 +210,71 @@ pub const MAX_ANGLE_FROM_DESIRED: f64 = 0.35;
 /// liftoff: G1 -> G3 (0.30 rad) takes 6 steps, about as many as the speed takes to follow.
 pub const BETA_DES_STEP: f64 = 0.05;
 
+/// What a starting controller has heard before it takes over (see
+/// [`ControllerConfig::takeover_ms`]).
+#[derive(Clone, Copy, Debug, Default)]
+struct Listen {
+    /// Our time when listening began.
+    since_us: Option<u64>,
+    /// The foot's phase is known from a first FootContact. That first report is not taken for
+    /// an edge (it may be the 100 Hz report of a phase under way), but bounce is judged from
+    /// it: taken as the phase alone, the bounce after a first liftoff read as a touchdown at
+    /// the liftoff's angle.
+    phase_known: bool,
+    /// The gait, reason and terrain another controller last said it ran for our foot.
+    gait: Option<(u8, GaitReason, u8)>,
+    /// The step listened to: its touchdown angle, then its liftoff angle (the law's sign).
+    td: Option<f64>,
+    lo: Option<f64>,
+}
+
+/// The largest miss, rad, of a gait's eq. (5) in predicting the listened step's next touchdown
+/// angle for that gait to be the one the leg runs. Measured in the lock-step loop: the
+/// simulated leg's own laws hit the gait they run within 0.01 rad; the paper's gaits lie
+/// 0.15 rad apart in beta_des, and eq. (5) scales that by c = 0.2 to 0.03 rad between them.
+pub const TAKEOVER_FIT_RAD: f64 = 0.012;
+
+/// How a controller took over a leg (see [`ControllerConfig::takeover_ms`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Takeover {
+    /// Our time of the takeover, µs.
+    pub at_us: u64,
+    /// The gait taken over.
+    pub gait: u8,
+    /// Where the gait came from: "gait status" (another controller's), "touchdown law" (the
+    /// gait whose eq. (5) explains the step listened to) or "initial" (the config's; the
+    /// node's terrains then switch it at a liftoff as usual).
+    pub gait_from: &'static str,
+    /// The touchdown angle the leg came down at, rad; `None` when no step was heard in
+    /// `takeover_ms` (a fresh start).
+    pub touchdown_angle_rad: Option<f64>,
+    /// The beta_des eq. (5) aims at from the takeover on, rad.
+    pub beta_des_rad: f64,
+}
+
 /// The controller.
+///
+/// **Bumpless start.** A controller restarted in mid-hop knows nothing of the leg it takes
+/// over; measured on vcan before this existed, a restarted controller sent its initial gait's
+/// touchdown angle (G2, +0.420 rad) to a leg running G3 at +0.260 rad, and the hopper fell 1.85 s
+/// later. So a starting controller first listens (no LegCommand, no GaitStatus) to one step of
+/// the leg (touchdown, liftoff, next touchdown, after a first report of the phase) and takes
+/// over at the second touchdown, running the gait the leg runs:
+/// - another controller's GaitStatus for the foot names it, when one was heard;
+/// - else the leg's touchdown law does: the gait whose eq. (5), applied to the step heard,
+///   gives the touchdown angle the leg came down at (within [`TAKEOVER_FIT_RAD`]); its
+///   beta_des is the one eq. (5) inverted gives;
+/// - else the initial gait, aiming first at the angle the leg came down at and walked to the
+///   gait's beta_des by [`BETA_DES_STEP`] per step, as after any switch.
+///
+/// The node's TerrainClass reports are counted while listening, so a terrain it has confirmed
+/// switches the gait at a liftoff after the takeover, in flight as always. Measured in the
+/// lock-step loop with the controller dead from 6 s to 7 s, 60 steps on clay (G1), grass (G2)
+/// and carpet (G3): starting afresh fell 1-2 times per run; taking over in the terrain's gait
+/// at the first touchdown fell 9-15 times (at t = 0 the leg still ran the simulator's G2 while
+/// the node already said wood: G3's stance law at G2's speed left at 1.1 m/s instead of 0.5).
+///
+/// No touchdown within `takeover_ms`: a fresh start.
 pub struct Controller {
     cfg: ControllerConfig,
     /// `terrain_gaits` by terrain id (the catalog's), resolved once.
@@ -235,6 +306,10 @@ pub struct Controller {
     pub switches: u64,
     /// Liftoffs after which eq. (5) was restarted from beta_des (an implausible step).
     pub gait_resets: u64,
+    /// Listening before the takeover (`None` once commanding).
+    listen: Option<Listen>,
+    /// How the controller took over, once it has.
+    pub takeover: Option<Takeover>,
 }
 
 impl Controller {
@@ -274,6 +349,8 @@ impl Controller {
             seq: 0,
             switches: 0,
             gait_resets: 0,
+            listen: (cfg.takeover_ms > 0).then(Listen::default),
+            takeover: None,
             gait_of_terrain,
             cfg,
         }
@@ -335,6 +412,18 @@ impl Controller {
         self.pending = Some((g, reason, terrain));
     }
 
+    /// The controller's own bus handle (re)opened at `now_us`. A heartbeat gap while we were
+    /// off the bus says nothing about the node (its NodeStatus frames were sent and lost to
+    /// us), so the node gets a whole timeout from now. Measured on vcan before: after a 2 s
+    /// link outage the controller declared the node lost 0.11 s after the link came back,
+    /// when the node's heartbeat had been back for 0.07 s; judged from the reopen, the first
+    /// heartbeat after it decides. A node already lost stays lost until it is heard.
+    pub fn on_bus_open(&mut self, now_us: u64) {
+        if self.reason != GaitReason::NodeLost {
+            self.last_heartbeat_us = Some(now_us);
+        }
+    }
+
     /// Feeds one received message (foot is the message's foot index).
     pub fn on_message(
         &mut self,
@@ -343,14 +432,30 @@ impl Controller {
         now_us: u64,
         out: &mut impl FnMut(Message),
     ) {
+        if let Some(l) = self.listen.as_mut() {
+            l.since_us.get_or_insert(now_us);
+        }
         match *msg {
             Message::NodeStatus(_) => self.last_heartbeat_us = Some(now_us),
+            Message::GaitStatus(gs) if gs.foot == self.cfg.foot => {
+                if let Some(l) = self.listen.as_mut() {
+                    l.gait = Some((gs.gait, gs.reason, gs.terrain));
+                }
+            }
             Message::LegState(ls) if foot == self.cfg.foot => {
                 self.foot_time(ls.timestamp_us, now_us);
                 self.leg_angle = ls.leg_angle_rad;
             }
             Message::FootContact(fc) if foot == self.cfg.foot => {
                 let t = self.foot_time(fc.timestamp_us, now_us);
+                if let Some(l) = self.listen.as_mut()
+                    && !l.phase_known
+                {
+                    l.phase_known = true;
+                    self.stance = fc.stance;
+                    self.last_edge_us = Some(t);
+                    return;
+                }
                 if fc.stance == self.stance {
                     return;
                 }
@@ -365,6 +470,19 @@ impl Controller {
                 if fc.stance {
                     self.touchdown_us = t;
                     self.beta_td = self.leg_angle;
+                    if let Some(l) = self.listen.as_mut() {
+                        if l.td.is_some() && l.lo.is_some() {
+                            self.take_over(true, now_us, out);
+                        } else {
+                            l.td = Some(self.leg_angle);
+                            l.lo = None;
+                        }
+                    }
+                } else if let Some(l) = self.listen.as_mut() {
+                    // The stance was another's: only heard.
+                    if l.td.is_some() {
+                        l.lo = Some(laws::liftoff_angle_from_signed(self.leg_angle));
+                    }
                 } else {
                     let beta_lo = laws::liftoff_angle_from_signed(self.leg_angle);
                     let g = &self.gait;
@@ -427,7 +545,79 @@ impl Controller {
         }
     }
 
+    /// Ends listening (see [`Controller`]): after a touchdown (`touchdown`) from the step
+    /// heard, otherwise (no step within `takeover_ms`) as on a fresh robot. A gait requested
+    /// from the node's terrains while listening stays pending, for a liftoff.
+    fn take_over(&mut self, touchdown: bool, now_us: u64, out: &mut impl FnMut(Message)) {
+        let Some(l) = self.listen.take() else {
+            return;
+        };
+        let b1 = self.beta_td;
+        let mut gait_from = "initial";
+        let mut beta_des = if touchdown { b1 } else { self.gait.beta_des };
+        let named = l
+            .gait
+            .and_then(|(g, reason, terrain)| Some((self.gait_by_id(g)?, reason, terrain)));
+        if let Some((g, reason, terrain)) = named {
+            beta_des = g.beta_des;
+            self.gait = g;
+            self.reason = reason;
+            self.terrain = terrain;
+            gait_from = "gait status";
+        } else if let (true, Some(td0), Some(lo0)) = (touchdown, l.td, l.lo) {
+            let miss =
+                |g: &Gait| (laws::next_touchdown_angle(lo0, td0, g.c, g.beta_des) - b1).abs();
+            let best = self
+                .cfg
+                .gaits
+                .iter()
+                .min_by(|a, b| miss(a).total_cmp(&miss(b)))
+                .filter(|g| miss(g) <= TAKEOVER_FIT_RAD && g.c > 0.0)
+                .cloned();
+            if let Some(g) = best {
+                // Eq. (5) solved for beta_des: mid-way through a walk after a switch the leg
+                // aims between two gaits' angles, and the walk goes on from there.
+                let aimed = td0 - (b1 - lo0) / g.c;
+                beta_des = if (aimed - g.beta_des).abs() <= BETA_DES_STEP {
+                    g.beta_des
+                } else {
+                    aimed.clamp(
+                        g.beta_des - MAX_ANGLE_FROM_DESIRED,
+                        g.beta_des + MAX_ANGLE_FROM_DESIRED,
+                    )
+                };
+                self.gait = g;
+                self.reason = GaitReason::Initial;
+                gait_from = "touchdown law";
+            }
+        }
+        // A terrain request heard while listening that this gait already serves.
+        if self
+            .pending
+            .as_ref()
+            .is_some_and(|p| p.0.id == self.gait.id)
+        {
+            self.pending = None;
+        }
+        self.beta_des = beta_des;
+        self.next_beta_td = if touchdown { b1 } else { beta_des };
+        if !touchdown {
+            self.beta_td = beta_des;
+        }
+        self.takeover = Some(Takeover {
+            at_us: now_us,
+            gait: self.gait.id,
+            gait_from,
+            touchdown_angle_rad: touchdown.then_some(b1),
+            beta_des_rad: beta_des,
+        });
+        out(Message::GaitStatus(self.status()));
+    }
+
     fn apply_pending(&mut self, out: &mut impl FnMut(Message)) {
+        if self.listen.is_some() {
+            return;
+        }
         if let Some((g, reason, terrain)) = self.pending.take() {
             self.gait = g;
             self.reason = reason;
@@ -457,6 +647,13 @@ impl Controller {
     /// Time-driven outputs: LegCommand at the command rate, GaitStatus at the status rate, and
     /// the heartbeat watchdog.
     pub fn tick(&mut self, now_us: u64, out: &mut impl FnMut(Message)) {
+        if let Some(l) = self.listen.as_mut() {
+            let since = *l.since_us.get_or_insert(now_us);
+            if now_us.saturating_sub(since) < self.cfg.takeover_ms * 1000 {
+                return;
+            }
+            self.take_over(false, now_us, out);
+        }
         let lost = match self.last_heartbeat_us {
             Some(t) => now_us.saturating_sub(t) > self.cfg.heartbeat_timeout_ms * 1000,
             None => now_us > self.cfg.heartbeat_timeout_ms * 1000,
@@ -508,6 +705,14 @@ mod tests {
     use super::*;
     use protocol::messages::{FootContact, NodeStatus, TerrainClass};
 
+    /// A controller on a fresh robot: commanding at once, no takeover.
+    fn fresh() -> ControllerConfig {
+        ControllerConfig {
+            takeover_ms: 0,
+            ..ControllerConfig::default()
+        }
+    }
+
     fn tc(terrain: u8, conf: f64) -> Message {
         Message::TerrainClass(TerrainClass {
             terrain,
@@ -527,7 +732,7 @@ mod tests {
 
     #[test]
     fn switches_in_flight_after_two_confident_steps() {
-        let mut c = Controller::new(ControllerConfig::default(), &TerrainCatalog::paper());
+        let mut c = Controller::new(fresh(), &TerrainCatalog::paper());
         let mut out = Vec::new();
         let mut t = 0;
         let hb = Message::NodeStatus(NodeStatus::default());
@@ -560,7 +765,7 @@ mod tests {
     /// unknown step in a terrain's run neither switches nor restarts that terrain's count.
     #[test]
     fn an_unknown_step_is_confirmed_before_the_safe_gait() {
-        let mut c = Controller::new(ControllerConfig::default(), &TerrainCatalog::paper());
+        let mut c = Controller::new(fresh(), &TerrainCatalog::paper());
         let mut out = Vec::new();
         let hb = Message::NodeStatus(NodeStatus::default());
         let wood = protocol::Terrain::WOOD.id();
@@ -590,7 +795,7 @@ mod tests {
 
     #[test]
     fn after_a_switch_eq5_aims_at_the_new_beta_des_in_steps() {
-        let mut c = Controller::new(ControllerConfig::default(), &TerrainCatalog::paper());
+        let mut c = Controller::new(fresh(), &TerrainCatalog::paper());
         let mut out = Vec::new();
         let hb = Message::NodeStatus(NodeStatus::default());
         let wood = protocol::Terrain::WOOD.id();
@@ -635,7 +840,7 @@ mod tests {
     fn a_lab_terrain_from_the_catalog_gets_its_gait() {
         let cat =
             TerrainCatalog::from_toml("[[terrain]]\nid = 20\nname = \"asphalt\"\n", "t").unwrap();
-        let mut cfg = ControllerConfig::default();
+        let mut cfg = fresh();
         cfg.terrain_gaits.insert("asphalt".into(), 3);
         let e = cfg.validate(&TerrainCatalog::paper()).unwrap_err();
         assert_eq!(e.key, "terrain_gaits.asphalt");
@@ -657,9 +862,132 @@ mod tests {
         assert_eq!(c.reason(), GaitReason::Terrain);
     }
 
+    /// Issue 28: a controller started in mid-hop listens to one step, then runs the gait whose
+    /// eq. (5) explains it, from the angle the leg came down at; another controller's
+    /// GaitStatus names the gait outright; nothing heard in `takeover_ms` is a fresh start.
+    #[test]
+    fn a_controller_started_in_mid_hop_takes_over_the_gait_the_leg_runs() {
+        let leg = |angle: f64, t: u64| {
+            Message::LegState(protocol::messages::LegState {
+                leg_angle_rad: angle,
+                leg_length_m: 0.9,
+                timestamp_us: t as u32,
+            })
+        };
+        // G3's leg: touchdown at 0.49, liftoff at 0.51 (law sign); eq. (5) with G3's
+        // beta_des 0.57 and c 0.2 sends it down next at 0.51 + 0.2 (0.49 - 0.57) = 0.494.
+        let g3 = Gait::g3();
+        let next = laws::next_touchdown_angle(0.51, 0.49, g3.c, g3.beta_des);
+        let hop = |c: &mut Controller, out: &mut Vec<Message>| {
+            // (message or a tick, time): heard in mid-stance, the phase, then the liftoff (not
+            // ours: nothing learned); then one whole step: touchdown, bounce, liftoff; then
+            // the next touchdown.
+            let events = [
+                (Some(contact(true, 10_000)), 10_000),
+                (Some(leg(-0.5, 60_000)), 60_000),
+                (Some(contact(false, 60_000)), 60_000),
+                (Some(leg(0.49, 300_000)), 300_000),
+                (Some(contact(true, 300_000)), 300_000),
+                (Some(contact(false, 300_400)), 300_400),
+                (Some(contact(true, 300_800)), 300_800),
+                (None, 350_000),
+                (Some(leg(-0.51, 440_000)), 440_000),
+                (Some(contact(false, 440_000)), 440_000),
+                (Some(Message::NodeStatus(NodeStatus::default())), 600_000),
+                (None, 600_000),
+                (Some(leg(next, 680_000)), 680_000),
+                (Some(contact(true, 680_000)), 680_000),
+                (None, 681_000),
+            ];
+            for (m, t) in events {
+                match m {
+                    Some(m) => c.on_message(0, &m, t, &mut |m| out.push(m)),
+                    None => c.tick(t, &mut |m| out.push(m)),
+                }
+            }
+        };
+        let cat = TerrainCatalog::paper();
+        let mut c = Controller::new(ControllerConfig::default(), &cat);
+        let mut out = Vec::new();
+        c.tick(0, &mut |m| out.push(m));
+        hop(&mut c, &mut out);
+        let t = c.takeover.expect("took over at the second touchdown");
+        assert_eq!((t.gait, t.gait_from), (3, "touchdown law"), "{t:?}");
+        assert_eq!(t.at_us, 680_000);
+        assert!((t.beta_des_rad - g3.beta_des).abs() < 1e-9);
+        // Silent until then; then the gait and a stance command for G3.
+        let first = out
+            .iter()
+            .position(|m| !matches!(m, Message::GaitStatus(_)))
+            .expect("commands after the takeover");
+        assert!(
+            matches!(out[first - 1], Message::GaitStatus(g) if g.gait == 3),
+            "{out:?}"
+        );
+        assert!(
+            matches!(out[first], Message::LegCommand(l) if l.gait == 3 && l.phase == Phase::Stance)
+        );
+        assert!(
+            out.iter()
+                .all(|m| !matches!(m, Message::GaitStatus(g) if g.gait != 3)),
+            "{out:?}"
+        );
+
+        // Another controller's GaitStatus names the gait, whatever the step says.
+        let mut c = Controller::new(ControllerConfig::default(), &cat);
+        let mut out = Vec::new();
+        let other = GaitStatus {
+            gait: 1,
+            terrain: protocol::Terrain::CLAY.id(),
+            omega_rad_s: 6.0,
+            beta_des_rad: 0.27,
+            reason: GaitReason::Terrain,
+            foot: 0,
+        };
+        c.on_message(0, &Message::GaitStatus(other), 0, &mut |m| out.push(m));
+        hop(&mut c, &mut out);
+        let t = c.takeover.expect("took over");
+        assert_eq!((t.gait, t.gait_from), (1, "gait status"));
+        assert_eq!(c.reason(), GaitReason::Terrain);
+
+        // No leg heard: a fresh start after takeover_ms, in the initial gait.
+        let mut c = Controller::new(ControllerConfig::default(), &cat);
+        let mut out = Vec::new();
+        c.tick(0, &mut |m| out.push(m));
+        c.tick(1_999_000, &mut |m| out.push(m));
+        assert!(out.is_empty() && c.takeover.is_none());
+        c.tick(2_000_000, &mut |m| out.push(m));
+        let t = c.takeover.expect("fresh start");
+        assert_eq!(
+            (t.gait, t.gait_from, t.touchdown_angle_rad),
+            (2, "initial", None)
+        );
+        assert!(out.iter().any(|m| matches!(m, Message::LegCommand(l)
+            if (l.touchdown_angle_rad - Gait::g2().beta_des).abs() < 1e-9)));
+    }
+
+    #[test]
+    fn a_heartbeat_gap_while_our_bus_was_down_is_not_a_lost_node() {
+        let mut c = Controller::new(fresh(), &TerrainCatalog::paper());
+        let mut out = Vec::new();
+        let hb = Message::NodeStatus(NodeStatus::default());
+        c.on_message(0, &hb, 100_000, &mut |m| out.push(m));
+        c.tick(200_000, &mut |m| out.push(m));
+        // Our interface was down from 0.2 s to 2.2 s; reopened, the node has a timeout again.
+        c.on_bus_open(2_200_000);
+        c.tick(2_250_000, &mut |m| out.push(m));
+        assert_eq!(c.reason(), GaitReason::Initial);
+        c.on_message(0, &hb, 2_270_000, &mut |m| out.push(m));
+        c.tick(2_600_000, &mut |m| out.push(m));
+        assert_eq!(c.reason(), GaitReason::Initial);
+        // Silent for the timeout after the reopen: lost.
+        c.tick(2_771_000, &mut |m| out.push(m));
+        assert_eq!(c.reason(), GaitReason::NodeLost);
+    }
+
     #[test]
     fn lost_heartbeat_goes_to_the_safe_gait() {
-        let mut c = Controller::new(ControllerConfig::default(), &TerrainCatalog::paper());
+        let mut c = Controller::new(fresh(), &TerrainCatalog::paper());
         let mut out = Vec::new();
         c.on_message(
             0,
@@ -679,7 +1007,7 @@ mod tests {
 
     #[test]
     fn stance_commands_follow_eq4_and_bounce_is_ignored() {
-        let mut c = Controller::new(ControllerConfig::default(), &TerrainCatalog::paper());
+        let mut c = Controller::new(fresh(), &TerrainCatalog::paper());
         let mut out = Vec::new();
         c.on_message(0, &contact(true, 1_000_000), 1_000_000, &mut |m| {
             out.push(m)
@@ -712,7 +1040,7 @@ mod tests {
         // No node on this bus: a long heartbeat timeout keeps the gait.
         let cfg = ControllerConfig {
             heartbeat_timeout_ms: 60_000,
-            ..Default::default()
+            ..fresh()
         };
         let mut c = Controller::new(cfg, &TerrainCatalog::paper());
         let mut out = Vec::new();
@@ -758,7 +1086,7 @@ mod tests {
         // 200 ms on.
         assert!((stance_len(&mut c, 9_261_000) - law(0.08)).abs() < 1e-9);
         // The foot's 32-bit clock wraps: an edge just after the wrap is still 100 ms later.
-        let mut c = Controller::new(ControllerConfig::default(), &TerrainCatalog::paper());
+        let mut c = Controller::new(fresh(), &TerrainCatalog::paper());
         let before = u32::MAX as u64 - 50_000;
         c.on_message(0, &contact(true, before), 0, &mut |m| out.push(m));
         c.on_message(0, &contact(false, before + 100_000), 100_000, &mut |m| {
@@ -769,7 +1097,7 @@ mod tests {
 
     #[test]
     fn a_fall_restarts_the_touchdown_law_from_beta_des() {
-        let mut c = Controller::new(ControllerConfig::default(), &TerrainCatalog::paper());
+        let mut c = Controller::new(fresh(), &TerrainCatalog::paper());
         let mut out = Vec::new();
         let ls = |angle: f64, foot_us: u32| {
             Message::LegState(protocol::messages::LegState {
@@ -827,7 +1155,7 @@ mod tests {
                 .to_string();
             assert!(e.contains(key) && e.contains("c.toml"), "{text}: {e}");
         }
-        let mut two = ControllerConfig::default();
+        let mut two = fresh();
         two.gaits.push(Gait::g1());
         let e = two
             .validate(&TerrainCatalog::paper())

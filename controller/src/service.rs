@@ -4,7 +4,7 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use protocol::bus::{Backoff, BusSource, after_bus_error, open_with_retry};
+use protocol::bus::{Backoff, BusSource, HealthWatch, after_bus_error, open_with_retry};
 use protocol::ids::MessageKind;
 use protocol::messages::{self, Message};
 use protocol::terrain::CatalogError;
@@ -30,6 +30,9 @@ pub fn run(
     let mut out: Vec<Message> = Vec::with_capacity(8);
     let mut backoff = Backoff::default();
     let mut switches_logged = 0;
+    // The episodes of the CAN controller under this process (bus-off, error-passive), each
+    // logged once with its fix.
+    let mut watch = HealthWatch::default();
     'open: while !stopping() {
         let Some(mut bus) = open_with_retry(&source, stop, "controller", &mut || {}) else {
             break;
@@ -42,11 +45,14 @@ pub fn run(
             MessageKind::LegState,
             MessageKind::TerrainClass,
             MessageKind::NodeStatus,
+            // Another controller's, heard while taking over a leg in mid-hop.
+            MessageKind::GaitStatus,
         ])) {
             after_bus_error("controller filters", &e, &mut backoff, stop);
             continue 'open;
         }
         backoff.reset();
+        ctrl.on_bus_open(now_us());
         tracing::info!(iface = %source.label(), foot, gait = ctrl.gait().id, "presrs controller running");
         while !stopping() {
             // Everything queued, then the laws: a burst never waits one loop per frame.
@@ -67,7 +73,17 @@ pub fn run(
                     }
                 }
             }
+            watch.update("controller", source.label(), &bus.health());
+            let listening = ctrl.takeover.is_none();
             ctrl.tick(now_us(), &mut |o| out.push(o));
+            if listening && let Some(t) = ctrl.takeover {
+                tracing::info!(
+                    gait = t.gait,
+                    gait_from = t.gait_from,
+                    touchdown_angle_rad = t.touchdown_angle_rad,
+                    "took over the leg"
+                );
+            }
             for m in out.drain(..) {
                 if let Message::GaitStatus(g) = &m
                     && ctrl.switches != switches_logged

@@ -36,6 +36,9 @@ pub struct LoopParams<'a> {
     pub steps: usize,
     /// The simulator's seed.
     pub seed: u64,
+    /// The controller is killed at `.0` (simulated µs) and a new one started `.1` µs later, as
+    /// a process crash and restart on a robot would: the new one knows only what the bus says.
+    pub controller_restart: Option<(u64, u64)>,
 }
 
 impl<'a> LoopParams<'a> {
@@ -48,6 +51,7 @@ impl<'a> LoopParams<'a> {
             damage_pct: 0.0,
             steps,
             seed,
+            controller_restart: None,
         }
     }
 }
@@ -174,7 +178,15 @@ pub fn run_recorded(
             on_step(&row);
             rows.push(row);
         }
-        // The controller.
+        // The controller (none while killed: its frames are lost, as a dead process's are).
+        if let (Some((kill_us, off_us)), Some(c)) = (p.controller_restart, p.controller) {
+            if (kill_us..kill_us + off_us).contains(&t_us) {
+                ctrl = None;
+                while ctrl_ep.recv(zero)?.is_some() {}
+            } else if t_us >= kill_us + off_us && ctrl.is_none() {
+                ctrl = Some(Controller::new(c.clone(), &c.catalog()?));
+            }
+        }
         while let Some(st) = ctrl_ep.recv(zero)? {
             if let (Some(ctrl), Ok(Some((foot, m)))) =
                 (ctrl.as_mut(), messages::decode(&st.frame, &ids))

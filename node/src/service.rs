@@ -26,7 +26,10 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use crossbeam_channel::{Receiver, RecvTimeoutError, Sender, TrySendError, bounded};
-use protocol::bus::{Backoff, BusSource, Tap, after_bus_error, open_with_retry};
+use protocol::bus::{
+    Backoff, BusSource, ControllerState, HealthWatch, Tap, after_bus_error, open_with_retry,
+};
+use protocol::clock::Clock;
 use protocol::messages::{Message, NodeState, NodeStatus, TerrainClass};
 use protocol::tactile::ReassemblyStats;
 use protocol::terrain::CatalogError;
@@ -92,6 +95,9 @@ impl Output {
 #[derive(Debug, Default)]
 struct Shared {
     state: AtomicU8,
+    /// The CAN controller's state ([`ControllerState`] as u8) from the receive handle's error
+    /// frames.
+    controller: AtomicU8,
     model_id: AtomicU64,
     damage_bits: AtomicU64,
     bus_errors: AtomicU64,
@@ -161,7 +167,7 @@ impl Shared {
     fn snapshot(&self) -> NodeStats {
         let l = |a: &AtomicU64| a.load(Ordering::Relaxed);
         NodeStats {
-            state: NodeState::from_u8(self.state.load(Ordering::Relaxed)).unwrap_or_default(),
+            state: self.state(),
             model_id: l(&self.model_id),
             damage_pct: f64::from_bits(l(&self.damage_bits)),
             rx_frames: l(&self.rx_frames),
@@ -177,6 +183,16 @@ impl Shared {
             incomplete: l(&self.incomplete),
             decode_errors: l(&self.decode_errors),
             record_dropped: 0,
+        }
+    }
+
+    /// The node's state, the CAN controller's error state first: a bus-off or error-passive
+    /// controller explains whatever else the node sees.
+    fn state(&self) -> NodeState {
+        match self.controller.load(Ordering::Relaxed) {
+            c if c == ControllerState::BusOff as u8 => NodeState::BusOff,
+            c if c == ControllerState::Passive as u8 => NodeState::ErrorPassive,
+            _ => NodeState::from_u8(self.state.load(Ordering::Relaxed)).unwrap_or_default(),
         }
     }
 
@@ -214,6 +230,13 @@ impl NodeService {
             heartbeat: 0,
             shared,
         })
+    }
+
+    /// Measures decisions' latency (TerrainClass `latency_us`) on `clock`, read when each
+    /// decision is made, instead of on the driver's time. [`NodeService::start`] sets the bus's
+    /// clock; a caller driving the node itself sets one when frames may reach it late.
+    pub fn set_clock(&mut self, clock: Arc<dyn Clock>) {
+        self.pipeline.set_clock(clock);
     }
 
     /// One received frame; the decisions it completes go to `out`.
@@ -259,20 +282,22 @@ impl NodeService {
         self.shared
             .publish(&self.pipeline.counters, &r, self.pipeline.damage_pct());
         self.heartbeat = self.heartbeat.wrapping_add(1);
-        let clamp = |v: u64| v.min(255) as u8;
+        // The low 8 bits of the running totals, as docs/protocol.md says: a monitor takes
+        // differences mod 256. (Saturating at 255 hid every loss after the 255th: measured on
+        // vcan, a 0x600 flood held IncompleteFrames at 255 for 131 s while the total grew to
+        // 37,700.)
+        let low8 = |v: u64| (v & 0xff) as u8;
         NodeStatus {
             heartbeat: self.heartbeat,
-            state: match NodeState::from_u8(self.shared.state.load(Ordering::Relaxed)) {
+            state: match self.shared.state() {
                 _ if stopping => NodeState::Stopping,
-                Some(NodeState::Running) if self.pipeline.wrong_image_size() => {
-                    NodeState::WrongImageSize
-                }
-                s => s.unwrap_or_default(),
+                NodeState::Running if self.pipeline.wrong_image_size() => NodeState::WrongImageSize,
+                s => s,
             },
             model_id: self.shared.model_id.load(Ordering::Relaxed) as u16,
-            crc_failures: clamp(r.crc_failures),
-            incomplete_frames: clamp(r.incomplete),
-            bus_errors: clamp(self.shared.bus_errors.load(Ordering::Relaxed)),
+            crc_failures: low8(r.crc_failures),
+            incomplete_frames: low8(r.incomplete),
+            bus_errors: low8(self.shared.bus_errors.load(Ordering::Relaxed)),
             damage_pct: self.pipeline.damage_pct(),
         }
     }
@@ -342,7 +367,10 @@ impl NodeService {
         bus: BusSource,
         tap: Option<Arc<dyn Tap>>,
     ) -> Result<RunningNode, ServiceError> {
-        let shared = self.shared.clone();
+        let mut node = self;
+        let clock = bus.clock();
+        node.set_clock(clock.clone());
+        let shared = node.shared.clone();
         shared.set_state(NodeState::Starting);
         let stop = Arc::new(AtomicBool::new(false));
         // About 0.4 s of one foot's FD tactile stream: room for the pipeline to fall briefly behind.
@@ -359,7 +387,7 @@ impl NodeService {
                 })
         };
         let label = bus.label().to_string();
-        let catalog = self.catalog.clone();
+        let catalog = node.catalog.clone();
         let mut threads = Vec::new();
         {
             let (bus, stop, sh) = (bus.clone(), stop.clone(), shared.clone());
@@ -374,7 +402,16 @@ impl NodeService {
             let h = spawn(
                 "pipeline",
                 Box::new(move || {
-                    pipeline_loop(self, &st, &sh, tap.as_deref(), rx_rx, model_rx, out_tx)
+                    pipeline_loop(
+                        node,
+                        &*clock,
+                        &st,
+                        &sh,
+                        tap.as_deref(),
+                        rx_rx,
+                        model_rx,
+                        out_tx,
+                    )
                 }),
             );
             match h {
@@ -485,14 +522,27 @@ fn join(threads: Vec<(&'static str, JoinHandle<()>)>) {
 fn receive_loop(bus: &BusSource, stop: &AtomicBool, sh: &Shared, to_pipeline: Sender<Stamped>) {
     let mut backoff = Backoff::default();
     let degrade = &mut || sh.set_state(NodeState::Degraded);
+    let mut watch = HealthWatch::default();
     while !stop.load(Ordering::Relaxed) {
         let Some(mut rx) = open_with_retry(bus, stop, "receive", degrade) else {
             break;
         };
         backoff.reset();
         sh.set_state(NodeState::Running);
+        // Error frames of this handle already in `bus_errors`.
+        let mut counted = 0u64;
         while !stop.load(Ordering::Relaxed) {
-            match rx.recv(Duration::from_millis(20)) {
+            let got = rx.recv(Duration::from_millis(20));
+            let h = rx.health();
+            if h.error_frames != counted {
+                sh.bus_errors
+                    .fetch_add(h.error_frames.saturating_sub(counted), Ordering::Relaxed);
+                counted = h.error_frames;
+            }
+            if let Some(state) = watch.update("node receive", bus.label(), &h) {
+                sh.controller.store(state as u8, Ordering::Relaxed);
+            }
+            match got {
                 Ok(Some(st)) => {
                     sh.rx_frames.fetch_add(1, Ordering::Relaxed);
                     match to_pipeline.try_send(st) {
@@ -517,8 +567,10 @@ fn receive_loop(bus: &BusSource, stop: &AtomicBool, sh: &Shared, to_pipeline: Se
     }
 }
 
+#[allow(clippy::too_many_arguments)]
 fn pipeline_loop(
     mut node: NodeService,
+    clock: &dyn Clock,
     stop: &AtomicBool,
     sh: &Shared,
     tap: Option<&dyn Tap>,
@@ -526,9 +578,9 @@ fn pipeline_loop(
     models: Receiver<Model>,
     to_send: Sender<CanFrame>,
 ) {
-    // The node's clock is the bus's (receive timestamps), advanced by the wall clock between
-    // frames so that deadlines and the heartbeat still come when the bus is quiet.
-    let mut anchor = (0u64, Instant::now());
+    // The node's clock is the bus's (that of the receive timestamps), read directly: anchored
+    // to the last frame's timestamp instead, a node that had been stopped took the frames
+    // queued meanwhile for "now".
     let mut next_tick_us = 0u64;
     let mut last_log = Instant::now();
     let mut last_counters = node.counters();
@@ -555,7 +607,6 @@ fn pipeline_loop(
         }
         match from_receive.recv_timeout(Duration::from_millis(20)) {
             Ok(st) => {
-                anchor = (st.t_us, Instant::now());
                 // The node's own frames come back through its receive handle (SocketCAN
                 // loops them to the node's other socket): the tap has them from `emit`.
                 if let Some(tap) = tap
@@ -583,7 +634,7 @@ fn pipeline_loop(
         }
         // Ticks at most once per millisecond of bus time, not per frame (about 20,000 frames/s
         // for six feet): deadlines and the heartbeat need no finer grain.
-        let now = anchor.0 + anchor.1.elapsed().as_micros() as u64;
+        let now = clock.now_us();
         if now >= next_tick_us || now + 1_000_000 < next_tick_us {
             next_tick_us = now + 1000;
             node.tick(now, &mut |o| emit(now, o));

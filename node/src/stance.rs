@@ -6,6 +6,7 @@
 //! tactile header), so a replay decides exactly as the live run did. Nothing here allocates per
 //! frame: buffers are sized when the model is installed.
 
+use protocol::clock::Clock;
 use protocol::messages::{self, FootContact, Message, TerrainClass, flags};
 use protocol::tactile::{Reassembler, ReassemblyStats};
 use protocol::{IdConfig, Stamped};
@@ -289,8 +290,12 @@ pub struct StancePipeline {
     refitter: Refitter,
     reassembler: Reassembler,
     feet: Vec<Foot>,
-    /// Receive time of the frame being processed: a decision's latency ends here.
+    /// Receive time of the frame being processed (or the tick's time).
     now_rx_us: u64,
+    /// The bus's clock, when the pipeline runs live: a decision's latency ends at its reading
+    /// when the decision is made, so a node that was stopped or behind shows it. Without one
+    /// (lock-step, replays) it ends at `now_rx_us`, the driver's clock.
+    clock: Option<Arc<dyn Clock>>,
     /// The last image size said not to fit the model (said once per size).
     said_size: Option<(u8, u8, u8)>,
     /// Per foot: its latest image was of a size the model does not take.
@@ -333,6 +338,7 @@ impl StancePipeline {
             refitter: Refitter::default(),
             feet: Vec::new(),
             now_rx_us: 0,
+            clock: None,
             said_size: None,
             wrong_size_now: Vec::new(),
             counters: Counters::default(),
@@ -448,6 +454,12 @@ impl StancePipeline {
             .iter()
             .map(|f| f.health.damage_pct())
             .fold(0.0, f64::max)
+    }
+
+    /// Measures each decision's latency on `clock` (the bus's: see
+    /// [`protocol::bus::BusSource::clock`]) instead of the driver's time.
+    pub fn set_clock(&mut self, clock: Arc<dyn Clock>) {
+        self.clock = Some(clock);
     }
 
     /// Processes one received frame; every TerrainClass it decides goes to `out`.
@@ -760,13 +772,20 @@ impl StancePipeline {
             }
         }
         tc.damage_pct = f.health.damage_pct();
-        // From the receipt of the sampled frame to now, saturated as the CAN field is; 0 when
-        // no frame was sampled (flag NO_SAMPLE), so that a log and the bus say the same.
+        // From the receipt of the sampled frame to now (the decision made, handed to the
+        // send queue), saturated as the CAN field is; 0 when no frame was sampled (flag
+        // NO_SAMPLE), so that a log and the bus say the same. Live, "now" is the bus clock's
+        // reading here: the frame that completes a decision was received when the frame
+        // before it was (measured on vcan before: LatencyUs 0 in all 365 TerrainClass frames,
+        // also those sent 1-3 s late by a stopped node).
+        let now = self
+            .clock
+            .as_ref()
+            .map_or(self.now_rx_us, |c| c.now_us().max(self.now_rx_us));
         tc.latency_us = if tc.flags & flags::NO_SAMPLE != 0 {
             0
         } else {
-            self.now_rx_us
-                .saturating_sub(f.best_rx_us)
+            now.saturating_sub(f.best_rx_us)
                 .min(messages::LATENCY_MAX_US as u64) as u32
         };
         out(foot, tc);

@@ -769,3 +769,126 @@ fn a_tap_gets_each_frame_in_and_out_once_and_its_drops_are_counted() {
         }
     }
 }
+
+/// Issue 28: NodeStatus carries the low 8 bits of each running total (docs/protocol.md), so a
+/// monitor that takes differences mod 256 sees every loss; saturating at 255 hid them all.
+#[test]
+fn status_counters_wrap_mod_256_instead_of_pinning_at_255() {
+    let mut node = NodeService::new(NodeConfig::default(), model()).unwrap();
+    let mut foot = FakeFoot::new();
+    let seg = Segmenter::new(Variant::Fd, IdConfig::default());
+    let px: Vec<u16> = texture(&mut foot.rng, 7);
+    let n = 300u64;
+    for k in 0..n {
+        let img = ImageRef {
+            rows: 44,
+            cols: 44,
+            bits: 8,
+            timestamp_us: (k * 10_000) as u32,
+            pixels: &px,
+        };
+        let mut frames = Vec::new();
+        seg.frames(0, k as u8, &img, |f| frames.push(f)).unwrap();
+        // A flipped pixel byte in the last data segment: the transfer fails its CRC.
+        let last = frames.last_mut().unwrap();
+        let mut data = last.data().to_vec();
+        data[4] ^= 0x55;
+        *last = CanFrame::fd(last.id(), &data, last.is_brs()).unwrap();
+        for f in frames {
+            node.process(
+                &Stamped {
+                    t_us: k * 10_000,
+                    frame: f,
+                },
+                &mut |_| {},
+            );
+        }
+    }
+    assert_eq!(node.reassembly_stats().crc_failures, n);
+    let s = node.status(false);
+    assert_eq!(s.crc_failures, (n % 256) as u8, "{s:?}");
+}
+
+/// Issue 28: LatencyUs runs from the sampled frame's receipt to the decision on the node's
+/// clock, so a node that takes its frames late (stopped, behind) says how late, saturating at
+/// the field's 65535 µs; in lock-step without a clock it is the driver's time (0 here: the
+/// frame that completes the image decides it).
+#[test]
+fn latency_shows_how_late_the_node_decided() {
+    use protocol::clock::ManualClock;
+    let run = |delay_us: Option<u64>| {
+        let mut node = NodeService::new(NodeConfig::default(), model()).unwrap();
+        let clock = ManualClock::new(0);
+        if delay_us.is_some() {
+            node.set_clock(std::sync::Arc::new(clock.clone()));
+        }
+        let frames = FakeFoot::new().stance(0, 1_000_000, 200, |_| true);
+        let mut said = Vec::new();
+        for f in &frames {
+            // The node takes each frame `delay` after the kernel stamped it.
+            clock.set_us(f.t_us + delay_us.unwrap_or(0));
+            node.process(f, &mut |o| said.push(o));
+        }
+        let got: Vec<TerrainClass> = said
+            .iter()
+            .filter_map(|o| match *o {
+                Output::Class { class, .. } => Some(class),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(got.len(), 1, "{got:?}");
+        assert_eq!(got[0].flags & flags::NO_SAMPLE, 0);
+        got[0].latency_us
+    };
+    assert_eq!(run(None), 0);
+    assert_eq!(run(Some(0)), 0);
+    assert_eq!(run(Some(20_000)), 20_000);
+    assert_eq!(run(Some(3_000_000)), messages::LATENCY_MAX_US);
+}
+
+/// Issue 28: error frames reach the node's NodeStatus: bus-off and error-passive are its state
+/// until the controller restarts, and each error frame counts in BusErrors.
+#[test]
+fn error_frames_set_the_node_state_until_the_controller_restarts() {
+    use protocol::bus::ErrorClasses;
+    let bus = InProcBus::new();
+    let mut robot = bus.endpoint();
+    let running = NodeService::new(NodeConfig::default(), model())
+        .unwrap()
+        .start(BusSource::InProc(bus.clone()))
+        .unwrap();
+    let ids = IdConfig::default();
+    // The next heartbeat whose state passes `want` (generous wall time: function, not speed).
+    let status = |robot: &mut dyn CanBus, want: &dyn Fn(NodeState) -> bool| {
+        let end = Instant::now() + Duration::from_secs(20);
+        while Instant::now() < end {
+            if let Ok(Some(st)) = robot.recv(Duration::from_millis(10))
+                && let Ok(Some((_, Message::NodeStatus(s)))) = messages::decode(&st.frame, &ids)
+                && want(s.state)
+            {
+                return Some(s);
+            }
+        }
+        None
+    };
+    let s = status(&mut robot, &|s| s == NodeState::Running).expect("running");
+    let errors_before = s.bus_errors;
+    bus.report_error(ErrorClasses {
+        passive: true,
+        ..Default::default()
+    });
+    status(&mut robot, &|s| s == NodeState::ErrorPassive).expect("error-passive reported");
+    bus.report_error(ErrorClasses {
+        bus_off: true,
+        ..Default::default()
+    });
+    let s = status(&mut robot, &|s| s == NodeState::BusOff).expect("bus-off reported");
+    assert_eq!(s.bus_errors.wrapping_sub(errors_before), 2, "{s:?}");
+    bus.report_error(ErrorClasses {
+        restarted: true,
+        ..Default::default()
+    });
+    status(&mut robot, &|s| s == NodeState::Running).expect("running after the restart");
+    let stats = running.stop();
+    assert_eq!(stats.bus_errors, 3, "{stats:?}");
+}

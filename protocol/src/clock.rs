@@ -52,6 +52,25 @@ impl Clock for MonotonicClock {
     }
 }
 
+/// UNIX-epoch microseconds from the system's real-time clock: the clock of SocketCAN's receive
+/// timestamps (`SO_TIMESTAMP`), so a reading minus a frame's [`crate::Stamped::t_us`] is how
+/// long ago the kernel received it, however long the process was stopped or behind. Held
+/// monotonic: a clock set backwards reads its last value until it catches up.
+#[derive(Debug, Default)]
+pub struct WallClock {
+    last: AtomicU64,
+}
+
+impl Clock for WallClock {
+    fn now_us(&self) -> u64 {
+        let now = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map(|d| d.as_micros() as u64)
+            .unwrap_or(0);
+        self.last.fetch_max(now, Ordering::Relaxed).max(now)
+    }
+}
+
 /// A clock that only moves when told to: for tests and simulation faster than real time.
 #[derive(Clone, Debug, Default)]
 pub struct ManualClock(Arc<AtomicU64>);
@@ -92,5 +111,10 @@ mod tests {
         let m = MonotonicClock::new();
         let a = m.now_us();
         assert!(m.now_us() >= a);
+        let w = WallClock::default();
+        let a = w.now_us();
+        // Within a second of the monotonic clock anchored to the epoch now.
+        assert!(a.abs_diff(MonotonicClock::unix().now_us()) < 1_000_000);
+        assert!(w.now_us() >= a);
     }
 }

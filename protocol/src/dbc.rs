@@ -169,7 +169,7 @@ pub fn signals(kind: MessageKind) -> Vec<Signal> {
         MessageKind::NodeStatus => vec![
             sig("Heartbeat", 0, 8, false, 1.0, ""),
             sig("State", 8, 8, false, 1.0, "")
-                .range(0.0, 5.0)
+                .range(0.0, 7.0)
                 .values("NodeState"),
             sig("ModelId", 16, 16, false, 1.0, ""),
             sig("CrcFailures", 32, 8, false, 1.0, ""),
@@ -289,6 +289,8 @@ pub fn value_table(name: &str, terrains: &TerrainCatalog) -> Vec<(u32, String)> 
             "no_model",
             "stopping",
             "wrong_image_size",
+            "error_passive",
+            "bus_off",
         ]),
         "GaitReason" => fixed(&["initial", "terrain", "unknown", "node_lost"]),
         _ => Vec::new(),

@@ -173,6 +173,14 @@ pub enum NodeState {
     /// Running, but a foot's latest images are of a size the model does not take: its steps
     /// are not classified (the log says which size; train a model on that foot's images).
     WrongImageSize = 5,
+    /// The CAN controller is error-passive (an error counter past 127): frames may be delayed
+    /// or lost. From the kernel's error frames; ends with a restart report, or traffic half a
+    /// second after the last error frame.
+    ErrorPassive = 6,
+    /// The CAN controller went bus-off: the node is off the bus until the controller restarts
+    /// (`restart-ms`). Seen on the bus only once it is back (this heartbeat is the first after
+    /// the episode), and in the node's log at once.
+    BusOff = 7,
 }
 
 impl NodeState {
@@ -185,6 +193,8 @@ impl NodeState {
             3 => Self::NoModel,
             4 => Self::Stopping,
             5 => Self::WrongImageSize,
+            6 => Self::ErrorPassive,
+            7 => Self::BusOff,
             _ => return None,
         })
     }

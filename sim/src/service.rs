@@ -9,7 +9,7 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use protocol::bus::{Backoff, BusSource, CanBus, after_bus_error, open_with_retry};
+use protocol::bus::{Backoff, BusSource, CanBus, open_with_retry, reopen_after_error};
 use protocol::ids::MessageKind;
 use protocol::messages::{self, Message};
 use protocol::{IdConfig, TerrainCatalog};
@@ -166,9 +166,10 @@ pub fn run(
                     tracing::warn!("sim send: {e} ({send_errors} send errors so far)");
                 }
                 if matches!(e, protocol::BusError::Down { .. }) {
-                    after_bus_error("sim", &e, &mut backoff, stop);
-                    if let Some(b) = open_sim_bus(&source, stop, &ids) {
-                        bus = b;
+                    if let Some(b) =
+                        reopen_after_error(&source, "sim", &e, &mut backoff, stop, &mut || {})
+                    {
+                        bus = filtered(b, &ids);
                     }
                     break;
                 }
@@ -187,11 +188,17 @@ pub fn run(
 /// Opens the simulator's bus, passing it only what the simulator reads: the controller's
 /// LegCommand and the node's TerrainClass (to score it).
 fn open_sim_bus(source: &BusSource, stop: &AtomicBool, ids: &IdConfig) -> Option<Box<dyn CanBus>> {
-    let mut bus = open_with_retry(source, stop, "sim", &mut || {})?;
+    Some(filtered(
+        open_with_retry(source, stop, "sim", &mut || {})?,
+        ids,
+    ))
+}
+
+fn filtered(mut bus: Box<dyn CanBus>, ids: &IdConfig) -> Box<dyn CanBus> {
     let kinds = [MessageKind::LegCommand, MessageKind::TerrainClass];
     if let Err(e) = bus.set_filters(&ids.filters(&kinds)) {
         // Unfiltered still works; it only costs the simulator time.
         tracing::warn!("sim: receive filters not set ({e}); reading every frame");
     }
-    Some(bus)
+    bus
 }

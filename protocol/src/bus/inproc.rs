@@ -6,7 +6,7 @@ use std::time::Duration;
 
 use crossbeam_channel::{Receiver, Sender, TrySendError, bounded};
 
-use super::{CanBus, passes};
+use super::{BusHealth, CanBus, ErrorClasses, passes};
 use crate::clock::{Clock, MonotonicClock};
 use crate::error::BusError;
 use crate::frame::{CanFrame, Stamped};
@@ -23,6 +23,10 @@ struct Shared {
     overruns: AtomicU64,
     clock: Arc<dyn Clock>,
     depth: usize,
+    /// Error frames reported on the bus ([`InProcBus::report_error`]), in order, with their
+    /// count for a lock-free check per receive.
+    errors: Mutex<Vec<(u64, ErrorClasses)>>,
+    n_errors: AtomicU64,
 }
 
 /// A broadcast bus: every endpoint receives what every other endpoint sends. Each endpoint has a
@@ -48,8 +52,15 @@ impl InProcBus {
                 overruns: AtomicU64::new(0),
                 clock,
                 depth,
+                errors: Mutex::new(Vec::new()),
+                n_errors: AtomicU64::new(0),
             }),
         }
+    }
+
+    /// The clock that stamps the bus's frames.
+    pub fn clock(&self) -> Arc<dyn Clock> {
+        self.shared.clock.clone()
     }
 
     /// A new endpoint on the bus.
@@ -64,6 +75,18 @@ impl InProcBus {
             id,
             rx,
             filters: Vec::new(),
+            errors_seen: 0,
+            health: BusHealth::default(),
+        }
+    }
+
+    /// Every endpoint hears an error frame of `classes` now, as sockets with an error mask
+    /// hear the CAN controller's (for tests and fault drills: a bus-off without hardware).
+    pub fn report_error(&self, classes: ErrorClasses) {
+        let s = &self.shared;
+        if let Ok(mut e) = s.errors.lock() {
+            e.push((s.clock.now_us(), classes));
+            s.n_errors.store(e.len() as u64, Ordering::Release);
         }
     }
 
@@ -85,6 +108,23 @@ pub struct InProcEndpoint {
     id: u64,
     rx: Receiver<Stamped>,
     filters: Vec<(u32, u32)>,
+    errors_seen: usize,
+    health: BusHealth,
+}
+
+impl InProcEndpoint {
+    fn take_errors(&mut self) {
+        let s = &self.bus.shared;
+        if s.n_errors.load(Ordering::Acquire) as usize == self.errors_seen {
+            return;
+        }
+        if let Ok(e) = s.errors.lock() {
+            for (t, c) in &e[self.errors_seen..] {
+                self.health.on_error_frame(c, *t);
+            }
+            self.errors_seen = e.len();
+        }
+    }
 }
 
 impl Drop for InProcEndpoint {
@@ -113,13 +153,22 @@ impl CanBus for InProcEndpoint {
 
     fn recv(&mut self, timeout: Duration) -> Result<Option<Stamped>, BusError> {
         let deadline = std::time::Instant::now() + timeout;
+        self.take_errors();
         loop {
             match self.rx.recv_deadline(deadline) {
-                Ok(st) if passes(&self.filters, &st.frame) => return Ok(Some(st)),
+                Ok(st) if passes(&self.filters, &st.frame) => {
+                    self.take_errors();
+                    self.health.on_traffic(st.t_us);
+                    return Ok(Some(st));
+                }
                 Ok(_) => continue,
                 Err(_) => return Ok(None),
             }
         }
+    }
+
+    fn health(&self) -> BusHealth {
+        self.health
     }
 
     fn set_filters(&mut self, filters: &[(u32, u32)]) -> Result<(), BusError> {

@@ -5,13 +5,15 @@
 //! host tests and the demo. On both, every endpoint sees every frame sent by every *other*
 //! endpoint; an endpoint does not receive its own frames (SocketCAN's default).
 
+mod errors;
 mod inproc;
 mod retry;
 mod socket;
 
+pub use errors::{BusHealth, ControllerState, ERROR_STATE_HOLD_US, ErrorClasses, HealthWatch};
 pub use inproc::{InProcBus, InProcEndpoint};
-pub use retry::{Backoff, BusSource, after_bus_error, open_with_retry};
-pub use socket::{SocketCanBus, interface_mtu};
+pub use retry::{Backoff, BusSource, after_bus_error, open_with_retry, reopen_after_error};
+pub use socket::{SocketCanBus, interface_mtu, send_error_frame};
 
 use std::time::Duration;
 
@@ -35,6 +37,12 @@ pub trait CanBus: Send {
 
     /// A name for logs ("vcan0", "inproc").
     fn name(&self) -> &str;
+
+    /// What the CAN controller's error frames have said on this handle so far (counted as
+    /// [`CanBus::recv`] reads them; they are never returned as frames).
+    fn health(&self) -> BusHealth {
+        BusHealth::default()
+    }
 }
 
 impl CanBus for Box<dyn CanBus> {
@@ -52,6 +60,9 @@ impl CanBus for Box<dyn CanBus> {
     }
     fn name(&self) -> &str {
         (**self).name()
+    }
+    fn health(&self) -> BusHealth {
+        (**self).health()
     }
 }
 

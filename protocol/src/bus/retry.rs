@@ -74,6 +74,16 @@ impl BusSource {
         }
     }
 
+    /// The clock of the bus's receive timestamps ([`crate::Stamped::t_us`]): the system's
+    /// real-time clock for SocketCAN, the bus's own for an in-process bus. A process that
+    /// compares "now" with a frame's receive time reads this one.
+    pub fn clock(&self) -> std::sync::Arc<dyn crate::clock::Clock> {
+        match self {
+            BusSource::Iface(_) => std::sync::Arc::new(crate::clock::WallClock::default()),
+            BusSource::InProc(b) => b.clock(),
+        }
+    }
+
     /// The interface name, or "inproc".
     pub fn label(&self) -> &str {
         match self {
@@ -118,6 +128,27 @@ pub fn after_bus_error(role: &str, e: &BusError, backoff: &mut Backoff, stop: &A
     backoff.wait(stop)
 }
 
+/// After a bus error on an open handle: waits the backoff ([`after_bus_error`]), then reopens
+/// `source` with retry, and on success resets `backoff`, so that the next outage starts again
+/// from the shortest delay. (Without the reset, measured in the simulator's loop: after two
+/// outages it waited 3.2 s before reopening, off the bus for 3.35 s in a 2.39 s outage.)
+/// `None` when asked to stop.
+pub fn reopen_after_error(
+    source: &BusSource,
+    role: &str,
+    e: &BusError,
+    backoff: &mut Backoff,
+    stop: &AtomicBool,
+    on_fail: &mut dyn FnMut(),
+) -> Option<Box<dyn CanBus>> {
+    if !after_bus_error(role, e, backoff, stop) {
+        return None;
+    }
+    let bus = open_with_retry(source, stop, role, on_fail)?;
+    backoff.reset();
+    Some(bus)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -138,6 +169,22 @@ mod tests {
         assert!(t.elapsed() < Duration::from_secs(1));
         b.reset();
         assert_eq!(b.delay(), Duration::from_millis(100));
+    }
+
+    #[test]
+    fn a_reopen_that_succeeds_resets_the_backoff() {
+        let source = BusSource::InProc(InProcBus::new());
+        let stop = AtomicBool::new(false);
+        let mut b = Backoff::default();
+        let e = BusError::Down {
+            iface: "vcan0".into(),
+            source: std::io::ErrorKind::NotConnected.into(),
+        };
+        for _ in 0..2 {
+            assert!(reopen_after_error(&source, "test", &e, &mut b, &stop, &mut || {}).is_some());
+            // The next outage waits the shortest delay again, not 200 ms, 400 ms, ...
+            assert_eq!(b.delay(), Duration::from_millis(100));
+        }
     }
 
     #[test]

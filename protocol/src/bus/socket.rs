@@ -4,12 +4,14 @@
 use std::io::ErrorKind;
 use std::time::{Duration, UNIX_EPOCH};
 
+use socketcan::errors::ControllerProblems;
 use socketcan::id::FdFlags;
 use socketcan::{
-    CanAnyFrame, CanFdFrame, CanFdSocket, CanFilter, EmbeddedFrame, Socket, SocketOptions,
+    CanAnyFrame, CanErrorFrame, CanFdFrame, CanFdSocket, CanFilter, EmbeddedFrame, Socket,
+    SocketOptions,
 };
 
-use super::CanBus;
+use super::{BusHealth, CanBus, ErrorClasses};
 use crate::error::BusError;
 use crate::frame::{CanFrame, Stamped};
 
@@ -25,6 +27,7 @@ pub struct SocketCanBus {
     iface: String,
     sock: CanFdSocket,
     read_timeout: Option<Duration>,
+    health: BusHealth,
 }
 
 fn force_recv_buffer(sock: &CanFdSocket, bytes: usize) -> bool {
@@ -59,6 +62,8 @@ impl SocketCanBus {
         };
         let sock = CanFdSocket::open(iface).map_err(open_err)?;
         sock.set_recv_timestamp(true).map_err(open_err)?;
+        // Every error class: bus-off and error-passive are what a robot must know first.
+        sock.set_error_filter_accept_all().map_err(open_err)?;
         // A full transmit queue (no ACK, bus off) must not stall a control loop.
         sock.set_write_timeout(Duration::from_millis(5))
             .map_err(open_err)?;
@@ -73,6 +78,7 @@ impl SocketCanBus {
             iface: iface.to_string(),
             sock,
             read_timeout: None,
+            health: BusHealth::default(),
         })
     }
 
@@ -121,6 +127,45 @@ fn from_socketcan(f: &CanAnyFrame) -> Option<CanFrame> {
     }
 }
 
+/// The classes of a kernel error frame, decoded by the `socketcan` crate.
+fn error_classes(f: CanErrorFrame) -> ErrorClasses {
+    let e = f.into_error();
+    let ctrl = e.controller().unwrap_or(ControllerProblems::empty());
+    ErrorClasses {
+        tx_timeout: e.is_transmit_timeout(),
+        lost_arbitration: e.lost_arbitration().is_some(),
+        warning: ctrl.intersects(ControllerProblems::RX_WARNING | ControllerProblems::TX_WARNING),
+        passive: ctrl.intersects(ControllerProblems::RX_PASSIVE | ControllerProblems::TX_PASSIVE),
+        active: ctrl.contains(ControllerProblems::ACTIVE),
+        overflow: ctrl
+            .intersects(ControllerProblems::RX_OVERFLOW | ControllerProblems::TX_OVERFLOW),
+        protocol: e.protocol().is_some(),
+        transceiver: e.transceiver().is_some(),
+        no_ack: e.is_no_ack(),
+        bus_off: e.is_bus_off(),
+        bus_error: e.is_bus_error(),
+        restarted: e.is_restarted(),
+        counters: e.counters(),
+    }
+}
+
+/// Writes a kernel error frame of `class_bits` (`CAN_ERR_*` of `linux/can/error.h`) with `data`
+/// to `iface`, as `cansend IFACE 2000xxxx#...` does: every socket with an error mask on a
+/// virtual interface hears it. For fault drills and tests; a real controller sends its own.
+pub fn send_error_frame(iface: &str, class_bits: u32, data: &[u8]) -> Result<(), BusError> {
+    let io = |source| BusError::Io {
+        iface: iface.to_string(),
+        source,
+    };
+    let f = CanErrorFrame::new_error(class_bits, data)
+        .map_err(|e| io(std::io::Error::new(ErrorKind::InvalidInput, format!("{e}"))))?;
+    let sock = CanFdSocket::open(iface).map_err(|source| BusError::Open {
+        iface: iface.to_string(),
+        source,
+    })?;
+    sock.write_frame(&CanAnyFrame::Error(f)).map_err(io)
+}
+
 impl CanBus for SocketCanBus {
     fn send(&mut self, frame: &CanFrame) -> Result<(), BusError> {
         let Some(f) = to_socketcan(frame) else {
@@ -158,13 +203,18 @@ impl CanBus for SocketCanBus {
         loop {
             match self.sock.read_frame_with_timestamp() {
                 Ok((f, ts)) => {
-                    let Some(frame) = from_socketcan(&f) else {
-                        continue;
-                    };
                     let t_us = ts
                         .duration_since(UNIX_EPOCH)
                         .map(|d| d.as_micros() as u64)
                         .unwrap_or(0);
+                    if let CanAnyFrame::Error(e) = f {
+                        self.health.on_error_frame(&error_classes(e), t_us);
+                        continue;
+                    }
+                    let Some(frame) = from_socketcan(&f) else {
+                        continue;
+                    };
+                    self.health.on_traffic(t_us);
                     return Ok(Some(Stamped { t_us, frame }));
                 }
                 Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {
@@ -195,5 +245,9 @@ impl CanBus for SocketCanBus {
 
     fn name(&self) -> &str {
         &self.iface
+    }
+
+    fn health(&self) -> BusHealth {
+        self.health
     }
 }
