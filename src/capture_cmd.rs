@@ -7,7 +7,7 @@ use std::time::Duration;
 
 use anyhow::{Context, Result, bail};
 use node::capture::{Capture, CaptureError, CaptureSet, CapturedStep, Labelling, parse_labels};
-use protocol::bus::CanBus;
+use protocol::bus::{Backoff, BusSource, CanBus, reopen_after_error};
 
 use crate::runtime::Signals;
 
@@ -91,16 +91,33 @@ pub fn run(a: CaptureArgs) -> Result<ExitCode> {
             .source
             .clone()
             .unwrap_or_else(|| format!("{iface}-{start}"));
-        let mut bus = protocol::bus::SocketCanBus::open(iface)?;
+        // A wrong name fails here at once; an interface that goes down later is reopened
+        // with the backoff every bus loop uses (images written so far stay written).
+        let mut bus: Box<dyn CanBus> = Box::new(protocol::bus::SocketCanBus::open(iface)?);
+        let source = BusSource::Iface(iface.clone());
+        let mut backoff = Backoff::default();
         tracing::info!(%iface, out = %a.out.display(), "capturing until SIGINT/SIGTERM");
         let mut last_t = 0;
         while !signals.stopping() && sink.failed.is_none() {
-            match bus.recv(Duration::from_millis(50))? {
-                Some(st) => {
+            match bus.recv(Duration::from_millis(50)) {
+                Ok(Some(st)) => {
                     last_t = st.t_us;
                     capture.feed(&st, &mut |c| sink.keep(c));
                 }
-                None => capture.tick(last_t, &mut |c| sink.keep(c)),
+                Ok(None) => capture.tick(last_t, &mut |c| sink.keep(c)),
+                Err(e) => {
+                    match reopen_after_error(
+                        &source,
+                        "capture",
+                        &e,
+                        &mut backoff,
+                        &signals.stop,
+                        &mut || {},
+                    ) {
+                        Some(b) => bus = b,
+                        None => break,
+                    }
+                }
             }
         }
     } else {

@@ -96,6 +96,8 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
         steps: a.steps,
         seed: a.seed,
         controller_restart: None,
+        node_restart: None,
+        link_down: None,
     };
     let show = !a.json;
     let recording = a.live.mcap.is_some() || a.live.foxglove.is_some();

@@ -216,11 +216,6 @@ pub const BETA_DES_STEP: f64 = 0.05;
 struct Listen {
     /// Our time when listening began.
     since_us: Option<u64>,
-    /// The foot's phase is known from a first FootContact. That first report is not taken for
-    /// an edge (it may be the 100 Hz report of a phase under way), but bounce is judged from
-    /// it: taken as the phase alone, the bounce after a first liftoff read as a touchdown at
-    /// the liftoff's angle.
-    phase_known: bool,
     /// The gait, reason and terrain another controller last said it ran for our foot.
     gait: Option<(u8, GaitReason, u8)>,
     /// The step listened to: its touchdown angle, then its liftoff angle (the law's sign).
@@ -233,6 +228,12 @@ struct Listen {
 /// simulated leg's own laws hit the gait they run within 0.01 rad; the paper's gaits lie
 /// 0.15 rad apart in beta_des, and eq. (5) scales that by c = 0.2 to 0.03 rad between them.
 pub const TAKEOVER_FIT_RAD: f64 = 0.012;
+
+/// LegState reports further apart than this on the foot's clock, in a stream that was regular
+/// (the leg reports at 100-500 Hz), mean that reports were lost, edges perhaps among them: the
+/// controller no longer knows the phase, µs. A stalled leg (a simulator the machine cannot keep
+/// up with) leaves no such gap: its clock stops too. See [`Controller`].
+pub const LEG_GAP_US: u64 = 50_000;
 
 /// How a controller took over a leg (see [`ControllerConfig::takeover_ms`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -275,6 +276,14 @@ pub struct Takeover {
 /// the node already said wood: G3's stance law at G2's speed left at 1.1 m/s instead of 0.5).
 ///
 /// No touchdown within `takeover_ms`: a fresh start.
+///
+/// **Gaps in the leg's reports.** After reports were lost (an interface down, a stalled
+/// process: [`LEG_GAP_US`]) the controller may have missed an edge, and a missed liftoff made
+/// it take the next touchdown for more of the old stance and run eq. (4) from a touchdown
+/// long past (measured in the lock-step loop with the bus silent 0.3 s: 4 falls). So after a
+/// gap the next FootContact gives the phase only, as at a takeover, and a stance whose
+/// touchdown was not heard is left to the leg (a flight command: the leg holds its rest
+/// length); eq. (5) restarts from beta_des at its liftoff.
 pub struct Controller {
     cfg: ControllerConfig,
     /// `terrain_gaits` by terrain id (the catalog's), resolved once.
@@ -308,6 +317,18 @@ pub struct Controller {
     pub gait_resets: u64,
     /// Listening before the takeover (`None` once commanding).
     listen: Option<Listen>,
+    /// The foot's phase is known: the next FootContact that differs is an edge. After a gap
+    /// in the leg's reports, and while listening, the first FootContact gives the phase only
+    /// (it may be the 100 Hz report of a phase under way); bounce is judged from it (taken as
+    /// nothing, the bounce after a first liftoff read as a touchdown at the liftoff's angle).
+    phase_known: bool,
+    /// The current stance's touchdown edge was heard: its stance law can run.
+    touchdown_known: bool,
+    /// Gaps in the leg's reports so far ([`LEG_GAP_US`]).
+    pub leg_gaps: u64,
+    /// Foot time of the last LegState, and whether the stream was regular up to it.
+    last_leg_state_us: Option<u64>,
+    leg_state_regular: bool,
     /// How the controller took over, once it has.
     pub takeover: Option<Takeover>,
 }
@@ -351,6 +372,12 @@ impl Controller {
             gait_resets: 0,
             listen: (cfg.takeover_ms > 0).then(Listen::default),
             takeover: None,
+            // A fresh start assumes flight (the leg is set down after the first command).
+            phase_known: cfg.takeover_ms == 0,
+            touchdown_known: false,
+            leg_gaps: 0,
+            last_leg_state_us: None,
+            leg_state_regular: false,
             gait_of_terrain,
             cfg,
         }
@@ -377,6 +404,30 @@ impl Controller {
             self.foot_clock = Some((t, now_us));
         }
         t
+    }
+
+    /// A LegState stamped `ts`: a gap in the leg's regular stream ([`LEG_GAP_US`]) makes the
+    /// phase unknown. Only a stream that was regular counts (the last interval within the
+    /// gap): a leg that reports now and then has no gaps to find.
+    fn leg_state(&mut self, ts: u32, now_us: u64) {
+        let t = self.foot_time(ts, now_us);
+        if let Some(last) = self.last_leg_state_us {
+            let gap = t.saturating_sub(last) > LEG_GAP_US;
+            if gap && self.leg_state_regular {
+                self.phase_known = false;
+                self.leg_gaps += 1;
+                // Commands were lost as well, and the leg's own laws ran it meanwhile: the
+                // controller knows as little of it as a restarted one.
+                if self.cfg.takeover_ms > 0 && self.listen.is_none() {
+                    self.listen = Some(Listen {
+                        since_us: Some(now_us),
+                        ..Listen::default()
+                    });
+                }
+            }
+            self.leg_state_regular = !gap;
+        }
+        self.last_leg_state_us = Some(t);
     }
 
     /// Now on the foot's clock: its latest timestamp plus our time since, for at most
@@ -443,16 +494,15 @@ impl Controller {
                 }
             }
             Message::LegState(ls) if foot == self.cfg.foot => {
-                self.foot_time(ls.timestamp_us, now_us);
+                self.leg_state(ls.timestamp_us, now_us);
                 self.leg_angle = ls.leg_angle_rad;
             }
             Message::FootContact(fc) if foot == self.cfg.foot => {
                 let t = self.foot_time(fc.timestamp_us, now_us);
-                if let Some(l) = self.listen.as_mut()
-                    && !l.phase_known
-                {
-                    l.phase_known = true;
+                if !self.phase_known {
+                    self.phase_known = true;
                     self.stance = fc.stance;
+                    self.touchdown_known = false;
                     self.last_edge_us = Some(t);
                     return;
                 }
@@ -469,6 +519,7 @@ impl Controller {
                 self.stance = fc.stance;
                 if fc.stance {
                     self.touchdown_us = t;
+                    self.touchdown_known = true;
                     self.beta_td = self.leg_angle;
                     if let Some(l) = self.listen.as_mut() {
                         if l.td.is_some() && l.lo.is_some() {
@@ -494,7 +545,8 @@ impl Controller {
                     // far too short or long, the leg swept far from the gait's angle) it would
                     // carry the bad angle into the next touchdown and the next fall: start the
                     // gait afresh instead.
-                    let plausible = (MIN_STANCE_US..=MAX_STANCE_US).contains(&stance_us)
+                    let plausible = self.touchdown_known
+                        && (MIN_STANCE_US..=MAX_STANCE_US).contains(&stance_us)
                         && (beta_lo - b).abs() <= MAX_ANGLE_FROM_DESIRED;
                     self.next_beta_td = if plausible {
                         laws::next_touchdown_angle(beta_lo, self.beta_td, g.c, b)
@@ -672,7 +724,7 @@ impl Controller {
         if now_us >= self.next_cmd_us {
             self.next_cmd_us = now_us + (1e6 / self.cfg.command_hz) as u64;
             let g = &self.gait;
-            let (phase, len) = if self.stance {
+            let (phase, len) = if self.stance && self.touchdown_known {
                 let t = self.foot_now(now_us).saturating_sub(self.touchdown_us) as f64 * 1e-6;
                 (
                     Phase::Stance,
@@ -964,6 +1016,36 @@ mod tests {
         );
         assert!(out.iter().any(|m| matches!(m, Message::LegCommand(l)
             if (l.touchdown_angle_rad - Gait::g2().beta_des).abs() < 1e-9)));
+    }
+
+    /// After a gap in a regular LegState stream the controller has lost the leg: it stops
+    /// commanding and takes it over again as at a start.
+    #[test]
+    fn a_gap_in_the_legs_reports_makes_the_controller_listen_again() {
+        let mut c = Controller::new(ControllerConfig::default(), &TerrainCatalog::paper());
+        let mut out = Vec::new();
+        c.tick(0, &mut |m| out.push(m));
+        c.tick(2_000_000, &mut |m| out.push(m));
+        assert!(c.takeover.is_some(), "fresh start after takeover_ms");
+        let ls = |t: u64| {
+            Message::LegState(protocol::messages::LegState {
+                leg_angle_rad: 0.3,
+                leg_length_m: 0.9,
+                timestamp_us: t as u32,
+            })
+        };
+        for t in (2_000_000..2_100_000).step_by(10_000) {
+            c.on_message(0, &ls(t), t, &mut |m| out.push(m));
+        }
+        c.tick(2_100_000, &mut |m| out.push(m));
+        assert_eq!(c.leg_gaps, 0);
+        // 300 ms of reports lost.
+        c.on_message(0, &ls(2_400_000), 2_400_000, &mut |m| out.push(m));
+        assert_eq!(c.leg_gaps, 1);
+        out.clear();
+        c.tick(2_401_000, &mut |m| out.push(m));
+        c.tick(2_500_000, &mut |m| out.push(m));
+        assert!(out.is_empty(), "commanded a leg it lost track of: {out:?}");
     }
 
     #[test]

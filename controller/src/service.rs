@@ -30,6 +30,7 @@ pub fn run(
     let mut out: Vec<Message> = Vec::with_capacity(8);
     let mut backoff = Backoff::default();
     let mut switches_logged = 0;
+    let (mut gaps_logged, mut takeover_logged) = (0, None);
     // The episodes of the CAN controller under this process (bus-off, error-passive), each
     // logged once with its fix.
     let mut watch = HealthWatch::default();
@@ -74,9 +75,18 @@ pub fn run(
                 }
             }
             watch.update("controller", source.label(), &bus.health());
-            let listening = ctrl.takeover.is_none();
             ctrl.tick(now_us(), &mut |o| out.push(o));
-            if listening && let Some(t) = ctrl.takeover {
+            if ctrl.leg_gaps != gaps_logged {
+                gaps_logged = ctrl.leg_gaps;
+                tracing::warn!(
+                    gaps = gaps_logged,
+                    "the leg's reports stopped for a while; listening to take it over again"
+                );
+            }
+            if let Some(t) = ctrl.takeover
+                && Some(t.at_us) != takeover_logged
+            {
+                takeover_logged = Some(t.at_us);
                 tracing::info!(
                     gait = t.gait,
                     gait_from = t.gait_from,

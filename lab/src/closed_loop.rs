@@ -39,6 +39,12 @@ pub struct LoopParams<'a> {
     /// The controller is killed at `.0` (simulated µs) and a new one started `.1` µs later, as
     /// a process crash and restart on a robot would: the new one knows only what the bus says.
     pub controller_restart: Option<(u64, u64)>,
+    /// The node likewise: killed at `.0` (simulated µs), a new one with the same model and
+    /// config started `.1` µs later.
+    pub node_restart: Option<(u64, u64)>,
+    /// The bus carries nothing from `.0` (simulated µs) for `.1` µs: every frame sent is lost,
+    /// as on an interface that is down.
+    pub link_down: Option<(u64, u64)>,
 }
 
 impl<'a> LoopParams<'a> {
@@ -52,6 +58,8 @@ impl<'a> LoopParams<'a> {
             steps,
             seed,
             controller_restart: None,
+            node_restart: None,
+            link_down: None,
         }
     }
 }
@@ -63,6 +71,8 @@ pub struct LoopRun {
     pub rows: Vec<StepRecord>,
     /// Times the hopper fell.
     pub falls: u64,
+    /// When, simulated µs.
+    pub fall_times_us: Vec<u64>,
 }
 
 /// A recording of a [`run`]: every frame on the bus and the simulator's truth.
@@ -117,7 +127,9 @@ pub fn run_recorded(
     let mut node_cfg = p.node.clone();
     // Lock-step simulated time: a refit lands at the step that asked for it, as in a replay.
     node_cfg.refit = node_cfg.refit.reproducible();
+    let restart_with = p.node_restart.map(|_| (node_cfg.clone(), model.clone()));
     let mut node = NodeService::new(node_cfg, model)?;
+    let mut node_dead = false;
     let catalog = node.catalog().clone();
     let mut ctrl = match p.controller {
         Some(c) => Some(Controller::new(c.clone(), &c.catalog()?)),
@@ -142,6 +154,9 @@ pub fn run_recorded(
     while rows.len() < p.steps && t_us < limit_us {
         t_us += 1000;
         clock.set_us(t_us);
+        let down = p
+            .link_down
+            .is_some_and(|(at, len)| (at..at + len).contains(&t_us));
         if let Some(r) = rec.as_mut() {
             if r.stop.load(std::sync::atomic::Ordering::Relaxed) {
                 break;
@@ -159,17 +174,33 @@ pub fn run_recorded(
         robot.advance_to(t_us, &mut |f| sent.push(f));
         for f in sent.drain(..) {
             offer(&rec, t_us, &f);
-            sim_ep.send(&f)?;
+            if !down {
+                sim_ep.send(&f)?;
+            }
         }
-        // The node: frames, then what is due by now (deadlines, the heartbeat).
-        while let Some(st) = node_ep.recv(zero)? {
+        // The node: frames, then what is due by now (deadlines, the heartbeat); none while
+        // killed.
+        if let (Some((kill_us, off_us)), Some((cfg, model))) = (p.node_restart, &restart_with) {
+            if (kill_us..kill_us + off_us).contains(&t_us) {
+                node_dead = true;
+                while node_ep.recv(zero)?.is_some() {}
+            } else if t_us >= kill_us + off_us && node_dead {
+                node = NodeService::new(cfg.clone(), model.clone())?;
+                node_dead = false;
+            }
+        }
+        while !node_dead && let Some(st) = node_ep.recv(zero)? {
             node.process(&st, &mut |o| said.push(o));
         }
-        node.tick(t_us, &mut |o| said.push(o));
+        if !node_dead {
+            node.tick(t_us, &mut |o| said.push(o));
+        }
         for o in said.drain(..) {
             if let Some(f) = node.frame(&o) {
                 offer(&rec, t_us, &f);
-                node_ep.send(&f)?;
+                if !down {
+                    node_ep.send(&f)?;
+                }
             }
             let Output::Class { foot, class: tc } = o else {
                 continue;
@@ -200,7 +231,9 @@ pub fn run_recorded(
         for m in out.drain(..) {
             if let Some(f) = m.to_frame(&ids, 0) {
                 offer(&rec, t_us, &f);
-                ctrl_ep.send(&f)?;
+                if !down {
+                    ctrl_ep.send(&f)?;
+                }
             }
         }
         // The robot hears the controller.
@@ -211,6 +244,7 @@ pub fn run_recorded(
     Ok(LoopRun {
         rows,
         falls: robot.falls.len() as u64,
+        fall_times_us: robot.falls.clone(),
     })
 }
 
@@ -272,6 +306,11 @@ pub fn run_realtime(
         LoopRun {
             rows,
             falls: report.falls,
+            fall_times_us: report
+                .fall_times_s
+                .iter()
+                .map(|t| (t * 1e6) as u64)
+                .collect(),
         },
         switches,
     ))
