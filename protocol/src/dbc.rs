@@ -230,6 +230,29 @@ pub fn signals(kind: MessageKind) -> Vec<Signal> {
     }
 }
 
+/// What a signal means where its name and unit do not say it (docs/protocol.md says more).
+fn comment(kind: MessageKind, signal: &str) -> Option<&'static str> {
+    Some(match (kind, signal) {
+        (MessageKind::TerrainClass, "LatencyUs") => {
+            "From the kernel's receive time of the sampled frame's last segment to the decision, \
+             on the node's clock: a node that was stopped or behind shows it. Saturates at \
+             65535; 0 with FlagNoSample."
+        }
+        (MessageKind::NodeStatus, "State") => {
+            "0 starting, 1 running, 2 degraded, 3 no model, 4 stopping, 5 wrong image size, \
+             6 CAN controller error-passive, 7 CAN controller bus-off (from error frames)."
+        }
+        (MessageKind::NodeStatus, "CrcFailures" | "IncompleteFrames") => {
+            "Low 8 bits of a running total: it wraps; take differences mod 256."
+        }
+        (MessageKind::NodeStatus, "BusErrors") => {
+            "CAN error frames heard plus failed reads and writes: low 8 bits of a running \
+             total; it wraps; take differences mod 256."
+        }
+        _ => return None,
+    })
+}
+
 fn sender(kind: MessageKind) -> &'static str {
     match kind {
         MessageKind::LegCommand | MessageKind::GaitStatus => "Controller",
@@ -307,7 +330,7 @@ pub fn generate(ids: &IdConfig, terrains: &TerrainCatalog) -> String {
     );
     let _ = writeln!(
         o,
-        "NS_ :\n\tBA_DEF_\n\tBA_\n\tVAL_\n\tVAL_TABLE_\n\tSG_MUL_VAL_\n"
+        "NS_ :\n\tCM_\n\tBA_DEF_\n\tBA_\n\tVAL_\n\tVAL_TABLE_\n\tSG_MUL_VAL_\n"
     );
     let _ = writeln!(o, "BS_:\n");
     let _ = writeln!(o, "BU_: Controller Leg Foot Node\n");
@@ -380,6 +403,14 @@ pub fn generate(ids: &IdConfig, terrains: &TerrainCatalog) -> String {
         }
         o.push('\n');
     }
+    for (dbc_id, _, kind) in &msgs {
+        for s in signals(*kind) {
+            if let Some(c) = comment(*kind, &s.name) {
+                let _ = writeln!(o, "CM_ SG_ {dbc_id} {} \"{c}\";", s.name);
+            }
+        }
+    }
+    o.push('\n');
     let _ = writeln!(o, "BA_DEF_  \"BusType\" STRING ;");
     let _ = writeln!(
         o,
