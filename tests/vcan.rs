@@ -480,9 +480,19 @@ fn sim_node_and_controller_as_processes_classify_steps_and_survive_bus_and_proce
     let t0 = Instant::now();
     let mut sim_done = false;
     let mut watch_errors = 0u64;
+    // (robot s from the leg's last LegState, when it came).
+    let mut leg_clock: Option<(f64, Instant)> = None;
+    // Per fault: robot time it started and ended.
+    let mut windows = vec![(f64::NAN, f64::NAN); schedule.len()];
     let mut bus_off_sent = false;
     while !sim_done {
-        let robot_now = t0.elapsed().as_secs_f64() * speed;
+        // The robot's clock: the leg's latest timestamp, carried on by the wall clock at
+        // `speed` while the leg is not heard (the link fault). Wall time alone runs ahead of
+        // it: under TCG the simulator falls behind `speed`, and a fault scheduled by the wall
+        // clock landed 0.9 robot s early, inside a terrain switch judged as clean.
+        let robot_now = leg_clock.map_or(t0.elapsed().as_secs_f64() * speed, |(r, at)| {
+            r + at.elapsed().as_secs_f64() * speed
+        });
         let got = match watch.recv(Duration::from_millis(5)) {
             Ok(g) => g,
             Err(_) => {
@@ -513,6 +523,9 @@ fn sim_node_and_controller_as_processes_classify_steps_and_survive_bus_and_proce
                         }
                     }
                 }
+                Ok(Some((_, Message::LegState(ls)))) => {
+                    leg_clock = Some((ls.timestamp_us as f64 * 1e-6, Instant::now()));
+                }
                 Ok(Some((_, Message::GaitStatus(g)))) => {
                     for (k, lost) in node_lost_in.iter_mut().enumerate() {
                         if began[k].is_some()
@@ -541,6 +554,7 @@ fn sim_node_and_controller_as_processes_classify_steps_and_survive_bus_and_proce
         for (k, &(fault, start, end)) in schedule.iter().enumerate() {
             if began[k].is_none() && robot_now >= start {
                 began[k] = Some(Instant::now());
+                windows[k].0 = robot_now;
                 match fault {
                     Fault::LinkDown => ip_link(&iface, "down"),
                     Fault::ErrorFrames => {
@@ -583,6 +597,7 @@ fn sim_node_and_controller_as_processes_classify_steps_and_survive_bus_and_proce
                     Fault::ControllerRestart => controller = spawn(&controller_args),
                 }
                 ended[k] = Some(Instant::now());
+                windows[k].1 = robot_now;
             }
         }
         if let Ok(Some(status)) = sim.0.try_wait() {
@@ -606,17 +621,6 @@ fn sim_node_and_controller_as_processes_classify_steps_and_survive_bus_and_proce
         .filter(|s| s["truth"] == s["classified"])
         .count();
     let accuracy = correct as f64 / steps.len().max(1) as f64;
-    // Robot time of each fault, from the wall clock (the simulator keeps `speed`; it slows
-    // down only when the machine cannot keep up, which makes these times early, never late).
-    let robot = |i: Instant| (i - t0).as_secs_f64() * speed;
-    let windows: Vec<(f64, f64)> = (0..schedule.len())
-        .map(|k| {
-            (
-                began[k].map_or(f64::NAN, robot),
-                ended[k].map_or(f64::NAN, robot),
-            )
-        })
-        .collect();
     // Steps from each terrain change to that terrain's gait (the controller's default table),
     // for changes outside the faults: from half a second before each until 3 s after it (the
     // 2 steps a switch needs, and the robot's clock running behind ours).
