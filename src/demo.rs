@@ -105,7 +105,7 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
         !(recording && a.realtime),
         "--mcap and --foxglove record the lock-step demo (paced to real time with --foxglove); drop --realtime"
     );
-    let (rows, falls) = if a.realtime {
+    let (falls, rows) = if a.realtime {
         if show {
             eprintln!(
                 "running simulator, node and controller in real time for {:.0} s...",
@@ -117,10 +117,10 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
             run.rows.iter().for_each(print_row);
             println!(
                 "(controller: {switches} gait switches; {} falls)",
-                run.falls
+                run.falls()
             );
         }
-        (run.rows, run.falls)
+        (run.falls(), run.rows)
     } else {
         let live = if recording {
             a.live.start(&lp.node.ids, &catalog)
@@ -161,7 +161,7 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
         );
         crate::mcap_cmd::finish(live);
         let run = run?;
-        (run.rows, run.falls)
+        (run.falls(), run.rows)
     };
     summarize(&rows, falls, &track, &ctrl_cfg, &known, &a)
 }

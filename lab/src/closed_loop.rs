@@ -69,10 +69,20 @@ impl<'a> LoopParams<'a> {
 pub struct LoopRun {
     /// One row per step the node decided, in order.
     pub rows: Vec<StepRecord>,
-    /// Times the hopper fell.
-    pub falls: u64,
-    /// When, simulated µs.
+    /// When the hopper fell, simulated µs.
     pub fall_times_us: Vec<u64>,
+}
+
+impl LoopRun {
+    /// Times the hopper fell.
+    pub fn falls(&self) -> u64 {
+        self.fall_times_us.len() as u64
+    }
+}
+
+/// True while `t_us` lies in a fault's window (start, length), µs.
+fn during(window: Option<(u64, u64)>, t_us: u64) -> bool {
+    window.is_some_and(|(at, len)| (at..at + len).contains(&t_us))
 }
 
 /// A recording of a [`run`]: every frame on the bus and the simulator's truth.
@@ -154,9 +164,7 @@ pub fn run_recorded(
     while rows.len() < p.steps && t_us < limit_us {
         t_us += 1000;
         clock.set_us(t_us);
-        let down = p
-            .link_down
-            .is_some_and(|(at, len)| (at..at + len).contains(&t_us));
+        let down = during(p.link_down, t_us);
         if let Some(r) = rec.as_mut() {
             if r.stop.load(std::sync::atomic::Ordering::Relaxed) {
                 break;
@@ -180,14 +188,12 @@ pub fn run_recorded(
         }
         // The node: frames, then what is due by now (deadlines, the heartbeat); none while
         // killed.
-        if let (Some((kill_us, off_us)), Some((cfg, model))) = (p.node_restart, &restart_with) {
-            if (kill_us..kill_us + off_us).contains(&t_us) {
-                node_dead = true;
-                while node_ep.recv(zero)?.is_some() {}
-            } else if t_us >= kill_us + off_us && node_dead {
-                node = NodeService::new(cfg.clone(), model.clone())?;
-                node_dead = false;
-            }
+        if during(p.node_restart, t_us) {
+            node_dead = true;
+            while node_ep.recv(zero)?.is_some() {}
+        } else if node_dead && let Some((cfg, model)) = &restart_with {
+            node = NodeService::new(cfg.clone(), model.clone())?;
+            node_dead = false;
         }
         while !node_dead && let Some(st) = node_ep.recv(zero)? {
             node.process(&st, &mut |o| said.push(o));
@@ -210,11 +216,11 @@ pub fn run_recorded(
             rows.push(row);
         }
         // The controller (none while killed: its frames are lost, as a dead process's are).
-        if let (Some((kill_us, off_us)), Some(c)) = (p.controller_restart, p.controller) {
-            if (kill_us..kill_us + off_us).contains(&t_us) {
+        if let Some(c) = p.controller {
+            if during(p.controller_restart, t_us) {
                 ctrl = None;
                 while ctrl_ep.recv(zero)?.is_some() {}
-            } else if t_us >= kill_us + off_us && ctrl.is_none() {
+            } else if ctrl.is_none() {
                 ctrl = Some(Controller::new(c.clone(), &c.catalog()?));
             }
         }
@@ -243,7 +249,6 @@ pub fn run_recorded(
     }
     Ok(LoopRun {
         rows,
-        falls: robot.falls.len() as u64,
         fall_times_us: robot.falls.clone(),
     })
 }
@@ -305,7 +310,6 @@ pub fn run_realtime(
     Ok((
         LoopRun {
             rows,
-            falls: report.falls,
             fall_times_us: report
                 .fall_times_s
                 .iter()

@@ -26,7 +26,7 @@ fn restart(terrain: &str, cfg: &ControllerConfig, seed: u64, node: bool) -> (u64
     let r = run(&track(terrain), model, &p, |_| {}).unwrap();
     assert_eq!(r.rows.len(), 60);
     let gaits = r.rows[50..].iter().map(|s| s.gait).collect();
-    (r.falls, gaits)
+    (r.falls(), gaits)
 }
 
 #[test]
@@ -78,7 +78,8 @@ fn a_silent_bus_costs_no_fall() {
         };
         let r = run(&Track::default(), model.clone(), &p, |_| {}).unwrap();
         assert_eq!(
-            r.falls, 0,
+            r.falls(),
+            0,
             "bus silent {len} us from {at} us: falls at {:?}",
             r.fall_times_us
         );
