@@ -259,12 +259,51 @@ fn bad_paths_and_logs_are_named_and_a_live_run_goes_on_without_its_recording() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
+/// A demo's stderr, read to the end on a thread (an unread pipe would stall the demo once
+/// it fills), and the port of its Foxglove view once the demo has said it.
+struct DemoLog {
+    text: std::sync::Arc<std::sync::Mutex<String>>,
+    port: std::sync::mpsc::Receiver<u16>,
+}
+
+impl DemoLog {
+    fn read(child: &mut Child) -> DemoLog {
+        use std::io::BufRead;
+        let text = std::sync::Arc::new(std::sync::Mutex::new(String::new()));
+        let (tx, port) = std::sync::mpsc::channel();
+        let err = child.stderr.take().unwrap();
+        let t = text.clone();
+        std::thread::spawn(move || {
+            for line in std::io::BufReader::new(err).lines().map_while(Result::ok) {
+                if let Some(p) = foxglove_port(&line) {
+                    let _ = tx.send(p);
+                }
+                let mut t = t.lock().unwrap();
+                t.push_str(&line);
+                t.push('\n');
+            }
+        });
+        DemoLog { text, port }
+    }
+
+    /// The port the demo's live view listens on: it binds port 0 and logs the one it got
+    /// (a port picked by the test and bound later by the demo can be taken in between).
+    fn port(&self) -> u16 {
+        self.port
+            .recv_timeout(Duration::from_secs(60))
+            .unwrap_or_else(|_| panic!("the demo named no Foxglove port:\n{}", self.text()))
+    }
+
+    fn text(&self) -> String {
+        self.text.lock().unwrap().clone()
+    }
+}
+
+/// `... Foxglove view on ws://127.0.0.1:36995 (...)` -> 36995.
+fn foxglove_port(line: &str) -> Option<u16> {
+    const SAYS: &str = "Foxglove view on ws://";
+    let addr = line[line.find(SAYS)? + SAYS.len()..].split(' ').next()?;
+    addr.rsplit_once(':')?.1.parse().ok()
 }
 
 fn signal(child: &Child, sig: i32) {
@@ -288,28 +327,38 @@ fn wait(child: &mut Child, within: Duration) -> std::process::ExitStatus {
 #[test]
 fn live_view_serves_images_and_terrain_and_a_killed_recording_keeps_its_chunks() {
     let dir = tempdir("live");
-    let port = free_port();
     // Paced to real time by --foxglove: 300 steps is two minutes, longer than the test.
-    let demo = |mcap: &str, fox: &str| {
+    let demo = |mcap: &str| {
         presrs()
             .args(["demo", "--steps", "300", "--json", "--csv"])
             .arg(dir.join(format!("{mcap}.csv")))
             .arg("--mcap")
             .arg(dir.join(mcap))
-            .args(["--foxglove", fox])
+            .args(["--foxglove", "127.0.0.1:0"])
             .stdout(Stdio::null())
             .stderr(Stdio::piped())
             .spawn()
             .unwrap()
     };
-    let mut killed = demo("killed.mcap", &format!("127.0.0.1:{port}"));
-    let mut stopped = demo("stopped.mcap", "127.0.0.1:0");
-    let client = common::output_ok(
-        Command::new("python3")
-            .arg(common::root().join("tests/interop/foxglove_client.py"))
-            .arg(format!("ws://127.0.0.1:{port}"))
-            .args(["/foot0/image", "/foot0/terrain", "/gait", "/sim/leg0"])
-            .args(["--timeout", "90"]),
+    let mut killed = demo("killed.mcap");
+    let mut stopped = demo("stopped.mcap");
+    let killed_log = DemoLog::read(&mut killed);
+    let stopped_log = DemoLog::read(&mut stopped);
+    let port = killed_log.port();
+    let client = Command::new("python3")
+        .arg(common::root().join("tests/interop/foxglove_client.py"))
+        .arg(format!("ws://127.0.0.1:{port}"))
+        .args(["/foot0/image", "/foot0/terrain", "/gait", "/sim/leg0"])
+        .args(["--timeout", "90"])
+        .output()
+        .unwrap();
+    assert!(
+        client.status.success(),
+        "foxglove_client.py: {}\n{}{}\nthe demo's log:\n{}",
+        client.status,
+        String::from_utf8_lossy(&client.stdout),
+        String::from_utf8_lossy(&client.stderr),
+        killed_log.text()
     );
     let got: Vec<Value> = String::from_utf8_lossy(&client.stdout)
         .lines()
@@ -341,7 +390,11 @@ fn live_view_serves_images_and_terrain_and_a_killed_recording_keeps_its_chunks()
     signal(&stopped, libc::SIGTERM);
     wait(&mut killed, Duration::from_secs(10));
     let status = wait(&mut stopped, Duration::from_secs(30));
-    assert!(status.success(), "SIGTERM ends the demo normally: {status}");
+    assert!(
+        status.success(),
+        "SIGTERM ends the demo normally: {status}\n{}",
+        stopped_log.text()
+    );
 
     // Killed: every chunk closed before the kill reads back; the torn tail, if any, is the
     // only loss.
