@@ -6,8 +6,9 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 use anyhow::{Context, Result, bail};
-use node::capture::{Capture, CaptureError, CaptureSet, CapturedStep, Labelling, parse_labels};
-use protocol::bus::{Backoff, BusSource, CanBus, reopen_after_error};
+use node::capture::{Capture, CaptureService, CaptureSet, Labelling, parse_labels};
+use protocol::bus::{BusSource, CanBus};
+use protocol::component::{self, Component, RunOptions};
 
 use crate::runtime::Signals;
 
@@ -61,14 +62,13 @@ pub fn run(a: CaptureArgs) -> Result<ExitCode> {
         }
         (None, None) => bail!("give --label TERRAIN or --labels FILE.csv"),
     };
-    let mut capture = Capture::new(cfg, labelling);
-    let mut sink = Sink {
-        set: CaptureSet::open(&a.out)?,
-        source: String::new(),
-        failed: None,
-    };
+    let mut service = CaptureService::new(
+        Capture::new(cfg, labelling),
+        CaptureSet::open(&a.out)?,
+        String::new(),
+    );
     if let Some(log) = &a.replay {
-        sink.source = a.source.clone().unwrap_or_else(|| {
+        service.source = a.source.clone().unwrap_or_else(|| {
             log.file_name()
                 .map_or("log".into(), |n| n.to_string_lossy().to_string())
         });
@@ -77,8 +77,8 @@ pub fn run(a: CaptureArgs) -> Result<ExitCode> {
         let records = protocol::candump::read_log(std::io::BufReader::new(file))
             .with_context(|| format!("reading {}", log.display()))?;
         for r in &records {
-            capture.feed(&r.stamped, &mut |c| sink.keep(c));
-            if sink.failed.is_some() {
+            service.feed(&r.stamped);
+            if service.done() {
                 break;
             }
         }
@@ -87,47 +87,30 @@ pub fn run(a: CaptureArgs) -> Result<ExitCode> {
         let start = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
             .map_or(0, |d| d.as_secs());
-        sink.source = a
+        service.source = a
             .source
             .clone()
             .unwrap_or_else(|| format!("{iface}-{start}"));
         // A wrong name fails here at once; an interface that goes down later is reopened
         // with the backoff every bus loop uses (images written so far stay written).
-        let mut bus: Box<dyn CanBus> = Box::new(protocol::bus::SocketCanBus::open(iface)?);
-        let source = BusSource::Iface(iface.clone());
-        let mut backoff = Backoff::default();
+        let bus: Box<dyn CanBus> = Box::new(protocol::bus::SocketCanBus::open(iface)?);
         tracing::info!(%iface, out = %a.out.display(), "capturing until SIGINT/SIGTERM");
-        let mut last_t = 0;
-        while !signals.stopping() && sink.failed.is_none() {
-            match bus.recv(Duration::from_millis(50)) {
-                Ok(Some(st)) => {
-                    last_t = st.t_us;
-                    capture.feed(&st, &mut |c| sink.keep(c));
-                }
-                Ok(None) => capture.tick(last_t, &mut |c| sink.keep(c)),
-                Err(e) => {
-                    match reopen_after_error(
-                        &source,
-                        "capture",
-                        &e,
-                        &mut backoff,
-                        &signals.stop,
-                        &mut || {},
-                    ) {
-                        Some(b) => bus = b,
-                        None => break,
-                    }
-                }
-            }
-        }
+        let opts = RunOptions {
+            tick: Duration::from_millis(50),
+            ..RunOptions::default()
+        };
+        let source = BusSource::Iface(iface.clone());
+        component::run_opened(&mut service, Some(bus), &source, &opts, &signals.stop);
     } else {
         bail!("give --replay FILE.log or --iface IFACE");
     }
-    let Sink {
+    let CaptureService {
+        capture,
         set,
         source,
         failed,
-    } = sink;
+        ..
+    } = service;
     let per_terrain = &set.written_per_terrain;
     let c = capture.counts();
     let pc = capture.pipeline().counters;
@@ -169,22 +152,4 @@ pub fn run(a: CaptureArgs) -> Result<ExitCode> {
         return Err(e).context(format!("capture stopped after {} images", set.written));
     }
     Ok(ExitCode::SUCCESS)
-}
-
-/// Where captured steps go; the first write error stops the capture (everything before it
-/// stays written).
-struct Sink {
-    set: CaptureSet,
-    source: String,
-    failed: Option<CaptureError>,
-}
-
-impl Sink {
-    fn keep(&mut self, c: CapturedStep) {
-        if self.failed.is_none()
-            && let Err(e) = self.set.add(&c, &self.source)
-        {
-            self.failed = Some(e);
-        }
-    }
 }

@@ -10,14 +10,16 @@
 use std::sync::Arc;
 use std::time::Duration;
 
-use controller::{Controller, ControllerConfig};
+use controller::ControllerConfig;
+use controller::service::ControllerService;
+use node::NodeConfig;
+use node::NodeService;
 use node::classifier::Model;
-use node::{NodeConfig, NodeService, Output};
-use protocol::bus::{CanBus, InProcBus};
-use protocol::clock::ManualClock;
-use protocol::messages;
+use protocol::TerrainCatalog;
+use protocol::bus::InProcBus;
+use protocol::component::{Component, LockStep};
 use sim::runner::{SimConfig, SimRobot, Track};
-use sim::service::StepRecord;
+use sim::service::{SimService, StepRecord};
 
 use crate::LabError;
 
@@ -118,12 +120,9 @@ pub fn run_recorded(
     model: Model,
     p: &LoopParams,
     mut on_step: impl FnMut(&StepRecord),
-    mut rec: Option<LoopRecording>,
+    rec: Option<LoopRecording>,
 ) -> Result<LoopRun, LabError> {
     let wall = std::time::Instant::now();
-    let clock = ManualClock::new(0);
-    let bus = InProcBus::with_clock(Arc::new(clock.clone()), 1 << 16);
-    let (mut sim_ep, mut node_ep, mut ctrl_ep) = (bus.endpoint(), bus.endpoint(), bus.endpoint());
     let mut sim_cfg = SimConfig {
         track: track.clone(),
         ..Default::default()
@@ -132,124 +131,98 @@ pub fn run_recorded(
         sim_cfg.gait = g;
     }
     sim_cfg.faults.initial_damage_pct = p.damage_pct;
-    let ids = sim_cfg.ids.clone();
-    let mut robot = SimRobot::new(sim_cfg, p.seed);
     let mut node_cfg = p.node.clone();
     // Lock-step simulated time: a refit lands at the step that asked for it, as in a replay.
     node_cfg.refit = node_cfg.refit.reproducible();
     let restart_with = p.node_restart.map(|_| (node_cfg.clone(), model.clone()));
-    let mut node = NodeService::new(node_cfg, model)?;
-    let mut node_dead = false;
-    let catalog = node.catalog().clone();
-    let mut ctrl = match p.controller {
-        Some(c) => Some(Controller::new(c.clone(), &c.catalog()?)),
-        None => None,
+    let mut node = Some(NodeService::new(node_cfg, model)?);
+    let catalog = node
+        .as_ref()
+        .map(|n| n.catalog().clone())
+        .unwrap_or_else(TerrainCatalog::paper);
+    let new_controller = || {
+        p.controller
+            .map(|c| ControllerService::new(c.clone()))
+            .transpose()
     };
-    let mut rows: Vec<StepRecord> = Vec::new();
-    let mut t_us = 0u64;
-    let zero = Duration::ZERO;
-    let limit_us = (p.steps as u64 + 20) * 1_000_000;
-    // Reused every millisecond: the loop allocates only when a step is logged.
-    let mut sent = Vec::new();
-    let mut said = Vec::new();
-    let mut out = Vec::new();
-    let offer = |rec: &Option<LoopRecording>, t_us: u64, frame: &protocol::CanFrame| {
-        if let Some(r) = rec {
-            r.tap.offer(&protocol::Stamped {
-                t_us: r.epoch_us + t_us,
+    let mut ctrl = new_controller()?;
+    let (tap, epoch_us, pace, stop, mut truth) = match rec {
+        Some(r) => (Some(r.tap), r.epoch_us, r.pace, Some(r.stop), Some(r.truth)),
+        None => (None, 0, None, None, None),
+    };
+    // The robot's truth every 10 ms of simulated time, for a recording.
+    let mut observe = |t_us: u64, robot: &SimRobot| {
+        if let Some(f) = truth.as_mut() {
+            f(epoch_us + t_us, robot);
+        }
+    };
+    let mut sim = SimService::new(sim_cfg, p.seed, None, &catalog, &mut observe);
+    let mut sent = |t_us: u64, frame: &protocol::CanFrame| {
+        if let Some(tap) = tap {
+            tap.offer(&protocol::Stamped {
+                t_us: epoch_us + t_us,
                 frame: *frame,
             });
         }
     };
-    while rows.len() < p.steps && t_us < limit_us {
+    // Parts in turn within a millisecond: the robot (it hears the controller's last
+    // commands, then moves), the node, the controller.
+    let mut bus = LockStep::new(3, 1 << 16);
+    bus.start(0, &mut sim, &mut sent)?;
+    if let Some(n) = node.as_mut() {
+        bus.start(1, n, &mut sent)?;
+    }
+    if let Some(c) = ctrl.as_mut() {
+        bus.start(2, c, &mut sent)?;
+    }
+    let mut t_us = 0u64;
+    let limit_us = (p.steps as u64 + 20) * 1_000_000;
+    let mut reported = 0;
+    while sim.records().len() < p.steps && t_us < limit_us {
         t_us += 1000;
-        clock.set_us(t_us);
-        let down = during(p.link_down, t_us);
-        if let Some(r) = rec.as_mut() {
-            if r.stop.load(std::sync::atomic::Ordering::Relaxed) {
-                break;
-            }
-            if let Some(pace) = r.pace.filter(|p| *p > 0.0) {
-                let due = Duration::from_secs_f64(t_us as f64 * 1e-6 / pace);
-                if let Some(wait) = due.checked_sub(wall.elapsed()) {
-                    std::thread::sleep(wait);
-                }
-            }
-            if t_us.is_multiple_of(10_000) {
-                (r.truth)(r.epoch_us + t_us, &robot);
+        if stop.is_some_and(|s| s.load(std::sync::atomic::Ordering::Relaxed)) {
+            break;
+        }
+        if let Some(pace) = pace.filter(|p| *p > 0.0) {
+            let due = Duration::from_secs_f64(t_us as f64 * 1e-6 / pace);
+            if let Some(wait) = due.checked_sub(wall.elapsed()) {
+                std::thread::sleep(wait);
             }
         }
-        robot.advance_to(t_us, &mut |f| sent.push(f));
-        for f in sent.drain(..) {
-            offer(&rec, t_us, &f);
-            if !down {
-                sim_ep.send(&f)?;
-            }
-        }
-        // The node: frames, then what is due by now (deadlines, the heartbeat); none while
-        // killed.
+        bus.set_link(!during(p.link_down, t_us));
+        // Killed processes, and new ones started after their windows: a new one knows only
+        // what the bus says from then on.
         if during(p.node_restart, t_us) {
-            node_dead = true;
-            while node_ep.recv(zero)?.is_some() {}
-        } else if node_dead && let Some((cfg, model)) = &restart_with {
-            node = NodeService::new(cfg.clone(), model.clone())?;
-            node_dead = false;
+            node = None;
+        } else if node.is_none()
+            && let Some((cfg, model)) = &restart_with
+        {
+            let mut n = NodeService::new(cfg.clone(), model.clone())?;
+            bus.start(1, &mut n, &mut sent)?;
+            node = Some(n);
         }
-        while !node_dead && let Some(st) = node_ep.recv(zero)? {
-            node.process(&st, &mut |o| said.push(o));
+        if during(p.controller_restart, t_us) {
+            ctrl = None;
+        } else if ctrl.is_none()
+            && let Some(mut c) = new_controller()?
+        {
+            bus.start(2, &mut c, &mut sent)?;
+            ctrl = Some(c);
         }
-        if !node_dead {
-            node.tick(t_us, &mut |o| said.push(o));
+        let mut parts: [Option<&mut dyn Component>; 3] = [
+            Some(&mut sim),
+            node.as_mut().map(|n| n as &mut dyn Component),
+            ctrl.as_mut().map(|c| c as &mut dyn Component),
+        ];
+        bus.step(t_us, &mut parts, &mut sent)?;
+        for row in &sim.records()[reported..] {
+            on_step(row);
         }
-        for o in said.drain(..) {
-            if let Some(f) = node.frame(&o) {
-                offer(&rec, t_us, &f);
-                if !down {
-                    node_ep.send(&f)?;
-                }
-            }
-            let Output::Class { foot, class: tc } = o else {
-                continue;
-            };
-            let row = StepRecord::of(&robot, foot, &tc, t_us, &catalog);
-            on_step(&row);
-            rows.push(row);
-        }
-        // The controller (none while killed: its frames are lost, as a dead process's are).
-        if let Some(c) = p.controller {
-            if during(p.controller_restart, t_us) {
-                ctrl = None;
-                while ctrl_ep.recv(zero)?.is_some() {}
-            } else if ctrl.is_none() {
-                ctrl = Some(Controller::new(c.clone(), &c.catalog()?));
-            }
-        }
-        while let Some(st) = ctrl_ep.recv(zero)? {
-            if let (Some(ctrl), Ok(Some((foot, m)))) =
-                (ctrl.as_mut(), messages::decode(&st.frame, &ids))
-            {
-                ctrl.on_message(foot, &m, t_us, &mut |o| out.push(o));
-            }
-        }
-        if let Some(ctrl) = ctrl.as_mut() {
-            ctrl.tick(t_us, &mut |o| out.push(o));
-        }
-        for m in out.drain(..) {
-            if let Some(f) = m.to_frame(&ids, 0) {
-                offer(&rec, t_us, &f);
-                if !down {
-                    ctrl_ep.send(&f)?;
-                }
-            }
-        }
-        // The robot hears the controller.
-        while let Some(st) = sim_ep.recv(zero)? {
-            robot.on_frame(&st.frame);
-        }
+        reported = sim.records().len();
     }
     Ok(LoopRun {
-        rows,
-        fall_times_us: robot.falls.clone(),
+        fall_times_us: sim.robot().falls.clone(),
+        rows: sim.into_records(),
     })
 }
 

@@ -13,6 +13,7 @@ use std::path::{Path, PathBuf};
 
 use protocol::Stamped;
 use protocol::candump::{format_seconds, parse_seconds};
+use protocol::component::{Component, Outbox};
 use protocol::terrain::{Terrain, TerrainCatalog};
 
 use crate::classifier::PressureImage;
@@ -396,6 +397,79 @@ pub fn read_runs(
         runs.insert(PathBuf::from(f[0]), f[8].to_string());
     }
     Ok(Some(runs))
+}
+
+/// A capture filling a training set, as a part on the bus ([`Component`]): `presrs capture
+/// --iface` runs it with the one runner; a log is fed to it frame by frame
+/// ([`CaptureService::feed`]). The first write error stops it ([`Component::done`]);
+/// everything written before stays written.
+pub struct CaptureService {
+    /// The stance logic and the labels.
+    pub capture: Capture,
+    /// Where captured steps go.
+    pub set: CaptureSet,
+    /// The name the manifest keys steps by.
+    pub source: String,
+    /// The write error that stopped it, if one did.
+    pub failed: Option<CaptureError>,
+    last_t: u64,
+}
+
+impl CaptureService {
+    /// A capture into `set`, keying steps by `source`.
+    pub fn new(capture: Capture, set: CaptureSet, source: String) -> Self {
+        Self {
+            capture,
+            set,
+            source,
+            failed: None,
+            last_t: 0,
+        }
+    }
+
+    /// One frame with its time (a log's, or the bus's receive time).
+    pub fn feed(&mut self, st: &Stamped) {
+        self.last_t = st.t_us;
+        let (set, source, failed) = (&mut self.set, &self.source, &mut self.failed);
+        self.capture
+            .feed(st, &mut |c| keep(set, source, failed, &c));
+    }
+}
+
+fn keep(set: &mut CaptureSet, source: &str, failed: &mut Option<CaptureError>, c: &CapturedStep) {
+    if failed.is_none()
+        && let Err(e) = set.add(c, source)
+    {
+        *failed = Some(e);
+    }
+}
+
+impl Component for CaptureService {
+    fn name(&self) -> &'static str {
+        "capture"
+    }
+
+    /// Every frame, as the node sees them: a lab's foot may send what the node reads under
+    /// any ids its config gives.
+    fn filters(&self) -> Vec<(u32, u32)> {
+        Vec::new()
+    }
+
+    fn on_frame(&mut self, st: &Stamped, _: u64, _: &mut Outbox) {
+        self.feed(st);
+    }
+
+    /// The bus went quiet: steps whose nearer images can no longer come are decided, on the
+    /// clock of the last frame's receive time (the bus's, not this process's).
+    fn tick(&mut self, _: u64, _: &mut Outbox) {
+        let (set, source, failed) = (&mut self.set, &self.source, &mut self.failed);
+        self.capture
+            .tick(self.last_t, &mut |c| keep(set, source, failed, &c));
+    }
+
+    fn done(&self) -> bool {
+        self.failed.is_some()
+    }
 }
 
 /// The manifest's header line.

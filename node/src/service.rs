@@ -27,9 +27,11 @@ use std::time::{Duration, Instant};
 
 use crossbeam_channel::{Receiver, RecvTimeoutError, Sender, TrySendError, bounded};
 use protocol::bus::{
-    Backoff, BusSource, ControllerState, HealthWatch, Tap, after_bus_error, open_with_retry,
+    Backoff, BusHealth, BusSource, ControllerState, HealthWatch, Tap, after_bus_error,
+    open_with_retry,
 };
 use protocol::clock::Clock;
+use protocol::component::{Component, Outbox};
 use protocol::messages::{Message, NodeState, NodeStatus, TerrainClass};
 use protocol::tactile::ReassemblyStats;
 use protocol::terrain::CatalogError;
@@ -209,6 +211,8 @@ pub struct NodeService {
     next_status_us: Option<u64>,
     heartbeat: u8,
     shared: Arc<Shared>,
+    /// What one call said, kept between calls ([`Component`]): no allocation per frame.
+    said: Vec<Output>,
 }
 
 impl NodeService {
@@ -229,6 +233,7 @@ impl NodeService {
             next_status_us: None,
             heartbeat: 0,
             shared,
+            said: Vec::with_capacity(16),
         })
     }
 
@@ -274,6 +279,15 @@ impl NodeService {
             self.next_status_us = Some(now_us + self.status_period_us);
             out(Output::Status(self.status(false)));
         }
+    }
+
+    fn send_said(&mut self, said: &mut Vec<Output>, out: &mut Outbox) {
+        for o in said.drain(..) {
+            if let Some(f) = self.frame(&o) {
+                out.push(f);
+            }
+        }
+        self.said = std::mem::take(said);
     }
 
     /// The NodeStatus the heartbeat carries now.
@@ -515,6 +529,52 @@ fn join(threads: Vec<(&'static str, JoinHandle<()>)>) {
     for (name, h) in threads {
         if h.join().is_err() {
             tracing::error!("the node's {name} thread panicked");
+        }
+    }
+}
+
+/// The node as a part on the bus, on one thread: [`protocol::component::run`] runs it with
+/// [`RunOptions::clock`](protocol::component::RunOptions) set to the bus's clock (its deadlines
+/// compare with the frames' receive times). [`NodeService::start`] runs the same node on three
+/// threads (receive, pipeline, send), which is what `presrs node` does: measured with
+/// `presrs bench-node`, the receive thread keeps a burst of six feet's images from waiting
+/// behind a classification.
+impl Component for NodeService {
+    fn name(&self) -> &'static str {
+        "node"
+    }
+
+    /// Every frame: a foot's tactile stream and switch, under the ids the config gives.
+    fn filters(&self) -> Vec<(u32, u32)> {
+        Vec::new()
+    }
+
+    fn start(&mut self, _: u64, _: &mut Outbox) {
+        self.shared.set_state(NodeState::Running);
+    }
+
+    fn on_frame(&mut self, st: &Stamped, _: u64, out: &mut Outbox) {
+        let mut said = std::mem::take(&mut self.said);
+        self.process(st, &mut |o| said.push(o));
+        self.send_said(&mut said, out);
+    }
+
+    fn tick(&mut self, now_us: u64, out: &mut Outbox) {
+        let mut said = std::mem::take(&mut self.said);
+        NodeService::tick(self, now_us, &mut |o| said.push(o));
+        self.send_said(&mut said, out);
+    }
+
+    fn on_health(&mut self, health: &BusHealth, _: u64) {
+        self.shared
+            .controller
+            .store(health.state as u8, Ordering::Relaxed);
+    }
+
+    fn stop(&mut self, _: u64, out: &mut Outbox) {
+        let last = Output::Status(self.status(true));
+        if let Some(f) = self.frame(&last) {
+            out.push(f);
         }
     }
 }

@@ -448,6 +448,70 @@ fn started_on_a_bus_it_answers_each_step_and_says_when_it_stops() {
     assert_eq!(last, Some(NodeState::Stopping));
 }
 
+/// The same node as a bus component on the one runner, on one thread: a step in, its
+/// TerrainClass out, heartbeats on the bus's clock, a last NodeStatus that says Stopping.
+#[test]
+fn as_a_component_on_the_one_runner_it_answers_each_step() {
+    use protocol::component::{self, RunOptions};
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let bus = InProcBus::new();
+    let mut robot = bus.endpoint();
+    let stop = Arc::new(AtomicBool::new(false));
+    let (b, s) = (bus.clone(), stop.clone());
+    let runner = std::thread::spawn(move || {
+        let mut node = NodeService::new(NodeConfig::default(), model()).unwrap();
+        let source = BusSource::InProc(b);
+        let opts = RunOptions {
+            clock: Some(source.clock()),
+            ..RunOptions::default()
+        };
+        let stats = component::run(&mut node, &source, &opts, &s);
+        (stats, node.counters())
+    });
+    let ids = IdConfig::default();
+    let mut said = Vec::new();
+    let mut listen = |robot: &mut dyn CanBus, until: &dyn Fn(&[Message]) -> bool| {
+        let end = Instant::now() + Duration::from_secs(20);
+        while Instant::now() < end && !until(&said) {
+            if let Ok(Some(st)) = robot.recv(Duration::from_millis(10))
+                && let Ok(Some((_, m))) = messages::decode(&st.frame, &ids)
+            {
+                said.push(m);
+            }
+        }
+        said.clone()
+    };
+    let heard = listen(&mut robot, &|m| {
+        m.iter().any(|m| matches!(m, Message::NodeStatus(_)))
+    });
+    assert!(!heard.is_empty(), "no heartbeat");
+    let mut foot = FakeFoot::new();
+    for st in foot.stance(2, 1_000_000, 200, |_| true) {
+        robot.send(&st.frame).unwrap();
+    }
+    let heard = listen(&mut robot, &|m| {
+        m.iter().any(|m| matches!(m, Message::TerrainClass(_)))
+    });
+    let tc = heard.iter().find_map(|m| match m {
+        Message::TerrainClass(tc) => Some(*tc),
+        _ => None,
+    });
+    let tc = tc.expect("no TerrainClass for the step");
+    assert_eq!(TerrainCatalog::paper().describe(tc.terrain), "grass");
+    stop.store(true, Ordering::Relaxed);
+    let (stats, counters) = runner.join().unwrap();
+    assert_eq!((counters.steps, counters.classified), (1, 1));
+    assert!(stats.sent >= 2, "{stats:?}");
+    let mut last = None;
+    while let Ok(Some(st)) = robot.recv(Duration::from_millis(50)) {
+        if let Ok(Some((_, Message::NodeStatus(s)))) = messages::decode(&st.frame, &ids) {
+            last = Some(s.state);
+        }
+    }
+    assert_eq!(last, Some(NodeState::Stopping));
+}
+
 #[test]
 fn a_replay_decides_each_step_as_the_log_clock_says() {
     let mut foot = FakeFoot::new();

@@ -18,6 +18,8 @@
 //! - [`terrain`]: the terrain type and the catalog of terrain ids (the paper's and a lab's own);
 //! - [`dbc`]: the DBC file for any CAN tool; [`candump`]: can-utils log files;
 //! - [`bus`]: SocketCAN and an in-process bus behind one trait; [`clock`]: time sources;
+//! - [`component`]: the one shape of every part on the bus (node, controller, simulated
+//!   robot, capture, recorder) and the one loop that runs it on a bus;
 //! - [`config`]: the one config-file loader and its errors; [`error`]: the error types.
 //!
 //! ## On the foot's microcontroller
@@ -45,6 +47,8 @@ pub mod bus;
 pub mod candump;
 #[cfg(feature = "std")]
 pub mod clock;
+#[cfg(feature = "std")]
+pub mod component;
 #[cfg(feature = "std")]
 pub mod config;
 #[cfg(feature = "std")]

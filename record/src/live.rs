@@ -12,6 +12,7 @@ use std::time::{Duration, Instant};
 use crossbeam_channel::{Receiver, Sender, TryRecvError, TrySendError, bounded};
 use protocol::Stamped;
 use protocol::bus::{BusSource, Tap, open_with_retry};
+use protocol::component::{self, Component, Outbox, RunOptions};
 
 use crate::RecordError;
 use crate::recorder::{Channel, RecordStats, Recorder, SimTruth, Sink};
@@ -127,6 +128,21 @@ impl LiveRecorder {
     }
 }
 
+/// A recorder beside a process that does not record itself, as a part on the bus: it reads
+/// every frame (no filter) and sends none; the runner's tap keeps each one.
+struct Listener;
+
+impl Component for Listener {
+    fn name(&self) -> &'static str {
+        "record"
+    }
+    fn filters(&self) -> Vec<(u32, u32)> {
+        Vec::new()
+    }
+    fn on_frame(&mut self, _: &Stamped, _: u64, _: &mut Outbox) {}
+    fn tick(&mut self, _: u64, _: &mut Outbox) {}
+}
+
 /// Reads every frame on `source` into `tap` on a thread of its own until `stop`: a recorder
 /// beside a process that does not record itself (SocketCAN delivers that process's frames to
 /// this second socket too). Opened before it returns, so no early frame is missed; reopened
@@ -136,24 +152,19 @@ pub fn listen(
     tap: Arc<LiveTap>,
     stop: Arc<AtomicBool>,
 ) -> Result<JoinHandle<()>, RecordError> {
-    let mut bus = open_with_retry(&source, &stop, "record", &mut || {});
+    let bus = open_with_retry(&source, &stop, "record", &mut || {});
     std::thread::Builder::new()
         .name("record-listen".into())
         .spawn(move || {
-            while let Some(mut b) = bus.take() {
-                loop {
-                    match b.recv(Duration::from_millis(50)) {
-                        Ok(Some(st)) => tap.offer(&st),
-                        Ok(None) if stop.load(Ordering::Relaxed) => return,
-                        Ok(None) => {}
-                        Err(e) => {
-                            tracing::warn!("recording listener: {e}; reopening");
-                            bus = open_with_retry(&source, &stop, "record", &mut || {});
-                            break;
-                        }
-                    }
-                }
+            if bus.is_none() {
+                return;
             }
+            let opts = RunOptions {
+                tick: Duration::from_millis(50),
+                tap: Some(tap),
+                ..RunOptions::default()
+            };
+            component::run_opened(&mut Listener, bus, &source, &opts, &stop);
         })
         .map_err(RecordError::Spawn)
 }

@@ -6,13 +6,14 @@
 //! TerrainClass it hears is matched to the stance in progress on that foot, with the gait the
 //! leg ran, as a [`StepRecord`]; [`run`] returns them in a [`SimReport`].
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
-use protocol::bus::{Backoff, BusSource, CanBus, open_with_retry, reopen_after_error};
+use protocol::bus::BusSource;
+use protocol::component::{self, Component, Outbox};
 use protocol::ids::MessageKind;
 use protocol::messages::{self, Message};
-use protocol::{IdConfig, TerrainCatalog};
+use protocol::{IdConfig, Stamped, TerrainCatalog};
 
 use crate::runner::{SimConfig, SimRobot};
 
@@ -97,6 +98,128 @@ pub struct RunOptions {
 /// The most robot time one pass of the simulator covers, µs: commands are read between passes.
 const MAX_LAG_US: u64 = 2_000;
 
+/// The simulated robot as a part on the bus ([`Component`]): its robot time follows the
+/// runner's clock in steps of at least 1 ms, it sends what its feet and legs send, obeys
+/// LegCommand, and scores every TerrainClass it hears.
+pub struct SimService<'a> {
+    robot: SimRobot,
+    ids: IdConfig,
+    catalog: &'a TerrainCatalog,
+    observe: &'a mut dyn FnMut(u64, &SimRobot),
+    records: Vec<StepRecord>,
+    end_us: Option<u64>,
+    t_us: u64,
+    /// Robot time given up because the machine could not keep up (see `tick`).
+    stretched_us: u64,
+    frames: Vec<protocol::CanFrame>,
+}
+
+impl<'a> SimService<'a> {
+    /// The robot `cfg` describes, run for `duration_s` of robot time (`None`: until stopped);
+    /// `observe` sees it every 10 ms of robot time (a recording's ground truth).
+    pub fn new(
+        cfg: SimConfig,
+        seed: u64,
+        duration_s: Option<f64>,
+        catalog: &'a TerrainCatalog,
+        observe: &'a mut dyn FnMut(u64, &SimRobot),
+    ) -> Self {
+        let ids = cfg.ids.clone();
+        Self {
+            robot: SimRobot::new(cfg, seed),
+            ids,
+            catalog,
+            observe,
+            records: Vec::new(),
+            end_us: duration_s.map(|d| (d * 1e6) as u64),
+            t_us: 0,
+            stretched_us: 0,
+            frames: Vec::with_capacity(128),
+        }
+    }
+
+    /// The robot.
+    pub fn robot(&self) -> &SimRobot {
+        &self.robot
+    }
+
+    /// Robot time so far, µs.
+    pub fn t_us(&self) -> u64 {
+        self.t_us
+    }
+
+    /// Every TerrainClass heard so far, scored.
+    pub fn records(&self) -> &[StepRecord] {
+        &self.records
+    }
+
+    /// The records, the service done with.
+    pub fn into_records(self) -> Vec<StepRecord> {
+        self.records
+    }
+}
+
+impl Component for SimService<'_> {
+    fn name(&self) -> &'static str {
+        "sim"
+    }
+
+    /// What the simulator reads: the controller's LegCommand and GaitStatus (the leg's own
+    /// laws follow the controller's gait between commands; the process filtered GaitStatus
+    /// out until the lock-step loop ran on this same component and its speeds moved) and the
+    /// node's TerrainClass (to score it).
+    fn filters(&self) -> Vec<(u32, u32)> {
+        self.ids.filters(&[
+            MessageKind::LegCommand,
+            MessageKind::GaitStatus,
+            MessageKind::TerrainClass,
+        ])
+    }
+
+    fn on_frame(&mut self, st: &Stamped, _: u64, _: &mut Outbox) {
+        self.robot.on_frame(&st.frame);
+        if let Ok(Some((foot, Message::TerrainClass(tc)))) = messages::decode(&st.frame, &self.ids)
+        {
+            self.records.push(StepRecord::of(
+                &self.robot,
+                foot,
+                &tc,
+                self.t_us,
+                self.catalog,
+            ));
+        }
+    }
+
+    fn tick(&mut self, now_us: u64, out: &mut Outbox) {
+        // Simulated time follows the runner's clock in steps of at least 1 ms.
+        let target = now_us.saturating_sub(self.stretched_us);
+        if target < self.t_us + 1000 || self.done() {
+            return;
+        }
+        // A machine too slow for `speed` (a debug build, emulation, a loaded CI runner):
+        // robot time slows down rather than jumping ahead to catch up. A jump would run the
+        // leg for tens of ms on one stale command and deliver the foot's frames in bursts; a
+        // real leg never pauses, and neither does its controller's view of it.
+        if target > self.t_us + MAX_LAG_US {
+            self.stretched_us += target - (self.t_us + MAX_LAG_US);
+        }
+        let before = self.t_us;
+        self.t_us = target.min(self.t_us + MAX_LAG_US);
+        let frames = &mut self.frames;
+        self.robot.advance_to(self.t_us, &mut |f| frames.push(f));
+        if self.t_us / 10_000 != before / 10_000 {
+            (self.observe)(self.t_us, &self.robot);
+        }
+        for f in self.frames.drain(..) {
+            out.push(f);
+        }
+    }
+
+    fn done(&self) -> bool {
+        self.end_us.is_some_and(|e| self.t_us >= e)
+    }
+}
+
 /// Runs the simulated robot on `source` until `opts.duration_s` or `stop`; names terrains the
 /// node reports from `catalog`. `observe` sees the robot every 10 ms of robot time (a
 /// recording's ground truth), with that time.
@@ -108,97 +231,24 @@ pub fn run(
     stop: &AtomicBool,
     observe: &mut dyn FnMut(u64, &SimRobot),
 ) -> SimReport {
-    let ids = cfg.ids.clone();
-    let (feet, gait) = (cfg.feet, cfg.gait);
-    let mut robot = SimRobot::new(cfg, opts.seed);
     let start = Instant::now();
-    let mut records: Vec<StepRecord> = Vec::new();
-    let report =
-        |robot: &SimRobot, records: Vec<StepRecord>, t_us: u64, send_errors: u64| SimReport {
-            simulated_s: t_us as f64 * 1e-6,
-            wall_s: start.elapsed().as_secs_f64(),
-            touchdowns: robot.steps.len(),
-            falls: robot.falls.len() as u64,
-            fall_times_s: robot.falls.iter().map(|&t| t as f64 * 1e-6).collect(),
-            send_errors,
-            steps: records,
-        };
-    let Some(mut bus) = open_sim_bus(&source, stop, &ids) else {
-        return report(&robot, records, 0, 0);
+    tracing::info!(iface = %source.label(), feet = cfg.feet, speed = opts.speed, gait = cfg.gait, "presrs sim running");
+    let mut sim = SimService::new(cfg, opts.seed, opts.duration_s, catalog, observe);
+    let run_opts = component::RunOptions {
+        time_scale: opts.speed,
+        // The simulator is the robot: it ticks often, so each pass covers about 1 ms.
+        tick: Duration::from_micros(300),
+        ..component::RunOptions::default()
     };
-    tracing::info!(iface = %source.label(), feet, speed = opts.speed, gait, "presrs sim running");
-    let end_us = opts.duration_s.map(|d| (d * 1e6) as u64);
-    // Robot time given up because the machine could not keep up (see below).
-    let mut stretched_us = 0u64;
-    let mut out = Vec::with_capacity(128);
-    let mut backoff = Backoff::default();
-    let mut send_errors = 0u64;
-    let mut t_us = 0u64;
-    loop {
-        if stop.load(Ordering::Relaxed) || end_us.is_some_and(|e| t_us >= e) {
-            break;
-        }
-        // Simulated time follows the wall clock; 1 ms steps, sleeping when ahead.
-        let target = ((start.elapsed().as_secs_f64() * opts.speed * 1e6) as u64)
-            .saturating_sub(stretched_us);
-        if target < t_us + 1000 {
-            std::thread::sleep(Duration::from_micros(300));
-            continue;
-        }
-        // A machine too slow for `speed` (a debug build, emulation, a loaded CI runner):
-        // robot time slows down rather than jumping ahead to catch up. A jump would run the
-        // leg for tens of ms on one stale command and deliver the foot's frames in bursts; a
-        // real leg never pauses, and neither does its controller's view of it.
-        if target > t_us + MAX_LAG_US {
-            stretched_us += target - (t_us + MAX_LAG_US);
-        }
-        let before = t_us;
-        t_us = target.min(t_us + MAX_LAG_US);
-        robot.advance_to(t_us, &mut |f| out.push(f));
-        if t_us / 10_000 != before / 10_000 {
-            observe(t_us, &robot);
-        }
-        for f in out.drain(..) {
-            if let Err(e) = bus.send(&f) {
-                send_errors += 1;
-                // A lost frame is what a real foot would cause too; a dead bus is reopened.
-                if send_errors.is_power_of_two() {
-                    tracing::warn!("sim send: {e} ({send_errors} send errors so far)");
-                }
-                if matches!(e, protocol::BusError::Down { .. }) {
-                    if let Some(b) =
-                        reopen_after_error(&source, "sim", &e, &mut backoff, stop, &mut || {})
-                    {
-                        bus = filtered(b, &ids);
-                    }
-                    break;
-                }
-            }
-        }
-        while let Ok(Some(st)) = bus.recv(Duration::ZERO) {
-            robot.on_frame(&st.frame);
-            if let Ok(Some((foot, Message::TerrainClass(tc)))) = messages::decode(&st.frame, &ids) {
-                records.push(StepRecord::of(&robot, foot, &tc, t_us, catalog));
-            }
-        }
+    let stats = component::run(&mut sim, &source, &run_opts, stop);
+    let robot = &sim.robot;
+    SimReport {
+        simulated_s: sim.t_us as f64 * 1e-6,
+        wall_s: start.elapsed().as_secs_f64(),
+        touchdowns: robot.steps.len(),
+        falls: robot.falls.len() as u64,
+        fall_times_s: robot.falls.iter().map(|&t| t as f64 * 1e-6).collect(),
+        send_errors: stats.send_errors,
+        steps: sim.records,
     }
-    report(&robot, records, t_us, send_errors)
-}
-
-/// Opens the simulator's bus, passing it only what the simulator reads: the controller's
-/// LegCommand and the node's TerrainClass (to score it).
-fn open_sim_bus(source: &BusSource, stop: &AtomicBool, ids: &IdConfig) -> Option<Box<dyn CanBus>> {
-    Some(filtered(
-        open_with_retry(source, stop, "sim", &mut || {})?,
-        ids,
-    ))
-}
-
-fn filtered(mut bus: Box<dyn CanBus>, ids: &IdConfig) -> Box<dyn CanBus> {
-    let kinds = [MessageKind::LegCommand, MessageKind::TerrainClass];
-    if let Err(e) = bus.set_filters(&ids.filters(&kinds)) {
-        // Unfiltered still works; it only costs the simulator time.
-        tracing::warn!("sim: receive filters not set ({e}); reading every frame");
-    }
-    bus
 }

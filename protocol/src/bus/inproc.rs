@@ -1,6 +1,6 @@
 //! An in-process broadcast bus between threads.
 
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -27,6 +27,8 @@ struct Shared {
     /// count for a lock-free check per receive.
     errors: Mutex<Vec<(u64, ErrorClasses)>>,
     n_errors: AtomicU64,
+    /// False while the link is down ([`InProcBus::set_link`]).
+    up: AtomicBool,
 }
 
 /// A broadcast bus: every endpoint receives what every other endpoint sends. Each endpoint has a
@@ -54,6 +56,7 @@ impl InProcBus {
                 depth,
                 errors: Mutex::new(Vec::new()),
                 n_errors: AtomicU64::new(0),
+                up: AtomicBool::new(true),
             }),
         }
     }
@@ -87,6 +90,25 @@ impl InProcBus {
         if let Ok(mut e) = s.errors.lock() {
             e.push((s.clock.now_us(), classes));
             s.n_errors.store(e.len() as u64, Ordering::Release);
+        }
+    }
+
+    /// Takes the link down or brings it up, as `ip link set vcan0 down|up` does: while it is
+    /// down every endpoint's send and receive, and every open, fail with [`BusError::Down`],
+    /// and nothing sent before is delivered after (for tests and fault drills).
+    pub fn set_link(&self, up: bool) {
+        self.shared.up.store(up, Ordering::Release);
+    }
+
+    /// Whether the link is up.
+    pub fn link_up(&self) -> bool {
+        self.shared.up.load(Ordering::Acquire)
+    }
+
+    pub(crate) fn down_error() -> BusError {
+        BusError::Down {
+            iface: "inproc".into(),
+            source: std::io::ErrorKind::NotConnected.into(),
         }
     }
 
@@ -138,6 +160,9 @@ impl Drop for InProcEndpoint {
 impl CanBus for InProcEndpoint {
     fn send(&mut self, frame: &CanFrame) -> Result<(), BusError> {
         let s = &self.bus.shared;
+        if !self.bus.link_up() {
+            return Err(InProcBus::down_error());
+        }
         let st = Stamped {
             t_us: s.clock.now_us(),
             frame: *frame,
@@ -154,6 +179,11 @@ impl CanBus for InProcEndpoint {
     fn recv(&mut self, timeout: Duration) -> Result<Option<Stamped>, BusError> {
         let deadline = std::time::Instant::now() + timeout;
         self.take_errors();
+        if !self.bus.link_up() {
+            // What a socket on a downed interface does: its queue is gone.
+            while self.rx.try_recv().is_ok() {}
+            return Err(InProcBus::down_error());
+        }
         loop {
             match self.rx.recv_deadline(deadline) {
                 Ok(st) if passes(&self.filters, &st.frame) => {

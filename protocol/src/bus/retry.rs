@@ -70,6 +70,7 @@ impl BusSource {
     pub fn open(&self) -> Result<Box<dyn CanBus>, BusError> {
         match self {
             BusSource::Iface(i) => Ok(Box::new(SocketCanBus::open(i)?)),
+            BusSource::InProc(b) if !b.link_up() => Err(InProcBus::down_error()),
             BusSource::InProc(b) => Ok(Box::new(b.endpoint())),
         }
     }
