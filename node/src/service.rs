@@ -9,7 +9,9 @@
 //! decided at its sample deadline when no nearer frame can come, and NodeStatus (the heartbeat)
 //! at `status_hz`.
 //!
-//! Started, three threads joined by bounded channels:
+//! The node is a [`Component`], the shape of every part on the bus. Started
+//! ([`NodeService::start`]), it runs on the runner's three threads ([`component::spawn`]),
+//! joined by bounded channels:
 //! - `receive` reads the bus and never blocks on the others: a full queue drops the frame and
 //!   counts it (`rx_dropped`);
 //! - `pipeline` owns the service: reassembly, stance tracking, classification, ticks and model
@@ -21,17 +23,12 @@
 
 use std::path::Path;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, Ordering};
-use std::thread::JoinHandle;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
-use crossbeam_channel::{Receiver, RecvTimeoutError, Sender, TrySendError, bounded};
-use protocol::bus::{
-    Backoff, BusHealth, BusSource, ControllerState, HealthWatch, Tap, after_bus_error,
-    open_with_retry,
-};
+use protocol::bus::{BusSource, ControllerState, Tap};
 use protocol::clock::Clock;
-use protocol::component::{Component, Outbox};
+use protocol::component::{self, Component, Link, LinkStats, Outbox, RunOptions, Threaded};
 use protocol::messages::{Message, NodeState, NodeStatus, TerrainClass};
 use protocol::tactile::ReassemblyStats;
 use protocol::terrain::CatalogError;
@@ -93,20 +90,13 @@ impl Output {
     }
 }
 
-/// The counters a running node shares between its threads, written without locks.
+/// The counters a running node shares between its threads, written without locks: the
+/// runner's (frames in and out, bus errors, the link's state) and the pipeline's.
 #[derive(Debug, Default)]
 struct Shared {
-    state: AtomicU8,
-    /// The CAN controller's state ([`ControllerState`] as u8) from the receive handle's error
-    /// frames.
-    controller: AtomicU8,
+    link: Arc<LinkStats>,
     model_id: AtomicU64,
     damage_bits: AtomicU64,
-    bus_errors: AtomicU64,
-    rx_frames: AtomicU64,
-    rx_dropped: AtomicU64,
-    tx_frames: AtomicU64,
-    tx_dropped: AtomicU64,
     steps: AtomicU64,
     classified: AtomicU64,
     no_sample: AtomicU64,
@@ -172,11 +162,11 @@ impl Shared {
             state: self.state(),
             model_id: l(&self.model_id),
             damage_pct: f64::from_bits(l(&self.damage_bits)),
-            rx_frames: l(&self.rx_frames),
-            rx_dropped: l(&self.rx_dropped),
-            tx_frames: l(&self.tx_frames),
-            tx_dropped: l(&self.tx_dropped),
-            bus_errors: l(&self.bus_errors),
+            rx_frames: l(&self.link.rx_frames),
+            rx_dropped: l(&self.link.rx_dropped),
+            tx_frames: l(&self.link.tx_frames),
+            tx_dropped: l(&self.link.tx_dropped),
+            bus_errors: l(&self.link.bus_errors),
             steps: l(&self.steps),
             classified: l(&self.classified),
             no_sample: l(&self.no_sample),
@@ -191,15 +181,13 @@ impl Shared {
     /// The node's state, the CAN controller's error state first: a bus-off or error-passive
     /// controller explains whatever else the node sees.
     fn state(&self) -> NodeState {
-        match self.controller.load(Ordering::Relaxed) {
-            c if c == ControllerState::BusOff as u8 => NodeState::BusOff,
-            c if c == ControllerState::Passive as u8 => NodeState::ErrorPassive,
-            _ => NodeState::from_u8(self.state.load(Ordering::Relaxed)).unwrap_or_default(),
+        match (self.link.controller(), self.link.link()) {
+            (ControllerState::BusOff, _) => NodeState::BusOff,
+            (ControllerState::Passive, _) => NodeState::ErrorPassive,
+            (_, Link::Starting) => NodeState::Starting,
+            (_, Link::Open) => NodeState::Running,
+            (_, Link::Failing) => NodeState::Degraded,
         }
-    }
-
-    fn set_state(&self, s: NodeState) {
-        self.state.store(s as u8, Ordering::Relaxed);
     }
 }
 
@@ -213,6 +201,8 @@ pub struct NodeService {
     shared: Arc<Shared>,
     /// What one call said, kept between calls ([`Component`]): no allocation per frame.
     said: Vec<Output>,
+    last_log: Instant,
+    last_logged: Counters,
 }
 
 impl NodeService {
@@ -224,7 +214,7 @@ impl NodeService {
         let shared = Arc::new(Shared::default());
         shared.model_id.store(model.id(), Ordering::Relaxed);
         // Driven in lock-step, there is no bus to wait for: running at once.
-        shared.set_state(NodeState::Running);
+        shared.link.set_link(Link::Open);
         let status_period_us = (1e6 / config.status_hz.max(0.1)) as u64;
         Ok(Self {
             pipeline: StancePipeline::new(config, Some(model)),
@@ -234,6 +224,8 @@ impl NodeService {
             heartbeat: 0,
             shared,
             said: Vec::with_capacity(16),
+            last_log: Instant::now(),
+            last_logged: Counters::default(),
         })
     }
 
@@ -311,7 +303,7 @@ impl NodeService {
             model_id: self.shared.model_id.load(Ordering::Relaxed) as u16,
             crc_failures: low8(r.crc_failures),
             incomplete_frames: low8(r.incomplete),
-            bus_errors: low8(self.shared.bus_errors.load(Ordering::Relaxed)),
+            bus_errors: low8(self.shared.link.bus_errors.load(Ordering::Relaxed)),
             damage_pct: self.pipeline.damage_pct(),
         }
     }
@@ -367,6 +359,12 @@ impl NodeService {
         self.pipeline.model()
     }
 
+    /// The counters of the runner it runs under, which NodeStatus reports (its state, bus
+    /// errors): pass them as [`RunOptions::link`].
+    pub fn link_stats(&self) -> Arc<LinkStats> {
+        self.shared.link.clone()
+    }
+
     /// Runs the node on `bus` on its own threads until [`RunningNode::stop`].
     pub fn start(self, bus: BusSource) -> Result<RunningNode, ServiceError> {
         self.start_with_tap(bus, None)
@@ -385,90 +383,40 @@ impl NodeService {
         let clock = bus.clock();
         node.set_clock(clock.clone());
         let shared = node.shared.clone();
-        shared.set_state(NodeState::Starting);
-        let stop = Arc::new(AtomicBool::new(false));
-        // About 0.4 s of one foot's FD tactile stream: room for the pipeline to fall briefly behind.
-        let (rx_tx, rx_rx) = bounded::<Stamped>(16_384);
-        let (out_tx, out_rx) = bounded::<CanFrame>(256);
-        let (model_tx, model_rx) = bounded::<Model>(2);
-        let spawn = |name: &'static str, f: Box<dyn FnOnce() + Send>| {
-            std::thread::Builder::new()
-                .name(name.into())
-                .spawn(f)
-                .map_err(|source| ServiceError::Spawn {
-                    thread: name,
-                    source,
-                })
-        };
-        let label = bus.label().to_string();
         let catalog = node.catalog.clone();
-        let mut threads = Vec::new();
-        {
-            let (bus, stop, sh) = (bus.clone(), stop.clone(), shared.clone());
-            let h = spawn(
-                "receive",
-                Box::new(move || receive_loop(&bus, &stop, &sh, rx_tx)),
-            )?;
-            threads.push(("receive", h));
-        }
-        {
-            let (st, sh, tap) = (stop.clone(), shared.clone(), tap.clone());
-            let h = spawn(
-                "pipeline",
-                Box::new(move || {
-                    pipeline_loop(
-                        node,
-                        &*clock,
-                        &st,
-                        &sh,
-                        tap.as_deref(),
-                        rx_rx,
-                        model_rx,
-                        out_tx,
-                    )
-                }),
-            );
-            match h {
-                Ok(h) => threads.push(("pipeline", h)),
-                Err(e) => {
-                    stop.store(true, Ordering::Relaxed);
-                    join(threads);
-                    return Err(e);
-                }
-            }
-        }
-        {
-            let (st, sh) = (stop.clone(), shared.clone());
-            let h = spawn("send", Box::new(move || send_loop(&bus, &st, &sh, out_rx)));
-            match h {
-                Ok(h) => threads.push(("send", h)),
-                Err(e) => {
-                    stop.store(true, Ordering::Relaxed);
-                    join(threads);
-                    return Err(e);
-                }
-            }
-        }
+        let label = bus.label().to_string();
+        let opts = RunOptions {
+            // The node's clock is the bus's (that of the receive timestamps), read directly:
+            // anchored to the last frame's timestamp instead, a node that had been stopped
+            // took the frames queued meanwhile for "now".
+            clock: Some(clock),
+            tap: tap.clone(),
+            link: Some(shared.link.clone()),
+            ..RunOptions::default()
+        };
+        // About 0.4 s of one foot's FD tactile stream: room for the pipeline to fall briefly
+        // behind.
+        let threads =
+            component::spawn(node, bus, opts, 16_384).map_err(|source| ServiceError::Spawn {
+                thread: "node",
+                source,
+            })?;
         tracing::info!(iface = %label, "presrs node started");
         Ok(RunningNode {
-            stop,
+            threads,
             catalog,
-            models: model_tx,
             shared,
             tap,
-            threads,
         })
     }
 }
 
 /// A node running on its threads (from [`NodeService::start`]).
 pub struct RunningNode {
-    stop: Arc<AtomicBool>,
+    threads: Threaded<NodeService>,
     catalog: TerrainCatalog,
-    models: Sender<Model>,
     shared: Arc<Shared>,
     tap: Option<Arc<dyn Tap>>,
-    threads: Vec<(&'static str, JoinHandle<()>)>,
 }
 
 impl RunningNode {
@@ -479,7 +427,13 @@ impl RunningNode {
         let model = Model::load(path)?;
         model.check_catalog(&self.catalog)?;
         let id = model.id();
-        self.models.send(model).map_err(|_| ServiceError::Stopped)?;
+        let installed = self.threads.call(move |node| match node.set_model(model) {
+            Ok(id) => tracing::info!(model_id = id, "model reloaded"),
+            Err(e) => tracing::error!("{e}; keeping the model already loaded"),
+        });
+        if !installed {
+            return Err(ServiceError::Stopped);
+        }
         Ok(id)
     }
 
@@ -498,14 +452,13 @@ impl RunningNode {
 
     /// True while every thread runs.
     pub fn is_running(&self) -> bool {
-        self.threads.iter().all(|(_, h)| !h.is_finished())
+        self.threads.is_running()
     }
 
     /// Stops the threads (a last NodeStatus says `Stopping`), joins them and returns the final
     /// counters.
     pub fn stop(self) -> NodeStats {
-        self.stop.store(true, Ordering::Relaxed);
-        join(self.threads);
+        let _ = self.threads.stop();
         let s = NodeStats {
             record_dropped: self.tap.as_ref().map_or(0, |t| t.dropped()),
             ..self.shared.snapshot()
@@ -525,32 +478,21 @@ impl RunningNode {
     }
 }
 
-fn join(threads: Vec<(&'static str, JoinHandle<()>)>) {
-    for (name, h) in threads {
-        if h.join().is_err() {
-            tracing::error!("the node's {name} thread panicked");
-        }
-    }
-}
-
-/// The node as a part on the bus, on one thread: [`protocol::component::run`] runs it with
-/// [`RunOptions::clock`](protocol::component::RunOptions) set to the bus's clock (its deadlines
-/// compare with the frames' receive times). [`NodeService::start`] runs the same node on three
-/// threads (receive, pipeline, send), which is what `presrs node` does: measured with
-/// `presrs bench-node`, the receive thread keeps a burst of six feet's images from waiting
-/// behind a classification.
+/// The node as a part on the bus. [`NodeService::start`] runs it on three threads
+/// ([`component::spawn`]: receive, pipeline, send), which is what `presrs node` does: the
+/// receive thread keeps a burst of six feet's images from waiting behind a classification
+/// (`presrs bench-node --feet 6`). [`component::run`] runs it on one thread, with
+/// [`RunOptions::clock`] set to the bus's clock (its deadlines compare with the frames'
+/// receive times) and [`RunOptions::link`] to [`NodeService::link_stats`] (NodeStatus reports
+/// the link).
 impl Component for NodeService {
     fn name(&self) -> &'static str {
-        "node"
+        "pipeline"
     }
 
     /// Every frame: a foot's tactile stream and switch, under the ids the config gives.
     fn filters(&self) -> Vec<(u32, u32)> {
         Vec::new()
-    }
-
-    fn start(&mut self, _: u64, _: &mut Outbox) {
-        self.shared.set_state(NodeState::Running);
     }
 
     fn on_frame(&mut self, st: &Stamped, _: u64, out: &mut Outbox) {
@@ -563,12 +505,27 @@ impl Component for NodeService {
         let mut said = std::mem::take(&mut self.said);
         NodeService::tick(self, now_us, &mut |o| said.push(o));
         self.send_said(&mut said, out);
-    }
-
-    fn on_health(&mut self, health: &BusHealth, _: u64) {
-        self.shared
-            .controller
-            .store(health.state as u8, Ordering::Relaxed);
+        // A log line every 10 s: never per frame.
+        if self.last_log.elapsed() >= Duration::from_secs(10) {
+            let c = self.counters();
+            let r = self.reassembly_stats();
+            let last = self.last_logged;
+            tracing::info!(
+                frames = c.frames - last.frames,
+                steps = c.steps - last.steps,
+                classified = c.classified - last.classified,
+                no_sample = c.no_sample - last.no_sample,
+                decode_errors = c.decode_errors - last.decode_errors,
+                images = r.delivered,
+                crc_failures = r.crc_failures,
+                incomplete = r.incomplete,
+                rx_dropped = self.shared.link.rx_dropped.load(Ordering::Relaxed),
+                damage_pct = self.damage_pct(),
+                "last 10 s"
+            );
+            self.last_logged = c;
+            self.last_log = Instant::now();
+        }
     }
 
     fn stop(&mut self, _: u64, out: &mut Outbox) {
@@ -577,184 +534,12 @@ impl Component for NodeService {
             out.push(f);
         }
     }
-}
 
-fn receive_loop(bus: &BusSource, stop: &AtomicBool, sh: &Shared, to_pipeline: Sender<Stamped>) {
-    let mut backoff = Backoff::default();
-    let degrade = &mut || sh.set_state(NodeState::Degraded);
-    let mut watch = HealthWatch::default();
-    while !stop.load(Ordering::Relaxed) {
-        let Some(mut rx) = open_with_retry(bus, stop, "receive", degrade) else {
-            break;
-        };
-        backoff.reset();
-        sh.set_state(NodeState::Running);
-        // Error frames of this handle already in `bus_errors`.
-        let mut counted = 0u64;
-        while !stop.load(Ordering::Relaxed) {
-            let got = rx.recv(Duration::from_millis(20));
-            let h = rx.health();
-            if h.error_frames != counted {
-                sh.bus_errors
-                    .fetch_add(h.error_frames.saturating_sub(counted), Ordering::Relaxed);
-                counted = h.error_frames;
-            }
-            if let Some(state) = watch.update("node receive", bus.label(), &h) {
-                sh.controller.store(state as u8, Ordering::Relaxed);
-            }
-            match got {
-                Ok(Some(st)) => {
-                    sh.rx_frames.fetch_add(1, Ordering::Relaxed);
-                    match to_pipeline.try_send(st) {
-                        Ok(()) => {}
-                        Err(TrySendError::Full(_)) => {
-                            sh.rx_dropped.fetch_add(1, Ordering::Relaxed);
-                        }
-                        Err(TrySendError::Disconnected(_)) => return,
-                    }
-                }
-                Ok(None) => {}
-                Err(e) => {
-                    sh.bus_errors.fetch_add(1, Ordering::Relaxed);
-                    sh.set_state(NodeState::Degraded);
-                    if !after_bus_error("receive", &e, &mut backoff, stop) {
-                        return;
-                    }
-                    break;
-                }
-            }
-        }
-    }
-}
-
-#[allow(clippy::too_many_arguments)]
-fn pipeline_loop(
-    mut node: NodeService,
-    clock: &dyn Clock,
-    stop: &AtomicBool,
-    sh: &Shared,
-    tap: Option<&dyn Tap>,
-    from_receive: Receiver<Stamped>,
-    models: Receiver<Model>,
-    to_send: Sender<CanFrame>,
-) {
-    // The node's clock is the bus's (that of the receive timestamps), read directly: anchored
-    // to the last frame's timestamp instead, a node that had been stopped took the frames
-    // queued meanwhile for "now".
-    let mut next_tick_us = 0u64;
-    let mut last_log = Instant::now();
-    let mut last_counters = node.counters();
-    let ids = node.ids().clone();
-    // Sent frames reach the tap stamped with the node's clock at the decision.
-    let mut t_out = 0u64;
-    let emit = |t_us: u64, o: Output| {
-        let Some(f) = o.to_frame(&ids) else {
-            return;
-        };
-        if let Some(tap) = tap {
-            tap.offer(&Stamped { t_us, frame: f });
-        }
-        if to_send.try_send(f).is_err() {
-            sh.tx_dropped.fetch_add(1, Ordering::Relaxed);
-        }
-    };
-    loop {
-        if let Ok(m) = models.try_recv() {
-            match node.set_model(m) {
-                Ok(id) => tracing::info!(model_id = id, "model reloaded"),
-                Err(e) => tracing::error!("{e}; keeping the model already loaded"),
-            }
-        }
-        match from_receive.recv_timeout(Duration::from_millis(20)) {
-            Ok(st) => {
-                // The node's own frames come back through its receive handle (SocketCAN
-                // loops them to the node's other socket): the tap has them from `emit`.
-                if let Some(tap) = tap
-                    && !matches!(
-                        ids.lookup(st.frame.raw_id(), st.frame.is_extended()),
-                        Some((MessageKind::TerrainClass | MessageKind::NodeStatus, _))
-                    )
-                {
-                    tap.offer(&st);
-                }
-                node.process(&st, &mut |o| emit(st.t_us, o));
-                t_out = st.t_us;
-            }
-            Err(RecvTimeoutError::Timeout) => {}
-            Err(RecvTimeoutError::Disconnected) => {
-                if !stop.load(Ordering::Relaxed) {
-                    // The receive thread ended by itself: say so, then stop like a signal.
-                    tracing::error!("the receive thread has exited; stopping the node");
-                }
-                break;
-            }
-        }
-        if stop.load(Ordering::Relaxed) {
-            break;
-        }
-        // Ticks at most once per millisecond of bus time, not per frame (about 20,000 frames/s
-        // for six feet): deadlines and the heartbeat need no finer grain.
-        let now = clock.now_us();
-        if now >= next_tick_us || now + 1_000_000 < next_tick_us {
-            next_tick_us = now + 1000;
-            node.tick(now, &mut |o| emit(now, o));
-            t_out = now;
-        }
-        // A log line every 10 s: never per frame.
-        if last_log.elapsed() >= Duration::from_secs(10) {
-            let c = node.counters();
-            let r = node.reassembly_stats();
-            tracing::info!(
-                frames = c.frames - last_counters.frames,
-                steps = c.steps - last_counters.steps,
-                classified = c.classified - last_counters.classified,
-                no_sample = c.no_sample - last_counters.no_sample,
-                decode_errors = c.decode_errors - last_counters.decode_errors,
-                images = r.delivered,
-                crc_failures = r.crc_failures,
-                incomplete = r.incomplete,
-                rx_dropped = sh.rx_dropped.load(Ordering::Relaxed),
-                record_dropped = tap.map_or(0, |t| t.dropped()),
-                damage_pct = node.damage_pct(),
-                "last 10 s"
-            );
-            last_counters = c;
-            last_log = Instant::now();
-        }
-    }
-    let last = node.status(true);
-    emit(t_out, Output::Status(last));
-}
-
-fn send_loop(bus: &BusSource, stop: &AtomicBool, sh: &Shared, from_pipeline: Receiver<CanFrame>) {
-    let mut backoff = Backoff::default();
-    let degrade = &mut || sh.set_state(NodeState::Degraded);
-    // Runs until the pipeline has stopped and its last frames (the final NodeStatus) are out.
-    'open: loop {
-        let Some(mut tx) = open_with_retry(bus, stop, "send", degrade) else {
-            break;
-        };
-        backoff.reset();
-        loop {
-            let f = match from_pipeline.recv_timeout(Duration::from_millis(50)) {
-                Ok(f) => f,
-                Err(RecvTimeoutError::Timeout) => continue,
-                Err(RecvTimeoutError::Disconnected) => break 'open,
-            };
-            match tx.send(&f) {
-                Ok(()) => {
-                    sh.tx_frames.fetch_add(1, Ordering::Relaxed);
-                }
-                Err(e) => {
-                    sh.bus_errors.fetch_add(1, Ordering::Relaxed);
-                    sh.tx_dropped.fetch_add(1, Ordering::Relaxed);
-                    sh.set_state(NodeState::Degraded);
-                    if !after_bus_error("send", &e, &mut backoff, stop) {
-                        break 'open;
-                    }
-                    continue 'open;
-                }
-            }
-        }
+    /// TerrainClass and NodeStatus: the node is their one sender.
+    fn is_own(&self, frame: &CanFrame) -> bool {
+        matches!(
+            self.ids().lookup(frame.raw_id(), frame.is_extended()),
+            Some((MessageKind::TerrainClass | MessageKind::NodeStatus, _))
+        )
     }
 }

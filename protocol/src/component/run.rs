@@ -1,155 +1,14 @@
-//! One shape for every part that lives on the bus, and one loop that runs it.
-//!
-//! The node, the controller, the simulated robot, a training-set capture and a recorder all do
-//! the same four things: they say which frames they read, take them one at a time, act when
-//! time passes, and send frames. A [`Component`] is that shape, with a lifecycle in the
-//! spirit of a robot task (made from its config, started when its bus opens, stopped once):
-//!
-//! - [`Component::filters`]: what it reads, as kernel filters, so that a process which
-//!   does not read the tactile stream (about 2,600 frames/s per foot) never wakes for it;
-//! - [`Component::start`]: its bus opened, the first time or again after an error;
-//! - [`Component::on_frame`]: one received frame;
-//! - [`Component::tick`]: time passed;
-//! - [`Component::on_health`]: the CAN controller's error state changed;
-//! - [`Component::stop`]: the run ends (a signal, or [`Component::done`]).
-//!
-//! It writes what it sends into an [`Outbox`]; it never touches the bus. That keeps it free of
-//! I/O, so a test drives it frame by frame on a clock it sets, and so the same component runs
-//! on `can0`, on `vcan0` in CI and on an [`InProcBus`](crate::bus::InProcBus).
-//!
-//! [`LockStep`] runs several components on one simulated clock in one thread (the demo,
-//! tests, experiments). [`run`] is the loop every process uses: it opens the bus with retry and backoff, sets the
-//! filters, receives, ticks on the robot's clock (wall time times a scale, for a simulator
-//! slower than real time), sends, keeps a recording tap, reopens the bus after an error
-//! (never exiting for one) and stops on a flag.
-//!
-//! ```
-//! use std::sync::atomic::AtomicBool;
-//! use presrs_protocol::bus::{BusSource, CanBus, InProcBus};
-//! use presrs_protocol::component::{Component, Outbox, RunOptions, run};
-//! use presrs_protocol::{CanFrame, Stamped};
-//!
-//! /// Answers every frame with id 0x100 by the same data on 0x101, and stops after three.
-//! struct Echo(usize);
-//! impl Component for Echo {
-//!     fn name(&self) -> &'static str { "echo" }
-//!     fn filters(&self) -> Vec<(u32, u32)> { vec![(0x100, 0x7ff)] }
-//!     fn on_frame(&mut self, st: &Stamped, _now_us: u64, out: &mut Outbox) {
-//!         if let Some(f) = CanFrame::classic(embedded_can::StandardId::new(0x101).unwrap(), st.frame.data()) { out.push(f); }
-//!         self.0 += 1;
-//!     }
-//!     fn tick(&mut self, _now_us: u64, _out: &mut Outbox) {}
-//!     fn done(&self) -> bool { self.0 == 3 }
-//! }
-//!
-//! let bus = InProcBus::new();
-//! let mut peer = bus.endpoint();
-//! let feeder = std::thread::spawn(move || {
-//!     for i in 0..3u8 {
-//!         std::thread::sleep(std::time::Duration::from_millis(20));
-//!         peer.send(&CanFrame::classic(embedded_can::StandardId::new(0x100).unwrap(), &[i]).unwrap()).unwrap();
-//!     }
-//!     peer
-//! });
-//! let mut echo = Echo(0);
-//! let stats = run(&mut echo, &BusSource::InProc(bus), &RunOptions::default(), &AtomicBool::new(false));
-//! let mut peer = feeder.join().unwrap();
-//! assert_eq!((stats.received, stats.sent), (3, 3));
-//! let back = peer.recv(std::time::Duration::from_secs(1)).unwrap().unwrap();
-//! assert_eq!(back.frame.raw_id(), 0x101);
-//! ```
+//! The loop every process runs a component with: [`run`].
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use crate::bus::{
-    Backoff, BusHealth, BusSource, CanBus, HealthWatch, InProcBus, InProcEndpoint, Tap,
-    after_bus_error, open_with_retry,
-};
-use crate::clock::{Clock, ManualClock};
+use super::{Component, Link, LinkStats, Outbox};
+use crate::bus::{Backoff, BusSource, CanBus, HealthWatch, Tap, after_bus_error, open_with_retry};
+use crate::clock::Clock;
 use crate::error::BusError;
-use crate::frame::{CanFrame, Stamped};
-
-/// The frames a component sends, collected during one call and sent by the runner after it.
-/// Its buffer is kept between calls: sending allocates nothing once it has grown to the
-/// largest burst.
-#[derive(Debug, Default)]
-pub struct Outbox {
-    frames: Vec<CanFrame>,
-}
-
-impl Outbox {
-    /// An outbox with room for `n` frames before it grows.
-    pub fn with_capacity(n: usize) -> Self {
-        Self {
-            frames: Vec::with_capacity(n),
-        }
-    }
-
-    /// Queues a frame to send.
-    pub fn push(&mut self, frame: CanFrame) {
-        self.frames.push(frame);
-    }
-
-    /// The frames queued so far.
-    pub fn frames(&self) -> &[CanFrame] {
-        &self.frames
-    }
-
-    /// Takes the frames queued, oldest first.
-    pub fn drain(&mut self) -> std::vec::Drain<'_, CanFrame> {
-        self.frames.drain(..)
-    }
-
-    /// Nothing queued.
-    pub fn is_empty(&self) -> bool {
-        self.frames.is_empty()
-    }
-}
-
-/// A part that lives on the bus. See the [module docs](self).
-///
-/// Times are robot time in microseconds, from the runner's clock ([`run`]: wall time since
-/// the run began, times [`RunOptions::time_scale`], or [`RunOptions::clock`]); a test or a
-/// lock-step loop passes its own.
-pub trait Component {
-    /// A short name for logs: "node", "controller", "sim", "capture", "record".
-    fn name(&self) -> &'static str;
-
-    /// The frames it reads, as `(id, mask)` kernel filters; empty: every frame.
-    fn filters(&self) -> Vec<(u32, u32)>;
-
-    /// Its bus opened at `now_us`: the first time, or again after an error (a component that
-    /// judges silence, such as a heartbeat watch, does not count the time the bus was down).
-    fn start(&mut self, now_us: u64, out: &mut Outbox) {
-        let _ = (now_us, out);
-    }
-
-    /// One frame received (and passed by [`Component::filters`]).
-    fn on_frame(&mut self, frame: &Stamped, now_us: u64, out: &mut Outbox);
-
-    /// Time passed: it is now `now_us`. Called at least every [`RunOptions::tick`] of wall
-    /// time, and after every burst of frames.
-    fn tick(&mut self, now_us: u64, out: &mut Outbox);
-
-    /// The CAN controller under its bus handle changed state (error-passive, bus-off, back to
-    /// active). The runner logs the change with its fix; a component reports it on the bus.
-    fn on_health(&mut self, health: &BusHealth, now_us: u64) {
-        let _ = (health, now_us);
-    }
-
-    /// The run ends; frames written here are sent if the bus is open (a last status).
-    fn stop(&mut self, now_us: u64, out: &mut Outbox) {
-        let _ = (now_us, out);
-    }
-
-    /// True when it has finished on its own (a simulation of a set duration, a capture whose
-    /// disk failed): the runner stops it.
-    fn done(&self) -> bool {
-        false
-    }
-}
+use crate::frame::Stamped;
 
 /// How [`run`] drives a component.
 #[derive(Clone)]
@@ -169,6 +28,9 @@ pub struct RunOptions {
     /// deadlines compare with the frames' receive times; a test passes a
     /// [`ManualClock`](crate::clock::ManualClock).
     pub clock: Option<Arc<dyn Clock>>,
+    /// Counts frames in and out, errors and the link's state, for a status the component
+    /// reports or a watcher reads.
+    pub link: Option<Arc<LinkStats>>,
 }
 
 impl Default for RunOptions {
@@ -179,6 +41,7 @@ impl Default for RunOptions {
             max_burst: 256,
             tap: None,
             clock: None,
+            link: None,
         }
     }
 }
@@ -237,26 +100,40 @@ pub fn run_opened(
     let mut backoff = Backoff::default();
     let mut watch = HealthWatch::default();
     let filters = component.filters();
+    let link = opts.link.clone().unwrap_or_default();
+    let failed = |e: &BusError, backoff: &mut Backoff, stats: &mut RunStats| {
+        LinkStats::add(&link.bus_errors, 1);
+        link.set_link(Link::Failing);
+        after_bus_error(name, e, backoff, stop);
+        stats.reopens += 1;
+    };
     let mut bus: Option<Box<dyn CanBus>> = None;
     'open: while !stopping() && !component.done() {
         bus = None;
         let Some(mut b) = opened
             .take()
-            .or_else(|| open_with_retry(source, stop, name, &mut || {}))
+            .or_else(|| open_with_retry(source, stop, name, &mut || link.set_link(Link::Failing)))
         else {
             break;
         };
         if let Err(e) = b.set_filters(&filters) {
             // Unfiltered, a component that does not read the tactile stream falls behind it.
-            after_bus_error(name, &e, &mut backoff, stop);
-            stats.reopens += 1;
+            failed(&e, &mut backoff, &mut stats);
             continue 'open;
         }
         backoff.reset();
+        link.set_link(Link::Open);
         component.start(now_us(), &mut out);
-        if let Err(e) = flush(&mut out, b.as_mut(), opts, &mut stats, now_us(), name) {
-            after_bus_error(name, &e, &mut backoff, stop);
-            stats.reopens += 1;
+        if let Err(e) = flush(
+            &mut out,
+            b.as_mut(),
+            opts,
+            &link,
+            &mut stats,
+            now_us(),
+            name,
+        ) {
+            failed(&e, &mut backoff, &mut stats);
             continue 'open;
         }
         let mut next_tick = Instant::now();
@@ -268,7 +145,10 @@ pub fn run_opened(
                 match b.recv(wait) {
                     Ok(Some(st)) => {
                         stats.received += 1;
-                        if let Some(t) = &opts.tap {
+                        LinkStats::add(&link.rx_frames, 1);
+                        if let Some(t) = &opts.tap
+                            && !component.is_own(&st.frame)
+                        {
                             t.offer(&st);
                         }
                         component.on_frame(&st, now_us(), &mut out);
@@ -276,24 +156,23 @@ pub fn run_opened(
                     }
                     Ok(None) => break,
                     Err(e) => {
-                        after_bus_error(name, &e, &mut backoff, stop);
-                        stats.reopens += 1;
+                        failed(&e, &mut backoff, &mut stats);
                         continue 'open;
                     }
                 }
             }
             let now = now_us();
             let health = b.health();
-            if watch.update(name, &iface, &health).is_some() {
+            if let Some(state) = watch.update(name, &iface, &health) {
+                link.set_controller(state);
                 component.on_health(&health, now);
             }
             if Instant::now() >= next_tick {
                 component.tick(now, &mut out);
                 next_tick = Instant::now() + opts.tick;
             }
-            if let Err(e) = flush(&mut out, b.as_mut(), opts, &mut stats, now, name) {
-                after_bus_error(name, &e, &mut backoff, stop);
-                stats.reopens += 1;
+            if let Err(e) = flush(&mut out, b.as_mut(), opts, &link, &mut stats, now, name) {
+                failed(&e, &mut backoff, &mut stats);
                 continue 'open;
             }
         }
@@ -304,7 +183,7 @@ pub fn run_opened(
     component.stop(end, &mut out);
     match bus.as_mut() {
         Some(b) => {
-            let _ = flush(&mut out, b.as_mut(), opts, &mut stats, end, name);
+            let _ = flush(&mut out, b.as_mut(), opts, &link, &mut stats, end, name);
         }
         None => out.drain().for_each(drop),
     }
@@ -318,6 +197,7 @@ fn flush(
     out: &mut Outbox,
     bus: &mut dyn CanBus,
     opts: &RunOptions,
+    link: &LinkStats,
     stats: &mut RunStats,
     now_us: u64,
     name: &str,
@@ -330,6 +210,7 @@ fn flush(
         match bus.send(&f) {
             Ok(()) => {
                 stats.sent += 1;
+                LinkStats::add(&link.tx_frames, 1);
                 if let Some(t) = &opts.tap {
                     t.offer(&Stamped {
                         t_us: now_us,
@@ -340,6 +221,7 @@ fn flush(
             Err(e @ (BusError::Down { .. } | BusError::Closed)) => down = Some(e),
             Err(e) => {
                 stats.send_errors += 1;
+                LinkStats::add(&link.tx_dropped, 1);
                 if stats.send_errors.is_power_of_two() {
                     tracing::warn!(
                         role = name,
@@ -353,115 +235,10 @@ fn flush(
     down.map_or(Ok(()), Err)
 }
 
-/// Every component on one simulated clock, on one in-process bus: the demo's, the tests' and
-/// the experiments' loop. Each [`LockStep::step`] sets the clock and gives each part, in a
-/// fixed order, the frames queued for it and then its tick; what a part sends is on the bus
-/// before the next part's turn. A run is the same on every machine for a seed, as fast as the
-/// machine goes, and the parts talk only through frames, as they do as processes on vcan.
-pub struct LockStep {
-    clock: ManualClock,
-    bus: InProcBus,
-    endpoints: Vec<InProcEndpoint>,
-    out: Outbox,
-    t_us: u64,
-    link_up: bool,
-}
-
-impl LockStep {
-    /// A bus for `parts` parts (part `i` is the `i`-th of [`LockStep::step`]'s slice), each
-    /// with a queue of `depth` frames, the clock at 0.
-    pub fn new(parts: usize, depth: usize) -> Self {
-        let clock = ManualClock::new(0);
-        let bus = InProcBus::with_clock(Arc::new(clock.clone()), depth);
-        let endpoints = (0..parts).map(|_| bus.endpoint()).collect();
-        Self {
-            clock,
-            bus,
-            endpoints,
-            out: Outbox::with_capacity(256),
-            t_us: 0,
-            link_up: true,
-        }
-    }
-
-    /// The simulated time, µs.
-    pub fn now_us(&self) -> u64 {
-        self.t_us
-    }
-
-    /// Part `i` (re)starts: its filters are set, frames queued for it are dropped (a new
-    /// process hears only what comes after it), and it is [`Component::start`]ed now.
-    pub fn start(
-        &mut self,
-        i: usize,
-        part: &mut dyn Component,
-        sent: &mut dyn FnMut(u64, &CanFrame),
-    ) -> Result<(), BusError> {
-        let Some(ep) = self.endpoints.get_mut(i) else {
-            return Ok(());
-        };
-        ep.set_filters(&part.filters())?;
-        while ep.recv(Duration::ZERO)?.is_some() {}
-        part.start(self.t_us, &mut self.out);
-        self.send(i, sent)
-    }
-
-    /// While the link is down every frame sent is lost, as on an interface that is down (the
-    /// observer of [`LockStep::step`] still sees it: the sender did send it).
-    pub fn set_link(&mut self, up: bool) {
-        self.link_up = up;
-    }
-
-    /// Moves the clock to `t_us` and runs each part in order: its frames, then its tick. A
-    /// part that is `None` (a process killed) loses what was queued for it. `sent` sees every
-    /// frame sent, with the time.
-    pub fn step(
-        &mut self,
-        t_us: u64,
-        parts: &mut [Option<&mut dyn Component>],
-        sent: &mut dyn FnMut(u64, &CanFrame),
-    ) -> Result<(), BusError> {
-        self.t_us = t_us;
-        self.clock.set_us(t_us);
-        for (i, part) in parts.iter_mut().enumerate() {
-            let Some(ep) = self.endpoints.get_mut(i) else {
-                break;
-            };
-            match part {
-                None => while ep.recv(Duration::ZERO)?.is_some() {},
-                Some(p) => {
-                    while let Some(st) = ep.recv(Duration::ZERO)? {
-                        p.on_frame(&st, t_us, &mut self.out);
-                    }
-                    p.tick(t_us, &mut self.out);
-                    self.send(i, sent)?;
-                }
-            }
-        }
-        Ok(())
-    }
-
-    fn send(&mut self, i: usize, sent: &mut dyn FnMut(u64, &CanFrame)) -> Result<(), BusError> {
-        let (t, up) = (self.t_us, self.link_up);
-        let ep = &mut self.endpoints[i];
-        for f in self.out.drain() {
-            sent(t, &f);
-            if up {
-                ep.send(&f)?;
-            }
-        }
-        Ok(())
-    }
-
-    /// Frames dropped because a part's queue was full.
-    pub fn overruns(&self) -> u64 {
-        self.bus.overruns()
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::CanFrame;
     use crate::bus::InProcBus;
 
     /// Counts what the runner does to it; sends one frame per tick with the tick count.

@@ -1,0 +1,159 @@
+//! One shape for every part that lives on the bus, and one loop that runs it.
+//!
+//! The node, the controller, the simulated robot, a training-set capture and a recorder all do
+//! the same four things: they say which frames they read, take them one at a time, act when
+//! time passes, and send frames. A [`Component`] is that shape, with a lifecycle in the
+//! spirit of a robot task (made from its config, started when its bus opens, stopped once):
+//!
+//! - [`Component::filters`]: what it reads, as kernel filters, so that a process which
+//!   does not read the tactile stream (about 2,600 frames/s per foot) never wakes for it;
+//! - [`Component::start`]: its bus opened, the first time or again after an error;
+//! - [`Component::on_frame`]: one received frame;
+//! - [`Component::tick`]: time passed;
+//! - [`Component::on_health`]: the CAN controller's error state changed;
+//! - [`Component::stop`]: the run ends (a signal, or [`Component::done`]).
+//!
+//! It writes what it sends into an [`Outbox`]; it never touches the bus. That keeps it free of
+//! I/O, so a test drives it frame by frame on a clock it sets, and so the same component runs
+//! on `can0`, on `vcan0` in CI and on an [`InProcBus`](crate::bus::InProcBus).
+//!
+//! [`LockStep`] runs several components on one simulated clock in one thread (the demo,
+//! tests, experiments). [`run`] is the loop every process uses: it opens the bus with retry and backoff, sets the
+//! filters, receives, ticks on the robot's clock (wall time times a scale, for a simulator
+//! slower than real time), sends, keeps a recording tap, reopens the bus after an error
+//! (never exiting for one) and stops on a flag.
+//!
+//! ```
+//! use std::sync::atomic::AtomicBool;
+//! use presrs_protocol::bus::{BusSource, CanBus, InProcBus};
+//! use presrs_protocol::component::{Component, Outbox, RunOptions, run};
+//! use presrs_protocol::{CanFrame, Stamped};
+//!
+//! /// Answers every frame with id 0x100 by the same data on 0x101, and stops after three.
+//! struct Echo(usize);
+//! impl Component for Echo {
+//!     fn name(&self) -> &'static str { "echo" }
+//!     fn filters(&self) -> Vec<(u32, u32)> { vec![(0x100, 0x7ff)] }
+//!     fn on_frame(&mut self, st: &Stamped, _now_us: u64, out: &mut Outbox) {
+//!         if let Some(f) = CanFrame::classic(embedded_can::StandardId::new(0x101).unwrap(), st.frame.data()) { out.push(f); }
+//!         self.0 += 1;
+//!     }
+//!     fn tick(&mut self, _now_us: u64, _out: &mut Outbox) {}
+//!     fn done(&self) -> bool { self.0 == 3 }
+//! }
+//!
+//! let bus = InProcBus::new();
+//! let mut peer = bus.endpoint();
+//! let feeder = std::thread::spawn(move || {
+//!     for i in 0..3u8 {
+//!         std::thread::sleep(std::time::Duration::from_millis(20));
+//!         peer.send(&CanFrame::classic(embedded_can::StandardId::new(0x100).unwrap(), &[i]).unwrap()).unwrap();
+//!     }
+//!     peer
+//! });
+//! let mut echo = Echo(0);
+//! let stats = run(&mut echo, &BusSource::InProc(bus), &RunOptions::default(), &AtomicBool::new(false));
+//! let mut peer = feeder.join().unwrap();
+//! assert_eq!((stats.received, stats.sent), (3, 3));
+//! let back = peer.recv(std::time::Duration::from_secs(1)).unwrap().unwrap();
+//! assert_eq!(back.frame.raw_id(), 0x101);
+//! ```
+
+mod lockstep;
+mod run;
+mod threaded;
+
+pub use lockstep::LockStep;
+pub use run::{RunOptions, RunStats, run, run_opened};
+pub use threaded::{Link, LinkStats, Threaded, spawn};
+
+use crate::bus::BusHealth;
+use crate::frame::{CanFrame, Stamped};
+
+/// The frames a component sends, collected during one call and sent by the runner after it.
+/// Its buffer is kept between calls: sending allocates nothing once it has grown to the
+/// largest burst.
+#[derive(Debug, Default)]
+pub struct Outbox {
+    frames: Vec<CanFrame>,
+}
+
+impl Outbox {
+    /// An outbox with room for `n` frames before it grows.
+    pub fn with_capacity(n: usize) -> Self {
+        Self {
+            frames: Vec::with_capacity(n),
+        }
+    }
+
+    /// Queues a frame to send.
+    pub fn push(&mut self, frame: CanFrame) {
+        self.frames.push(frame);
+    }
+
+    /// The frames queued so far.
+    pub fn frames(&self) -> &[CanFrame] {
+        &self.frames
+    }
+
+    /// Takes the frames queued, oldest first.
+    pub fn drain(&mut self) -> std::vec::Drain<'_, CanFrame> {
+        self.frames.drain(..)
+    }
+
+    /// Nothing queued.
+    pub fn is_empty(&self) -> bool {
+        self.frames.is_empty()
+    }
+}
+
+/// A part that lives on the bus. See the [module docs](self).
+///
+/// Times are robot time in microseconds, from the runner's clock ([`run`]: wall time since
+/// the run began, times [`RunOptions::time_scale`], or [`RunOptions::clock`]); a test or a
+/// lock-step loop passes its own.
+pub trait Component {
+    /// A short name for logs: "node", "controller", "sim", "capture", "record".
+    fn name(&self) -> &'static str;
+
+    /// The frames it reads, as `(id, mask)` kernel filters; empty: every frame.
+    fn filters(&self) -> Vec<(u32, u32)>;
+
+    /// Its bus opened at `now_us`: the first time, or again after an error (a component that
+    /// judges silence, such as a heartbeat watch, does not count the time the bus was down).
+    fn start(&mut self, now_us: u64, out: &mut Outbox) {
+        let _ = (now_us, out);
+    }
+
+    /// One frame received (and passed by [`Component::filters`]).
+    fn on_frame(&mut self, frame: &Stamped, now_us: u64, out: &mut Outbox);
+
+    /// Time passed: it is now `now_us`. Called at least every [`RunOptions::tick`] of wall
+    /// time, and after every burst of frames.
+    fn tick(&mut self, now_us: u64, out: &mut Outbox);
+
+    /// The CAN controller under its bus handle changed state (error-passive, bus-off, back to
+    /// active). The runner logs the change with its fix; a component reports it on the bus.
+    fn on_health(&mut self, health: &BusHealth, now_us: u64) {
+        let _ = (health, now_us);
+    }
+
+    /// The run ends; frames written here are sent if the bus is open (a last status).
+    fn stop(&mut self, now_us: u64, out: &mut Outbox) {
+        let _ = (now_us, out);
+    }
+
+    /// True for a frame of a kind this component is the one sender of. Such a frame comes
+    /// back through a second handle of the same process (SocketCAN loops every frame to every
+    /// other socket); a recording keeps it once, as sent.
+    fn is_own(&self, frame: &CanFrame) -> bool {
+        let _ = frame;
+        false
+    }
+
+    /// True when it has finished on its own (a simulation of a set duration, a capture whose
+    /// disk failed): the runner stops it.
+    fn done(&self) -> bool {
+        false
+    }
+}
