@@ -6,6 +6,11 @@
 //! tactile header), so a replay decides exactly as the live run did. Nothing here allocates per
 //! frame: buffers are sized when the model is installed.
 
+mod adapt;
+mod debounce;
+mod decision;
+mod sample;
+
 use protocol::clock::Clock;
 use protocol::messages::{self, FootContact, Message, TerrainClass, flags};
 use protocol::tactile::{Reassembler, ReassemblyStats};
@@ -13,12 +18,11 @@ use protocol::{IdConfig, Stamped};
 
 use std::sync::Arc;
 
-use crossbeam_channel::{Receiver, Sender};
-
-use crate::classifier::train::{RefitError, refit};
 use crate::classifier::{Classifier, Model};
-use crate::config::{NodeConfig, RefitMode, RepairMode};
+use crate::config::NodeConfig;
 use crate::health::LineHealth;
+use adapt::{Adaptation, Adapted, Refitter, classify};
+use debounce::{Edge, Switch};
 
 /// Counters per stage, for NodeStatus and the logs.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -43,58 +47,9 @@ pub struct Counters {
     pub refits: u64,
 }
 
-/// A model refitted to one foot's dead lines, and the lines it was fitted for.
-struct Adapted {
-    cls: Classifier,
-    dead_rows: Vec<bool>,
-    dead_cols: Vec<bool>,
-}
-
-impl Adapted {
-    fn fits(&self, h: &LineHealth) -> bool {
-        self.dead_rows == h.dead_rows() && self.dead_cols == h.dead_cols()
-    }
-}
-
-/// A refit asked of the background thread, and its answer. `generation` tells answers for a
-/// model that has since been replaced (SIGHUP) from current ones.
-struct RefitJob {
-    foot: u8,
-    generation: u64,
-    model: Arc<Model>,
-    dead_rows: Vec<bool>,
-    dead_cols: Vec<bool>,
-}
-
-struct RefitDone {
-    foot: u8,
-    generation: u64,
-    result: Result<Adapted, RefitError>,
-}
-
-fn run_refit(job: RefitJob) -> RefitDone {
-    let result = refit(&job.model, &job.dead_rows, &job.dead_cols).map(|mut m| {
-        // The adapted model classifies; it never refits again, so it need not hold the images.
-        m.images = None;
-        Adapted {
-            cls: Classifier::new(m),
-            dead_rows: job.dead_rows,
-            dead_cols: job.dead_cols,
-        }
-    });
-    RefitDone {
-        foot: job.foot,
-        generation: job.generation,
-        result,
-    }
-}
-
 /// One foot's stance state.
 struct Foot {
-    raw: bool,
-    raw_since: u32,
-    state: bool,
-    have_raw: bool,
+    switch: Switch,
     touchdown_us: u32,
     decided: bool,
     step: u16,
@@ -140,10 +95,7 @@ impl Foot {
 
     fn new(input: usize, rows: usize, cols: usize, classes: usize) -> Self {
         Self {
-            raw: false,
-            raw_since: 0,
-            state: false,
-            have_raw: false,
+            switch: Switch::default(),
             touchdown_us: 0,
             decided: true,
             step: 0,
@@ -163,122 +115,6 @@ impl Foot {
             last_image_us: None,
             period_us: None,
             heard: None,
-        }
-    }
-}
-
-/// Refits of the model to the feet's dead lines (see [`crate::classifier::train::refit`]).
-#[derive(Default)]
-struct Refitter {
-    /// The installed model, shared with refit jobs.
-    model: Option<Arc<Model>>,
-    generation: u64,
-    /// The background thread's queues (RefitMode::Background), started on first use.
-    tx: Option<Sender<RefitJob>>,
-    rx: Option<Receiver<RefitDone>>,
-    /// The installed model cannot be refitted (it holds no images): said once per model.
-    unavailable: bool,
-}
-
-impl Refitter {
-    /// Takes in finished background refits (a channel poll: nothing allocated, nothing blocks).
-    fn collect(&mut self, feet: &mut [Foot], counters: &mut Counters) {
-        while let Some(done) = self.rx.as_ref().and_then(|rx| rx.try_recv().ok()) {
-            if done.generation == self.generation
-                && let Some(f) = feet.get_mut(done.foot as usize)
-            {
-                self.install(done.foot, f, done.result, counters);
-            }
-        }
-    }
-
-    fn install(
-        &mut self,
-        foot: u8,
-        f: &mut Foot,
-        result: Result<Adapted, RefitError>,
-        counters: &mut Counters,
-    ) {
-        match result {
-            Ok(a) => {
-                counters.refits += 1;
-                let dead = a
-                    .dead_rows
-                    .iter()
-                    .chain(&a.dead_cols)
-                    .filter(|&&d| d)
-                    .count();
-                tracing::info!(
-                    foot,
-                    dead_lines = dead,
-                    h = a.cls.model().h,
-                    "model refitted to the foot's dead sensor lines"
-                );
-                f.adapted = Some(a);
-            }
-            Err(RefitError::NoImages) => {
-                if !self.unavailable {
-                    tracing::warn!("{}", RefitError::NoImages);
-                }
-                self.unavailable = true;
-            }
-            Err(e) => tracing::warn!(foot, "refit to the dead sensor lines failed: {e}"),
-        }
-    }
-
-    /// Asks for a refit when the foot's dead lines are not those of its adapted model and not
-    /// already asked for.
-    fn request(&mut self, mode: RefitMode, foot: u8, f: &mut Foot, counters: &mut Counters) {
-        if mode == RefitMode::Off || self.unavailable || !f.health.any_dead() {
-            return;
-        }
-        let h = &f.health;
-        if f.adapted.as_ref().is_some_and(|a| a.fits(h))
-            || f.asked
-                .as_ref()
-                .is_some_and(|(r, c)| r == h.dead_rows() && c == h.dead_cols())
-        {
-            return;
-        }
-        let Some(model) = self.model.clone() else {
-            return;
-        };
-        let job = RefitJob {
-            foot,
-            generation: self.generation,
-            model,
-            dead_rows: h.dead_rows().to_vec(),
-            dead_cols: h.dead_cols().to_vec(),
-        };
-        f.asked = Some((job.dead_rows.clone(), job.dead_cols.clone()));
-        if mode == RefitMode::Inline {
-            let done = run_refit(job);
-            self.install(foot, f, done.result, counters);
-            return;
-        }
-        if self.tx.is_none() {
-            let (job_tx, job_rx) = crossbeam_channel::unbounded::<RefitJob>();
-            let (done_tx, done_rx) = crossbeam_channel::unbounded();
-            let spawned = std::thread::Builder::new()
-                .name("refit".into())
-                .spawn(move || {
-                    for job in job_rx {
-                        if done_tx.send(run_refit(job)).is_err() {
-                            break;
-                        }
-                    }
-                });
-            if let Err(e) = spawned {
-                tracing::warn!("cannot start the refit thread: {e}; refitting inline");
-                let done = run_refit(job);
-                self.install(foot, f, done.result, counters);
-                return;
-            }
-            self.tx = Some(job_tx);
-            self.rx = Some(done_rx);
-        }
-        if let Some(tx) = &self.tx {
-            let _ = tx.send(job);
         }
     }
 }
@@ -498,11 +334,7 @@ impl StancePipeline {
         self.settle(foot, fc.timestamp_us, out);
         let f = &mut self.feet[foot as usize];
         f.heard = Some((self.now_rx_us, fc.timestamp_us));
-        if !f.have_raw || fc.stance != f.raw {
-            f.raw = fc.stance;
-            f.raw_since = fc.timestamp_us;
-            f.have_raw = true;
-        }
+        f.switch.read(fc.stance, fc.timestamp_us);
         self.settle(foot, fc.timestamp_us, out);
     }
 
@@ -510,13 +342,12 @@ impl StancePipeline {
     fn settle(&mut self, foot: u8, now: u32, out: &mut impl FnMut(u8, TerrainClass)) {
         let debounce = self.cfg.debounce_us;
         let f = &mut self.feet[foot as usize];
-        if !f.have_raw || f.raw == f.state || now.wrapping_sub(f.raw_since) < debounce {
+        let Some(edge) = f.switch.settle(now, debounce) else {
             return;
-        }
-        f.state = f.raw;
-        if f.state {
-            // Touchdown: a new step.
-            f.touchdown_us = f.raw_since;
+        };
+        if let Edge::Touchdown { at_us } = edge {
+            // A new step.
+            f.touchdown_us = at_us;
             f.decided = false;
             f.best_err = None;
             f.sum_lp.fill(0.0);
@@ -541,20 +372,18 @@ impl StancePipeline {
         let multi = self.cfg.multi_frame;
         let f = &mut self.feet[foot as usize];
         if let Some(last) = f.last_image_us {
-            let p = ts.wrapping_sub(last);
-            // A plausible tactile frame period (the PreSRS runs at 100 Hz: 10 ms).
-            f.period_us = (1_000..=50_000).contains(&p).then_some(p).or(f.period_us);
+            f.period_us = sample::plausible_period(ts.wrapping_sub(last)).or(f.period_us);
         }
         f.last_image_us = Some(ts);
         f.heard = Some((rx_us, ts));
-        if !f.state || f.decided {
+        if !f.switch.stance || f.decided {
             return;
         }
         let dt = ts.wrapping_sub(f.touchdown_us);
-        if dt > 10_000_000 {
+        if dt > sample::FAR_US {
             return; // an image from before the touchdown
         }
-        if !f.raw && ts.wrapping_sub(f.raw_since) < 10_000_000 {
+        if f.switch.after_open_edge(ts) {
             // Sampled after a liftoff edge that the debounce has not confirmed yet: outside the
             // stance unless the edge was bounce, and then the next images are inside again.
             return;
@@ -590,23 +419,17 @@ impl StancePipeline {
             return;
         }
         if multi {
-            if dt >= w0 && dt <= w1 {
+            if sample::in_window(dt, [w0, w1]) {
                 f.keep(img, rx_us);
                 // The stance history learns from one frame per stance, not every frame.
                 let observe = f.used == 0;
                 let mut sum_lp = std::mem::take(&mut f.sum_lp);
-                let decided = classify(
-                    cls,
-                    foot,
-                    f,
-                    rows,
-                    cols,
-                    observe,
-                    Some(&mut sum_lp),
-                    &self.cfg,
-                    &mut self.refitter,
-                    &mut self.counters,
-                );
+                let ctx = Adaptation {
+                    cfg: &self.cfg,
+                    refitter: &mut self.refitter,
+                    counters: &mut self.counters,
+                };
+                let decided = classify(cls, foot, f, (rows, cols), observe, Some(&mut sum_lp), ctx);
                 f.sum_lp = sum_lp;
                 match decided {
                     Some((d, repaired)) if d.contact => {
@@ -637,16 +460,11 @@ impl StancePipeline {
         let sample_us = self.cfg.sample_ms * 1000;
         let img = self.reassembler.last_image();
         let f = &mut self.feet[foot as usize];
-        let err = dt.abs_diff(sample_us);
-        if f.best_err.is_none_or(|e| err < e) {
+        if let Some(err) = sample::nearer(dt, sample_us, f.best_err) {
             f.best_err = Some(err);
             f.keep(img, rx_us);
         }
-        // Decide as soon as the next frame can only be further from the sample time: at or past
-        // it, or (with a known frame period) less than half a period before it. Waiting for the
-        // next frame would add a whole period to every decision's latency.
-        let next_further = f.period_us.is_some_and(|p| dt + p / 2 >= sample_us);
-        if dt >= sample_us || next_further {
+        if sample::nearest_is_final(dt, sample_us, f.period_us) {
             self.decide(foot, out);
         }
     }
@@ -670,29 +488,20 @@ impl StancePipeline {
         for foot in 0..self.feet.len() {
             let f = &self.feet[foot];
             let Some((rx, ts)) = f.heard else { continue };
-            if !f.state || f.decided || now_rx_us < rx {
+            if !f.switch.stance || f.decided || now_rx_us < rx {
                 continue;
             }
             let dt = ts.wrapping_sub(f.touchdown_us);
-            if dt > 10_000_000 {
+            if dt > sample::FAR_US {
                 continue;
             }
             let margin = f.period_us.unwrap_or(10_000);
             let due = if self.cfg.multi_frame {
                 f.used > 0 && dt >= w1 + margin
             } else {
+                let last_dt = f.last_image_us.map(|l| l.wrapping_sub(f.touchdown_us));
                 f.best_err.is_some_and(|e| {
-                    // Images sampled before `limit` would be nearer than the best. The array
-                    // samples on a fixed period, so the last of them that can exist is the
-                    // last grid point before `limit` (images lost on the bus keep the grid);
-                    // without a known period, any time before `limit`.
-                    let limit = sample_us.saturating_add(e);
-                    let last_dt = f.last_image_us.map(|l| l.wrapping_sub(f.touchdown_us));
-                    let last_nearer = match (f.period_us, last_dt) {
-                        (Some(p), Some(l)) if l < limit => l + (limit - 1 - l) / p * p,
-                        _ => limit,
-                    };
-                    dt >= last_nearer.saturating_add(margin)
+                    sample::deadline_passed(dt, sample_us, e, last_dt, f.period_us, margin)
                 })
             };
             if due {
@@ -717,29 +526,21 @@ impl StancePipeline {
         match self.classifier.as_mut() {
             Some(cls) if cfg.multi_frame && f.used > 0 => {
                 let m = cls.model();
-                let n = m.classes.len();
-                let best = (0..n).fold(0, |b, k| if f.sum_lp[k] > f.sum_lp[b] { k } else { b });
-                let mx = f.sum_lp[best];
-                let z: f64 = (0..n).map(|k| (f.sum_lp[k] - mx).exp()).sum();
+                let lp = f.sum_lp.get(..m.classes.len()).unwrap_or(&f.sum_lp);
+                let (best, pct) = decision::combine(lp);
                 tc.terrain = m.classes[best].terrain_id;
-                tc.confidence_pct = 100.0 / z;
+                tc.confidence_pct = pct;
                 tc.flags |= flags::MULTI_FRAME;
             }
             Some(cls) if !cfg.multi_frame && f.best_err.is_some() => {
                 let m = cls.model();
                 let (rows, cols) = (m.input_rows, m.input_cols);
-                match classify(
-                    cls,
-                    foot,
-                    f,
-                    rows,
-                    cols,
-                    true,
-                    None,
+                let ctx = Adaptation {
                     cfg,
-                    &mut self.refitter,
-                    &mut self.counters,
-                ) {
+                    refitter: &mut self.refitter,
+                    counters: &mut self.counters,
+                };
+                match classify(cls, foot, f, (rows, cols), true, None, ctx) {
                     Some((d, _)) if !d.contact => f.no_contact = true,
                     Some((d, repaired)) => {
                         f.repaired = repaired;
@@ -755,22 +556,13 @@ impl StancePipeline {
             _ => {}
         }
         let sampled = f.used > 0 || (!cfg.multi_frame && f.best_err.is_some());
-        if f.no_contact && f.used == 0 {
-            tc.flags |= flags::NO_CONTACT;
-            self.counters.no_contact += 1;
-        } else if !sampled || self.classifier.is_none() {
-            tc.flags |= flags::NO_SAMPLE;
-            self.counters.no_sample += 1;
+        let outcome = decision::outcome(f.no_contact, f.used, sampled, self.classifier.is_some());
+        match outcome {
+            decision::Outcome::NoContact => self.counters.no_contact += 1,
+            decision::Outcome::NoSample => self.counters.no_sample += 1,
+            decision::Outcome::Classified => self.counters.classified += 1,
         }
-        if tc.flags & (flags::NO_SAMPLE | flags::NO_CONTACT) == 0 {
-            self.counters.classified += 1;
-            if tc.confidence_pct < cfg.low_confidence * 100.0 {
-                tc.flags |= flags::LOW_CONFIDENCE;
-            }
-            if f.repaired {
-                tc.flags |= flags::REPAIRED;
-            }
-        }
+        decision::set_flags(&mut tc, outcome, cfg.low_confidence, f.repaired);
         tc.damage_pct = f.health.damage_pct();
         // From the receipt of the sampled frame to now (the decision made, handed to the
         // send queue), saturated as the CAN field is; 0 when no frame was sampled (flag
@@ -782,65 +574,7 @@ impl StancePipeline {
             .clock
             .as_ref()
             .map_or(self.now_rx_us, |c| c.now_us().max(self.now_rx_us));
-        tc.latency_us = if tc.flags & flags::NO_SAMPLE != 0 {
-            0
-        } else {
-            now.saturating_sub(f.best_rx_us)
-                .min(messages::LATENCY_MAX_US as u64) as u32
-        };
+        tc.latency_us = decision::latency_us(&tc, now, f.best_rx_us);
         out(foot, tc);
     }
-}
-
-/// Crop, repair and decision for one frame (the foot's `best`). Returns the decision and
-/// whether any line was filled; `observe` feeds the frame to the stance history (once per
-/// stance); `sum_lp` gets the decision's log posteriors added (multi-frame). With history
-/// repair, a model refitted to the foot's current dead lines decides. An image without contact
-/// is neither learned from nor repaired.
-#[allow(clippy::too_many_arguments)]
-fn classify(
-    cls: &mut Classifier,
-    foot: u8,
-    f: &mut Foot,
-    rows: usize,
-    cols: usize,
-    observe: bool,
-    sum_lp: Option<&mut Vec<f64>>,
-    cfg: &NodeConfig,
-    refitter: &mut Refitter,
-    counters: &mut Counters,
-) -> Option<(crate::classifier::Decision, bool)> {
-    cls.prepare(&f.best[..f.best_len], rows, cols).ok()?;
-    // Measured once here: the decisions below skip the check.
-    if !cls.in_contact() {
-        return Some((crate::classifier::Decision::NO_CONTACT, false));
-    }
-    let add = |sum_lp: Option<&mut Vec<f64>>, lp: &[f64]| {
-        if let Some(s) = sum_lp {
-            for (a, b) in s.iter_mut().zip(lp) {
-                *a += b;
-            }
-        }
-    };
-    let repaired = match cfg.repair {
-        RepairMode::None => false,
-        RepairMode::PerImage => cls.repair_work() > 0,
-        RepairMode::History => {
-            if observe {
-                f.health.observe(cls.work_mut(), cfg.dead_after_stances);
-                refitter.request(cfg.refit, foot, f, counters);
-            }
-            if let Some(a) = f.adapted.as_mut().filter(|a| a.fits(&f.health)) {
-                a.cls.work_mut().copy_from_slice(cls.work_mut());
-                let repaired = f.health.repair(a.cls.work_mut()) > 0;
-                let d = a.cls.decide_in_contact();
-                add(sum_lp, a.cls.log_posteriors());
-                return Some((d, repaired));
-            }
-            f.health.repair(cls.work_mut()) > 0
-        }
-    };
-    let d = cls.decide_in_contact();
-    add(sum_lp, cls.log_posteriors());
-    Some((d, repaired))
 }
