@@ -8,6 +8,7 @@
 pub mod dataset;
 pub mod features;
 pub mod image;
+mod kernels;
 pub mod model;
 pub mod novelty;
 pub mod pwe;

@@ -288,9 +288,9 @@ impl Model {
     }
 
     /// An image of `bits` per pixel is of the model's depth.
-    pub fn check_depth(&self, bits: u8) -> Result<(), super::pwe::DepthMismatch> {
+    pub fn check_depth(&self, bits: u8) -> Result<(), DepthMismatch> {
         match self.bits {
-            Some(want) if want != bits => Err(super::pwe::DepthMismatch {
+            Some(want) if want != bits => Err(DepthMismatch {
                 bits,
                 want_bits: want,
             }),
@@ -557,4 +557,43 @@ impl Model {
             source,
         })
     }
+}
+
+/// An image of another bit depth than the model's training images.
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+#[error(
+    "a {bits}-bit image, but the model was trained on {want_bits}-bit images: pixel values of \
+     one depth mean nothing on the other's scale (docs/protocol.md); train a model on \
+     {bits}-bit images"
+)]
+pub struct DepthMismatch {
+    /// Bits per pixel of the image given.
+    pub bits: u8,
+    /// Bits per pixel of the model's training images.
+    pub want_bits: u8,
+}
+
+/// An image that does not fit the model.
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+pub enum ImageMismatch {
+    /// Another size.
+    #[error(transparent)]
+    Size(#[from] SizeMismatch),
+    /// Another bit depth.
+    #[error(transparent)]
+    Depth(#[from] DepthMismatch),
+}
+
+/// An image that does not fit the model.
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+#[error("image is {rows}x{cols} but the model takes {want_rows}x{want_cols} images")]
+pub struct SizeMismatch {
+    /// Rows of the image given.
+    pub rows: usize,
+    /// Columns of the image given.
+    pub cols: usize,
+    /// Rows the model takes.
+    pub want_rows: usize,
+    /// Columns the model takes.
+    pub want_cols: usize,
 }

@@ -1,0 +1,158 @@
+//! Kernels every CPU of the target runs: the AVX2 kernels' shapes in the baseline SIMD of
+//! x86-64 (SSE2) and aarch64 (NEON) where it pays, plain Rust written so that the compiler
+//! vectorises it elsewhere. The AVX2/FMA builds of `quad_form`, `centre` and `sq_dists` are
+//! these functions compiled for AVX2 (see `x86_64.rs`).
+
+#[cfg(target_arch = "aarch64")]
+use super::aarch64::rows4;
+#[cfg(target_arch = "x86_64")]
+use super::x86_64::rows4;
+
+/// The projection with the target's baseline SIMD: the AVX2 kernel's shape (four rows of W per
+/// pass over `c`, so that each load of `c` serves four rows; two 4-lane accumulators per row)
+/// in SSE2 on x86-64 and NEON on aarch64, which every CPU of those targets has. Elsewhere,
+/// one dot product per row.
+///
+/// Plain Rust over `[f32; 8]` lanes was tried first: LLVM's SLP vectoriser then packed the four
+/// rows' lanes into one register (the reduction at the end is cheaper that way) and paid a
+/// shuffle per load, 3x slower than these loops (measured with `cargo bench --bench classify`).
+pub(crate) fn project(w: &[f32], c: &[f32], q: &mut [f32]) {
+    let n = c.len();
+    let full = q.len() - q.len() % 4;
+    #[cfg(any(target_arch = "x86_64", target_arch = "aarch64"))]
+    for (j4, q4) in q[..full].chunks_exact_mut(4).enumerate() {
+        let j = 4 * j4;
+        let rows: [&[f32]; 4] = std::array::from_fn(|i| &w[(j + i) * n..(j + i + 1) * n]);
+        let sums = rows4(rows, c);
+        q4.copy_from_slice(&sums);
+    }
+    #[cfg(not(any(target_arch = "x86_64", target_arch = "aarch64")))]
+    let full = 0;
+    for (jj, qj) in q.iter_mut().enumerate().skip(full) {
+        *qj = dot(&w[jj * n..(jj + 1) * n], c);
+    }
+}
+
+#[inline(always)]
+pub(crate) fn quad_form(e: &[f32], q: &[f32]) -> f64 {
+    if q.is_empty() {
+        return 0.0;
+    }
+    let mut s = 0.0f64;
+    for (row, &qi) in e.chunks_exact(q.len()).zip(q) {
+        s += (dot(row, q) * qi) as f64;
+    }
+    s
+}
+
+/// `centre`: four independent lanes so that the compiler vectorises it.
+#[inline(always)]
+pub(crate) fn centre(f: &[f32], mean: &[f32], out: &mut [f32]) -> f64 {
+    let mut acc = [0.0f64; 4];
+    let (cf, cm, co) = (
+        f.chunks_exact(4),
+        mean.chunks_exact(4),
+        out.chunks_exact_mut(4),
+    );
+    let (rf, rm) = (cf.remainder(), cm.remainder());
+    for ((x, y), o) in cf.zip(cm).zip(co) {
+        for i in 0..4 {
+            o[i] = x[i] - y[i];
+            acc[i] += o[i] as f64 * o[i] as f64;
+        }
+    }
+    let mut s: f64 = acc.iter().sum();
+    let done = f.len() - rf.len();
+    for (i, (x, y)) in rf.iter().zip(rm).enumerate() {
+        let t = x - y;
+        out[done + i] = t;
+        s += t as f64 * t as f64;
+    }
+    s
+}
+
+#[inline(always)]
+pub(crate) fn sq_dists(samples: &[f32], q: &[f32], out: &mut [f64]) {
+    if q.is_empty() {
+        out.fill(0.0);
+        return;
+    }
+    for (o, x) in out.iter_mut().zip(samples.chunks_exact(q.len())) {
+        // Eight lanes per chunk: the compiler keeps `acc` in one vector register.
+        let mut acc = [0.0f32; 8];
+        for (xc, qc) in x.chunks_exact(8).zip(q.chunks_exact(8)) {
+            for i in 0..8 {
+                let t = xc[i] - qc[i];
+                acc[i] += t * t;
+            }
+        }
+        *o = acc.iter().sum::<f32>() as f64;
+    }
+}
+
+#[inline(always)]
+pub(crate) fn dot(a: &[f32], b: &[f32]) -> f32 {
+    // Sixteen independent accumulators let the compiler vectorise the reduction (two vectors
+    // of eight with AVX, four of four with SSE) without a dependency chain on one register.
+    let mut acc = [0.0f32; 16];
+    let ca = a.chunks_exact(16);
+    let cb = b.chunks_exact(16);
+    let (ra, rb) = (ca.remainder(), cb.remainder());
+    for (x, y) in ca.zip(cb) {
+        for i in 0..16 {
+            acc[i] += x[i] * y[i];
+        }
+    }
+    let mut s: f32 = acc.iter().sum();
+    for (x, y) in ra.iter().zip(rb) {
+        s += x * y;
+    }
+    s
+}
+
+/// `(W W^T)^-1` (h x h, row-major) for the rows `W` the projection runs with: the half-precision
+/// copy when there is one (`w16`), else `w`. The identity if it cannot be inverted.
+pub(crate) fn gram_inverse(w: &[f32], w16: &[u16], h: usize) -> Vec<f64> {
+    if h == 0 || !w.len().is_multiple_of(h) {
+        return Vec::new();
+    }
+    let n = w.len() / h;
+    let row = |j: usize, k: usize| -> f64 {
+        if w16.is_empty() {
+            w[j * n + k] as f64
+        } else {
+            half_to_f64(w16[j * n + k])
+        }
+    };
+    let mut g = nalgebra::DMatrix::<f64>::zeros(h, h);
+    for a in 0..h {
+        for b in a..h {
+            let v: f64 = (0..n).map(|k| row(a, k) * row(b, k)).sum();
+            g[(a, b)] = v;
+            g[(b, a)] = v;
+        }
+    }
+    let inv = g
+        .try_inverse()
+        .unwrap_or_else(|| nalgebra::DMatrix::identity(h, h));
+    let mut out = vec![0.0; h * h];
+    for a in 0..h {
+        for b in 0..h {
+            out[a * h + b] = inv[(a, b)];
+        }
+    }
+    out
+}
+
+/// An IEEE half-precision number's value (the weights' f16 copy, decoded exactly).
+pub(crate) fn half_to_f64(x: u16) -> f64 {
+    let sign = if x & 0x8000 != 0 { -1.0 } else { 1.0 };
+    let exp = ((x >> 10) & 0x1f) as i32;
+    let frac = (x & 0x3ff) as f64;
+    match exp {
+        0 => sign * frac * 2f64.powi(-24),
+        31 if frac == 0.0 => sign * f64::INFINITY,
+        31 => f64::NAN,
+        e => sign * (1.0 + frac / 1024.0) * 2f64.powi(e - 15),
+    }
+}
