@@ -15,16 +15,17 @@
 //! The figures go to a report (`--json`), not to a timed test: the machines are noisy.
 
 use std::path::PathBuf;
-use std::process::{Child, Command, ExitCode, Stdio};
-use std::time::{Duration, Instant};
+use std::process::{Command, ExitCode, Stdio};
+use std::time::Duration;
 
 use anyhow::{Context, Result};
-use lab::load::{self, FRAME_US, Feet, SIDE, Tally, WARMUP_US, memory_mb, task_cpu_ns};
+use lab::load::{
+    self, FRAME_US, Feet, NodeProcess, SIDE, Tally, WARMUP_US, memory_mb, task_cpu_ns,
+};
 use lab::score::percentile;
 use node::NodeConfig;
 use protocol::bus::{BusSource, CanBus, InProcBus};
 use protocol::ids::{IdConfig, MessageKind};
-use protocol::messages::{self, Message};
 use protocol::tactile::Variant;
 
 #[derive(clap::Args)]
@@ -78,7 +79,7 @@ pub fn run(a: BenchNodeArgs) -> Result<ExitCode> {
     match &a.iface {
         None => {
             let bus = InProcBus::new();
-            let live = crate::mcap_cmd::LiveArgs {
+            let live = crate::cli::LiveArgs {
                 mcap: a.mcap.clone(),
                 foxglove: None,
             };
@@ -89,7 +90,7 @@ pub fn run(a: BenchNodeArgs) -> Result<ExitCode> {
             );
             let node = node::NodeService::new(cfg.clone(), model)?.start_with_tap(
                 BusSource::InProc(bus.clone()),
-                crate::mcap_cmd::tap(&recording),
+                recording.as_ref().map(|r| r.bus_tap()),
             )?;
             let rec_cpu_start = task_cpu_ns("self", Some(&["record"]));
             let cpu = || task_cpu_ns("self", Some(&["receive", "pipeline", "send"]));
@@ -155,17 +156,20 @@ pub fn run(a: BenchNodeArgs) -> Result<ExitCode> {
             if let Some(p) = &a.mcap {
                 cmd.arg("--mcap").arg(p);
             }
-            let mut child = cmd
-                .stdout(Stdio::null())
-                .spawn()
-                .context("starting presrs node")?;
-            let result = wait_for_status(&mut rx, &ids, &mut child).and_then(|()| {
-                let pid = child.id().to_string();
-                let cpu = || task_cpu_ns(&pid, None);
-                Ok(load::measure(&mut tx, &mut rx, &ids, feet, total_us, &cpu)?)
-            });
-            let mem = memory_mb(&child.id().to_string());
-            stop_child(&mut child);
+            let mut node = NodeProcess(
+                cmd.stdout(Stdio::null())
+                    .spawn()
+                    .context("starting presrs node")?,
+            );
+            let result = node
+                .wait_for_heartbeat(&mut rx, &ids, Duration::from_secs(20))
+                .and_then(|()| {
+                    let pid = node.pid();
+                    let cpu = || task_cpu_ns(&pid, None);
+                    load::measure(&mut tx, &mut rx, &ids, feet, total_us, &cpu)
+                });
+            let mem = memory_mb(&node.pid());
+            node.stop();
             let _ = std::fs::remove_dir_all(&dir);
             let m = result?;
             report(
@@ -178,37 +182,6 @@ pub fn run(a: BenchNodeArgs) -> Result<ExitCode> {
             )
         }
     }
-}
-
-fn wait_for_status(rx: &mut dyn CanBus, ids: &IdConfig, child: &mut Child) -> Result<()> {
-    let end = Instant::now() + Duration::from_secs(20);
-    while Instant::now() < end {
-        if let Some(status) = child.try_wait()? {
-            anyhow::bail!("presrs node exited before the benchmark ({status})");
-        }
-        if let Some(st) = rx.recv(Duration::from_millis(50))?
-            && let Ok(Some((_, Message::NodeStatus(_)))) = messages::decode(&st.frame, ids)
-        {
-            return Ok(());
-        }
-    }
-    anyhow::bail!("no NodeStatus from presrs node within 20 s")
-}
-
-fn stop_child(child: &mut Child) {
-    // SIGTERM: the node's graceful stop. It ends within a receive timeout.
-    unsafe {
-        libc::kill(child.id() as i32, libc::SIGTERM);
-    }
-    let end = Instant::now() + Duration::from_secs(5);
-    while Instant::now() < end {
-        if let Ok(Some(_)) = child.try_wait() {
-            return;
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    let _ = child.kill();
-    let _ = child.wait();
 }
 
 fn report(

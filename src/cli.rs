@@ -29,6 +29,34 @@ impl TerrainsArg {
     }
 }
 
+/// `--mcap FILE` and `--foxglove [ADDR]`: record while running.
+#[derive(clap::Args, Clone, Debug, Default)]
+pub struct LiveArgs {
+    /// Record every frame seen and sent to this MCAP file, off the hot path (frames are
+    /// dropped and counted, never waited for, when the disk is slower than the bus).
+    #[arg(long, value_name = "FILE")]
+    pub mcap: Option<PathBuf>,
+    /// Serve the same channels live to the Foxglove app (Open connection -> Foxglove
+    /// WebSocket, ws://HOST:PORT).
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "127.0.0.1:8765")]
+    pub foxglove: Option<String>,
+}
+
+impl LiveArgs {
+    /// The recorder these options ask for ([`record::LiveOptions::start`]).
+    pub fn start(
+        &self,
+        ids: &protocol::IdConfig,
+        catalog: &TerrainCatalog,
+    ) -> Option<record::LiveRecorder> {
+        record::LiveOptions {
+            mcap: self.mcap.clone(),
+            foxglove: self.foxglove.clone(),
+        }
+        .start(ids, catalog)
+    }
+}
+
 /// The `--track` file (its terrains named in `catalog`), or the default track (wood, grass,
 /// clay, carpet quarters).
 pub fn load_track(
@@ -429,14 +457,6 @@ pub fn repair(file: &Path, out: &Path) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// The simulated datasets.
-#[derive(Clone, Copy, Debug, clap::ValueEnum)]
-pub enum DatasetKind {
-    Static,
-    Sandpaper,
-    Dynamic,
-}
-
 /// The simulated hopper and its sensor, as `dataset` and `sim` both take them.
 #[derive(clap::Args, Clone, Debug)]
 pub struct FootArgs {
@@ -475,7 +495,7 @@ pub fn check_damage(pct: f64) -> Result<f64> {
 pub struct DatasetArgs {
     /// static (section 4), sandpaper (section 5) or dynamic (section 7, on the hopper).
     #[arg(value_enum)]
-    pub kind: DatasetKind,
+    pub kind: sim::dataset::Kind,
     #[arg(long)]
     pub out: PathBuf,
     /// Images per terrain (default: the paper's counts; Table 4 for dynamic).
@@ -492,17 +512,12 @@ pub struct DatasetArgs {
 }
 
 pub fn dataset(a: &DatasetArgs) -> Result<ExitCode> {
-    use sim::dataset::{Kind, Options, generate};
+    use sim::dataset::{Options, generate};
     let catalog = a.terrains.catalog()?;
     let out = &a.out;
     let (gait, damage) = a.foot.checked()?;
-    let kind = match a.kind {
-        DatasetKind::Static => Kind::Static,
-        DatasetKind::Sandpaper => Kind::Sandpaper,
-        DatasetKind::Dynamic => Kind::Dynamic,
-    };
     let samples = generate(&Options {
-        kind,
+        kind: a.kind,
         n: a.n,
         gait,
         damage_pct: damage,
@@ -518,8 +533,8 @@ pub fn dataset(a: &DatasetArgs) -> Result<ExitCode> {
         );
     }
     lab::simdata::write_images(&samples, out)?;
-    for (t, n, [load, stance_s, speed]) in lab::simdata::means(&samples, &kind.terrains()) {
-        if kind == Kind::Dynamic {
+    for (t, n, [load, stance_s, speed]) in lab::simdata::means(&samples, &a.kind.terrains()) {
+        if a.kind == sim::dataset::Kind::Dynamic {
             println!(
                 "{}: {n} images; load at the sample {load:.1} N, stance {:.0} ms, speed {speed:.2} m/s (means)",
                 t.name(),

@@ -55,7 +55,7 @@ pub struct DemoArgs {
     /// `--mcap FILE` records every frame on the bus and the simulator's truth; `--foxglove`
     /// serves them live, with the loop paced to real time so there is something to watch.
     #[command(flatten)]
-    pub live: crate::mcap_cmd::LiveArgs,
+    pub live: crate::cli::LiveArgs,
 }
 
 pub fn run(a: DemoArgs) -> Result<ExitCode> {
@@ -135,7 +135,7 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
         };
         let tap = live.as_ref().map(|l| l.tap());
         let mut truth = |t_us: u64, robot: &sim::runner::SimRobot| {
-            if let (Some(tap), Some(t)) = (&tap, crate::sim_cmd::truth(robot, &track, 0)) {
+            if let (Some(tap), Some(t)) = (&tap, lab::closed_loop::sim_truth(robot, &track, 0)) {
                 tap.offer_truth(t_us, 0, t);
             }
         };
@@ -159,7 +159,9 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
             },
             rec,
         );
-        crate::mcap_cmd::finish(live);
+        if let Some(r) = live {
+            r.finish_logged();
+        }
         let run = run?;
         (run.falls(), run.rows)
     };

@@ -7,27 +7,15 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::{Context, Result};
-use lab::report::{Experiment, Report, UserData};
+use lab::report::{Report, Selection, UserData};
 use lab::simdata::TrainingSet;
 use node::classifier::image::Crop;
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum Which {
-    Static,
-    Resolution,
-    Dynamic,
-    Damage,
-    Lifespan,
-    Gaits,
-    Adaptation,
-    OpenSet,
-    All,
-}
-
 #[derive(clap::Args)]
 pub struct ExperimentArgs {
-    #[arg(value_enum)]
-    pub which: Which,
+    /// all, static, resolution, dynamic, gaits, damage, lifespan, adaptation or open-set.
+    #[arg(value_name = "EXPERIMENT")]
+    pub which: Selection,
     /// Output directory: results.md (or WHICH.md) and figures/.
     #[arg(long, default_value = "docs")]
     pub out: PathBuf,
@@ -93,30 +81,18 @@ pub fn run(a: ExperimentArgs) -> Result<ExitCode> {
     let mut ctx = Report::new(a.out.join("figures"), a.quick, a.seed, user)?;
     ctx.extra = extra;
     let t0 = std::time::Instant::now();
-    let list: Vec<Experiment> = match a.which {
-        Which::All => Experiment::ALL.to_vec(),
-        Which::Static => vec![Experiment::Static],
-        Which::Resolution => vec![Experiment::Resolution],
-        Which::Dynamic => vec![Experiment::Dynamic],
-        Which::Damage => vec![Experiment::Damage],
-        Which::Lifespan => vec![Experiment::Lifespan],
-        Which::Gaits => vec![Experiment::Gaits],
-        Which::Adaptation => vec![Experiment::Adaptation],
-        Which::OpenSet => vec![Experiment::OpenSet],
-    };
     let md = ctx.markdown(
-        &list,
+        &a.which.0,
         &mut || crate::cli::load_or_train(None).map_err(Into::into),
         &mut |w| eprintln!("experiment {w:?}..."),
     )?;
-    let name = if a.which == Which::All {
-        "results.md".to_string()
-    } else {
-        format!("{:?}.md", a.which).to_lowercase()
+    let name = match a.which.name() {
+        "all" => "results.md".to_string(),
+        one => format!("{one}.md"),
     };
     let mut command = format!(
         "presrs experiment {} --out {}",
-        format!("{:?}", a.which).to_lowercase(),
+        a.which.name(),
         a.out.display()
     );
     if a.quick {

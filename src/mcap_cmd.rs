@@ -4,13 +4,11 @@
 
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::sync::Arc;
 
 use anyhow::{Context, Result};
 use node::classifier::Model;
 use node::{NodeService, Output};
-use protocol::{IdConfig, TerrainCatalog};
-use record::{LiveRecorder, McapFile, Recorder, Sink};
+use record::{McapFile, Recorder, Sink};
 
 #[derive(clap::Args)]
 pub struct McapArgs {
@@ -88,104 +86,6 @@ pub fn run(a: McapArgs) -> Result<ExitCode> {
         s.foreign
     );
     Ok(ExitCode::SUCCESS)
-}
-
-/// `--mcap FILE` and `--foxglove [ADDR]`: record while running.
-#[derive(clap::Args, Clone, Debug, Default)]
-pub struct LiveArgs {
-    /// Record every frame seen and sent to this MCAP file, off the hot path (frames are
-    /// dropped and counted, never waited for, when the disk is slower than the bus).
-    #[arg(long, value_name = "FILE")]
-    pub mcap: Option<PathBuf>,
-    /// Serve the same channels live to the Foxglove app (Open connection -> Foxglove
-    /// WebSocket, ws://HOST:PORT).
-    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = DEFAULT_FOXGLOVE)]
-    pub foxglove: Option<String>,
-}
-
-#[cfg(feature = "foxglove")]
-const DEFAULT_FOXGLOVE: &str = record::DEFAULT_ADDR;
-#[cfg(not(feature = "foxglove"))]
-const DEFAULT_FOXGLOVE: &str = "127.0.0.1:8765";
-
-/// About 1.5 s of six feet's traffic (20,000 frames/s): the writer may stall that long (a
-/// slow disk, a chunk being written) before frames are dropped. 88 bytes each: 2.9 MB.
-const LIVE_QUEUE: usize = 32_768;
-
-impl LiveArgs {
-    /// The recorder for these options, or `None` when none is asked for or none could start.
-    /// A sink that cannot start is an error in the log, naming its path or address; the
-    /// caller runs on without it.
-    pub fn start(&self, ids: &IdConfig, catalog: &TerrainCatalog) -> Option<LiveRecorder> {
-        let mut sinks: Vec<(String, Box<dyn Sink>)> = Vec::new();
-        if let Some(p) = &self.mcap {
-            match McapFile::create(p) {
-                Ok(f) => {
-                    tracing::info!(file = %p.display(), "recording to MCAP");
-                    sinks.push((p.display().to_string(), Box::new(f)));
-                }
-                Err(e) => tracing::error!("--mcap: {e}; running without the recording"),
-            }
-        }
-        if let Some(addr) = &self.foxglove {
-            foxglove_sink(addr, &mut sinks);
-        }
-        if sinks.is_empty() {
-            return None;
-        }
-        match LiveRecorder::start(
-            Recorder::new(ids.clone(), catalog.clone()),
-            sinks,
-            LIVE_QUEUE,
-        ) {
-            Ok(r) => Some(r),
-            Err(e) => {
-                tracing::error!("{e}; running without the recording");
-                None
-            }
-        }
-    }
-}
-
-#[cfg(feature = "foxglove")]
-fn foxglove_sink(addr: &str, sinks: &mut Vec<(String, Box<dyn Sink>)>) {
-    match record::FoxgloveServer::start(addr) {
-        Ok(s) => {
-            tracing::info!(
-                "Foxglove view on ws://{}:{} (Foxglove app: Open connection -> Foxglove WebSocket)",
-                addr.rsplit_once(':').map_or(addr, |(h, _)| h),
-                s.port()
-            );
-            sinks.push((format!("ws://{addr}"), Box::new(s)));
-        }
-        Err(e) => tracing::error!("--foxglove: {e}; running without the live view"),
-    }
-}
-
-#[cfg(not(feature = "foxglove"))]
-fn foxglove_sink(addr: &str, _: &mut Vec<(String, Box<dyn Sink>)>) {
-    tracing::error!(
-        "--foxglove {addr}: this presrs was built without the `foxglove` feature; running without the live view"
-    );
-}
-
-/// Ends a live recording and says what it holds.
-pub fn finish(rec: Option<LiveRecorder>) {
-    if let Some(r) = rec {
-        let s = r.finish();
-        tracing::info!(
-            messages = s.stats.messages,
-            images = s.stats.images,
-            dropped = s.dropped,
-            failed_sinks = s.failed.len(),
-            "recording finished"
-        );
-    }
-}
-
-/// The tap of a live recorder as the node takes it.
-pub fn tap(rec: &Option<LiveRecorder>) -> Option<Arc<dyn protocol::bus::Tap>> {
-    rec.as_ref().map(|r| r.tap() as Arc<dyn protocol::bus::Tap>)
 }
 
 #[derive(clap::Args)]

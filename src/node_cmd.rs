@@ -36,7 +36,7 @@ pub struct NodeArgs {
     #[command(flatten)]
     pub terrains: crate::cli::TerrainsArg,
     #[command(flatten)]
-    pub live: crate::mcap_cmd::LiveArgs,
+    pub live: crate::cli::LiveArgs,
 }
 
 pub fn run(a: NodeArgs) -> Result<ExitCode> {
@@ -74,7 +74,7 @@ pub fn run(a: NodeArgs) -> Result<ExitCode> {
             let recording = a.live.start(node.ids(), node.catalog());
             let running = node.start_with_tap(
                 BusSource::Iface(iface.clone()),
-                crate::mcap_cmd::tap(&recording),
+                recording.as_ref().map(|r| r.bus_tap()),
             )?;
             while !signals.stopping() && running.is_running() {
                 if signals.take_reload() {
@@ -88,7 +88,9 @@ pub fn run(a: NodeArgs) -> Result<ExitCode> {
                 std::thread::sleep(Duration::from_millis(50));
             }
             running.stop();
-            crate::mcap_cmd::finish(recording);
+            if let Some(r) = recording {
+                r.finish_logged();
+            }
             Ok(ExitCode::SUCCESS)
         }
         (None, None) => anyhow::bail!("give --iface IFACE or --replay FILE.log"),

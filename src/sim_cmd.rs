@@ -19,7 +19,7 @@ use std::sync::atomic::Ordering;
 
 use crate::runtime::Signals;
 use protocol::bus::{BusSource, Tap};
-use sim::runner::{SimRobot, Track};
+use sim::runner::SimRobot;
 
 #[derive(clap::Args)]
 pub struct SimArgs {
@@ -61,19 +61,7 @@ pub struct SimArgs {
     /// the simulator's truth per leg (`/sim/legN`: speed, position, true terrain) as MCAP;
     /// `--foxglove`: the same live.
     #[command(flatten)]
-    pub live: crate::mcap_cmd::LiveArgs,
-}
-
-/// What the simulator knows of leg `foot` and the robot does not.
-pub fn truth(robot: &SimRobot, track: &Track, foot: u8) -> Option<record::SimTruth> {
-    let (speed, x) = robot.speed_and_position(foot)?;
-    Some(record::SimTruth {
-        speed_m_s: speed,
-        position_m: x,
-        terrain: track.terrain_at(x).id(),
-        gait: robot.gait_in_effect(foot).unwrap_or(0),
-        falls: robot.falls.len() as u32,
-    })
+    pub live: crate::cli::LiveArgs,
 }
 
 pub fn run(a: SimArgs) -> Result<ExitCode> {
@@ -105,7 +93,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     let mut observe = |t_us: u64, robot: &SimRobot| {
         if let Some(tap) = &tap {
             for f in 0..feet {
-                if let Some(t) = truth(robot, &track, f) {
+                if let Some(t) = lab::closed_loop::sim_truth(robot, &track, f) {
                     tap.offer_truth(t_us, f, t);
                 }
             }
@@ -113,7 +101,9 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     };
     if let Some(log) = &a.log {
         let r = write_log(cfg, &a, log, tap.as_deref(), &mut observe);
-        crate::mcap_cmd::finish(recording);
+        if let Some(r) = recording {
+            r.finish_logged();
+        }
         return r;
     }
     let opts = RunOptions {
@@ -147,7 +137,9 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         signals.stop.store(true, Ordering::Relaxed);
         let _ = l.join();
     }
-    crate::mcap_cmd::finish(recording);
+    if let Some(r) = recording {
+        r.finish_logged();
+    }
     // No gait table: the simulator scores the node, not the controller.
     let sum = lab::Summary::of(&r.steps, &Default::default());
     let (n, correct) = (sum.steps, sum.correct);

@@ -226,6 +226,19 @@ pub fn run_recorded(
     })
 }
 
+/// What the simulator knows of leg `foot` and the robot does not, for a recording's
+/// `/sim/leg<foot>` channel.
+pub fn sim_truth(robot: &SimRobot, track: &Track, foot: u8) -> Option<record::SimTruth> {
+    let (speed, x) = robot.speed_and_position(foot)?;
+    Some(record::SimTruth {
+        speed_m_s: speed,
+        position_m: x,
+        terrain: track.terrain_at(x).id(),
+        gait: robot.gait_in_effect(foot).unwrap_or(0),
+        falls: robot.falls.len() as u32,
+    })
+}
+
 /// How long [`run_realtime`] runs for `steps` steps, s: 0.4 s per step plus 1 s to start.
 pub fn realtime_seconds(steps: usize) -> f64 {
     steps as f64 * 0.4 + 1.0

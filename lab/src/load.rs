@@ -101,6 +101,66 @@ pub enum LoadError {
     /// The listener thread panicked.
     #[error("the listener thread panicked")]
     Listener,
+    /// The node process under test ended before the measurement.
+    #[error("presrs node exited before the benchmark ({0})")]
+    NodeExited(std::process::ExitStatus),
+    /// The node process under test sent no NodeStatus.
+    #[error("no NodeStatus from presrs node within {0:?} (is the interface up?)")]
+    NoHeartbeat(std::time::Duration),
+    /// Its state could not be read.
+    #[error("the node process: {0}")]
+    Process(#[from] std::io::Error),
+}
+
+/// A node process under test (`presrs node` started by the caller): its first heartbeat
+/// awaited, and stopped with SIGTERM (the node's graceful stop), killed if it has not ended
+/// 5 s later.
+pub struct NodeProcess(pub std::process::Child);
+
+impl NodeProcess {
+    /// Waits up to `within` for the node's first NodeStatus on `rx`.
+    pub fn wait_for_heartbeat(
+        &mut self,
+        rx: &mut dyn CanBus,
+        ids: &IdConfig,
+        within: std::time::Duration,
+    ) -> Result<(), LoadError> {
+        let end = std::time::Instant::now() + within;
+        while std::time::Instant::now() < end {
+            if let Some(status) = self.0.try_wait()? {
+                return Err(LoadError::NodeExited(status));
+            }
+            if let Some(st) = rx.recv(std::time::Duration::from_millis(50))?
+                && let Ok(Some((_, protocol::Message::NodeStatus(_)))) =
+                    protocol::messages::decode(&st.frame, ids)
+            {
+                return Ok(());
+            }
+        }
+        Err(LoadError::NoHeartbeat(within))
+    }
+
+    /// Its process id, for [`task_cpu_ns`] and [`memory_mb`].
+    pub fn pid(&self) -> String {
+        self.0.id().to_string()
+    }
+
+    /// SIGTERM, then SIGKILL after 5 s.
+    pub fn stop(mut self) {
+        // SAFETY: kill(2) on our own child's pid.
+        unsafe {
+            libc::kill(self.0.id() as i32, libc::SIGTERM);
+        }
+        let end = std::time::Instant::now() + std::time::Duration::from_secs(5);
+        while std::time::Instant::now() < end {
+            if let Ok(Some(_)) = self.0.try_wait() {
+                return;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
 }
 
 /// `n` feet on the fixed schedule, in time order.

@@ -44,7 +44,63 @@ pub enum Experiment {
     OpenSet,
 }
 
+/// The experiments a command asks for: one by its name, or `all` (parsed from the command
+/// line: `presrs experiment open-set`).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Selection(pub Vec<Experiment>);
+
+impl Selection {
+    /// Every name a selection takes, `all` first.
+    pub const NAMES: [&str; 9] = [
+        "all",
+        "static",
+        "resolution",
+        "dynamic",
+        "gaits",
+        "damage",
+        "lifespan",
+        "adaptation",
+        "open-set",
+    ];
+
+    /// Its name as given on the command line: `all`, or the experiment's.
+    pub fn name(&self) -> &'static str {
+        match self.0.as_slice() {
+            [one] => one.name(),
+            _ => "all",
+        }
+    }
+}
+
+impl std::str::FromStr for Selection {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        if s == "all" {
+            return Ok(Selection(Experiment::ALL.to_vec()));
+        }
+        Experiment::ALL
+            .iter()
+            .find(|e| e.name() == s)
+            .map(|e| Selection(vec![*e]))
+            .ok_or_else(|| format!("`{s}`: expected one of {}", Self::NAMES.join(", ")))
+    }
+}
+
 impl Experiment {
+    /// Its name on the command line and in file names: `open-set`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Experiment::Static => "static",
+            Experiment::Resolution => "resolution",
+            Experiment::Dynamic => "dynamic",
+            Experiment::Gaits => "gaits",
+            Experiment::Damage => "damage",
+            Experiment::Lifespan => "lifespan",
+            Experiment::Adaptation => "adaptation",
+            Experiment::OpenSet => "open-set",
+        }
+    }
+
     /// Every section, in the report's order.
     pub const ALL: [Experiment; 8] = [
         Experiment::Static,
@@ -1006,4 +1062,23 @@ fn open_set(ctx: &Report) -> Result<String, ReportError> {
     }
     md.push_str(&detail);
     Ok(md)
+}
+
+#[cfg(test)]
+mod selection_tests {
+    use super::*;
+
+    #[test]
+    fn every_name_parses_back_to_itself() {
+        for n in Selection::NAMES {
+            let sel: Selection = n.parse().unwrap();
+            assert_eq!(sel.name(), n);
+        }
+        assert_eq!(
+            "all".parse::<Selection>().unwrap().0,
+            Experiment::ALL.to_vec()
+        );
+        let e = "openset".parse::<Selection>().unwrap_err();
+        assert!(e.contains("open-set"), "{e}");
+    }
 }

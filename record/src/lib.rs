@@ -41,7 +41,7 @@ pub mod schema;
 
 #[cfg(feature = "foxglove")]
 pub use foxglove_server::{DEFAULT_ADDR, FoxgloveServer};
-pub use live::{LiveRecorder, LiveSummary, LiveTap, listen};
+pub use live::{LIVE_QUEUE, LiveOptions, LiveRecorder, LiveSummary, LiveTap, listen};
 pub use mcap_file::McapFile;
 pub use recorder::{Channel, RecordStats, Recorder, SimTruth, Sink, Topic};
 

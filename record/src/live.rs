@@ -371,3 +371,98 @@ mod tests {
         assert_eq!(s.failed.len(), 1);
     }
 }
+
+/// What to record live, as a process's `--mcap FILE` and `--foxglove ADDR` options give it.
+#[derive(Clone, Debug, Default)]
+pub struct LiveOptions {
+    /// An MCAP file to write.
+    pub mcap: Option<std::path::PathBuf>,
+    /// An address to serve the Foxglove view on (`127.0.0.1:8765`; port 0 picks one and the
+    /// log names it).
+    pub foxglove: Option<String>,
+}
+
+/// About 1.5 s of six feet's traffic (20,000 frames/s): the writer may stall that long (a
+/// slow disk, a chunk being written) before frames are dropped. 88 bytes each: 2.9 MB.
+pub const LIVE_QUEUE: usize = 32_768;
+
+impl LiveOptions {
+    /// The recorder for these options, or `None` when none is asked for or none could start.
+    /// A sink that cannot start is an error in the log, naming its path or address; the
+    /// caller runs on without it.
+    pub fn start(
+        &self,
+        ids: &protocol::IdConfig,
+        catalog: &protocol::TerrainCatalog,
+    ) -> Option<LiveRecorder> {
+        let mut sinks: Vec<(String, Box<dyn Sink>)> = Vec::new();
+        if let Some(p) = &self.mcap {
+            match crate::McapFile::create(p) {
+                Ok(f) => {
+                    tracing::info!(file = %p.display(), "recording to MCAP");
+                    sinks.push((p.display().to_string(), Box::new(f)));
+                }
+                Err(e) => tracing::error!("--mcap: {e}; running without the recording"),
+            }
+        }
+        if let Some(addr) = &self.foxglove {
+            foxglove_sink(addr, &mut sinks);
+        }
+        if sinks.is_empty() {
+            return None;
+        }
+        match LiveRecorder::start(
+            Recorder::new(ids.clone(), catalog.clone()),
+            sinks,
+            LIVE_QUEUE,
+        ) {
+            Ok(r) => Some(r),
+            Err(e) => {
+                tracing::error!("{e}; running without the recording");
+                None
+            }
+        }
+    }
+}
+
+#[cfg(feature = "foxglove")]
+fn foxglove_sink(addr: &str, sinks: &mut Vec<(String, Box<dyn Sink>)>) {
+    match crate::FoxgloveServer::start(addr) {
+        Ok(s) => {
+            tracing::info!(
+                "Foxglove view on ws://{}:{} (Foxglove app: Open connection -> Foxglove WebSocket)",
+                addr.rsplit_once(':').map_or(addr, |(h, _)| h),
+                s.port()
+            );
+            sinks.push((format!("ws://{addr}"), Box::new(s)));
+        }
+        Err(e) => tracing::error!("--foxglove: {e}; running without the live view"),
+    }
+}
+
+#[cfg(not(feature = "foxglove"))]
+fn foxglove_sink(addr: &str, _: &mut Vec<(String, Box<dyn Sink>)>) {
+    tracing::error!(
+        "--foxglove {addr}: this presrs was built without the `foxglove` feature; running without the live view"
+    );
+}
+
+impl LiveRecorder {
+    /// [`LiveRecorder::finish`], saying in the log what the recording holds.
+    pub fn finish_logged(self) -> LiveSummary {
+        let s = self.finish();
+        tracing::info!(
+            messages = s.stats.messages,
+            images = s.stats.images,
+            dropped = s.dropped,
+            failed_sinks = s.failed.len(),
+            "recording finished"
+        );
+        s
+    }
+
+    /// The tap as a process's bus loops take it.
+    pub fn bus_tap(&self) -> Arc<dyn Tap> {
+        self.tap()
+    }
+}

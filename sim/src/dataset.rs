@@ -20,10 +20,11 @@ pub const FRAME_PERIOD_S: f64 = crate::skin::FRAME_PERIOD_US as f64 * 1e-6;
 
 /// Which experiment.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum Kind {
-    /// Presses of the static platform on the paper's twelve surfaces (section 5).
+    /// Presses of the static platform on aluminum, sand, pine needles and gravel (section 4).
     Static,
-    /// Presses on the four sandpaper grits (section 6).
+    /// Presses on the four sandpaper grits and polished aluminum (section 5).
     Sandpaper,
     /// Hopper stances on the four dynamic terrains (section 7).
     Dynamic,
