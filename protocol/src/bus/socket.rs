@@ -26,7 +26,8 @@ pub const RECV_BUFFER_BYTES: usize = 4 << 20;
 pub struct SocketCanBus {
     iface: String,
     sock: CanFdSocket,
-    read_timeout: Option<Duration>,
+    /// Set non-blocking for receiving (see `recv`).
+    nonblocking: bool,
     health: BusHealth,
 }
 
@@ -77,7 +78,7 @@ impl SocketCanBus {
         Ok(Self {
             iface: iface.to_string(),
             sock,
-            read_timeout: None,
+            nonblocking: false,
             health: BusHealth::default(),
         })
     }
@@ -85,6 +86,31 @@ impl SocketCanBus {
     /// The interface name.
     pub fn iface(&self) -> &str {
         &self.iface
+    }
+
+    /// Waits up to `left` for the socket to be readable (or to have an error to report):
+    /// false after the wait without it, or on a signal.
+    fn wait_readable(&self, left: Duration) -> Result<bool, BusError> {
+        use std::os::fd::AsRawFd;
+        let mut pfd = libc::pollfd {
+            fd: self.sock.as_raw_fd(),
+            events: libc::POLLIN,
+            revents: 0,
+        };
+        let ts = libc::timespec {
+            tv_sec: left.as_secs().min(i32::MAX as u64) as libc::time_t,
+            tv_nsec: left.subsec_nanos() as libc::c_long,
+        };
+        // SAFETY: one valid pollfd, a valid timespec, no signal mask.
+        let r = unsafe { libc::ppoll(&mut pfd, 1, &ts, std::ptr::null()) };
+        if r < 0 {
+            let e = std::io::Error::last_os_error();
+            if e.kind() == ErrorKind::Interrupted {
+                return Ok(false);
+            }
+            return Err(self.io_err(e));
+        }
+        Ok(r > 0)
     }
 
     fn io_err(&self, e: std::io::Error) -> BusError {
@@ -187,19 +213,18 @@ impl CanBus for SocketCanBus {
     }
 
     fn recv(&mut self, timeout: Duration) -> Result<Option<Stamped>, BusError> {
-        // A zero timeout is a poll: a non-blocking read. (SO_RCVTIMEO cannot express it: the
-        // kernel rounds a 1 µs timeout up to a scheduler tick, several ms per empty poll.)
-        if self.read_timeout != Some(timeout) {
-            let r = if timeout.is_zero() {
-                self.sock.set_nonblocking(true)
-            } else {
-                self.sock
-                    .set_nonblocking(false)
-                    .and_then(|()| self.sock.set_read_timeout(timeout))
-            };
-            r.map_err(|e| self.io_err(e))?;
-            self.read_timeout = Some(timeout);
+        // The wait is ppoll(2)'s, on the kernel's high-resolution timers, then a non-blocking
+        // read. SO_RCVTIMEO rounds a wait up to a scheduler tick (4 ms on a HZ=250 kernel: a
+        // simulator ticking every 300 us ran at half speed), and the socketcan crate sets it in
+        // whole microseconds, so that a wait under 1 us read as 0, "wait forever" (measured in
+        // the vcan VM: `presrs sim` blocked in recv for minutes on a bus with no frame for it).
+        if !self.nonblocking {
+            self.sock
+                .set_nonblocking(true)
+                .map_err(|e| self.io_err(e))?;
+            self.nonblocking = true;
         }
+        let deadline = std::time::Instant::now() + timeout;
         loop {
             match self.sock.read_frame_with_timestamp() {
                 Ok((f, ts)) => {
@@ -218,7 +243,10 @@ impl CanBus for SocketCanBus {
                     return Ok(Some(Stamped { t_us, frame }));
                 }
                 Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {
-                    return Ok(None);
+                    let left = deadline.saturating_duration_since(std::time::Instant::now());
+                    if left.is_zero() || !self.wait_readable(left)? {
+                        return Ok(None);
+                    }
                 }
                 Err(e) if e.kind() == ErrorKind::Interrupted => return Ok(None),
                 Err(e) => return Err(self.io_err(e)),
