@@ -1268,23 +1268,50 @@ fn node_and_sim_record_mcap_and_serve_a_live_foxglove_view() {
     let dir = std::env::temp_dir().join(format!("presrs-vcan-mcap-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let (node_mcap, sim_mcap) = (dir.join("node.mcap"), dir.join("sim.mcap"));
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
+    // The node binds port 0 and logs the port it got: a port picked here and bound later by
+    // the node could be taken in between (the host's live-view test failed a CI run that way).
+    let mut node = Proc(
+        std::process::Command::new(presrs())
+            .args([
+                "node",
+                "--iface",
+                &iface,
+                "--model",
+                model.to_str().unwrap(),
+            ])
+            .args([
+                "--mcap",
+                node_mcap.to_str().unwrap(),
+                "--foxglove",
+                "127.0.0.1:0",
+            ])
+            .env("RUST_LOG", "warn,presrs_record=info")
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap(),
+    );
+    let (port_tx, port_rx) = std::sync::mpsc::channel();
+    let node_err = node.0.stderr.take().unwrap();
+    std::thread::spawn(move || {
+        use std::io::BufRead;
+        const SAYS: &str = "Foxglove view on ws://";
+        for line in std::io::BufReader::new(node_err)
+            .lines()
+            .map_while(Result::ok)
+        {
+            eprintln!("node: {line}");
+            if let Some(i) = line.find(SAYS)
+                && let Some(addr) = line[i + SAYS.len()..].split(' ').next()
+                && let Some(Ok(port)) = addr.rsplit_once(':').map(|(_, p)| p.parse::<u16>())
+            {
+                let _ = port_tx.send(port);
+            }
+        }
+    });
+    let port = port_rx
+        .recv_timeout(Duration::from_secs(120))
+        .expect("the node named no Foxglove port within 120 s");
     let fox = format!("127.0.0.1:{port}");
-    let mut node = spawn(&[
-        "node",
-        "--iface",
-        &iface,
-        "--model",
-        model.to_str().unwrap(),
-        "--mcap",
-        node_mcap.to_str().unwrap(),
-        "--foxglove",
-        &fox,
-    ]);
     let client = std::process::Command::new("python3")
         .arg(root().join("tests/interop/foxglove_client.py"))
         .arg(format!("ws://{fox}"))
