@@ -72,10 +72,7 @@ pub fn run(a: CaptureArgs) -> Result<ExitCode> {
             log.file_name()
                 .map_or("log".into(), |n| n.to_string_lossy().to_string())
         });
-        let file =
-            std::fs::File::open(log).with_context(|| format!("opening {}", log.display()))?;
-        let records = protocol::candump::read_log(std::io::BufReader::new(file))
-            .with_context(|| format!("reading {}", log.display()))?;
+        let records = protocol::candump::read_log_file(log)?;
         for r in &records {
             service.feed(&r.stamped);
             if service.done() {

@@ -1,7 +1,6 @@
 //! `presrs demo`: the simulator, the node and the controller in one process on the in-process
 //! bus, in simulated time (as fast as the machine runs).
 
-use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -190,19 +189,10 @@ fn summarize(
     let sum = Summary::of(rows, &cfg.terrain_gaits).with_unknown(rows, known, cfg.safe_gait);
     let (n, correct, accuracy, switches) = (sum.steps, sum.correct, sum.accuracy, sum.switches);
     let delays = &sum.steps_to_switch;
-    let mut csv =
+    let csv =
         std::fs::File::create(&a.csv).with_context(|| format!("creating {}", a.csv.display()))?;
-    writeln!(
-        csv,
-        "t_s,step,true_terrain,classified,confidence_pct,gait,speed_m_s"
-    )?;
-    for r in rows {
-        writeln!(
-            csv,
-            "{:.3},{},{},{},{:.1},{},{:.3}",
-            r.t_s, r.step, r.truth, r.classified, r.confidence_pct, r.gait, r.speed_m_s
-        )?;
-    }
+    lab::score::write_steps(std::io::BufWriter::new(csv), rows)
+        .with_context(|| format!("writing {}", a.csv.display()))?;
     let max_delay = sum.max_steps_to_switch();
     if a.json {
         let table: Vec<serde_json::Value> = sum

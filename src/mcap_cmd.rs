@@ -44,10 +44,7 @@ pub fn run(a: McapArgs) -> Result<ExitCode> {
         }
         None => None,
     };
-    let file =
-        std::fs::File::open(&a.log).with_context(|| format!("opening {}", a.log.display()))?;
-    let records = protocol::candump::read_log(std::io::BufReader::new(file))
-        .with_context(|| format!("reading {}", a.log.display()))?;
+    let records = protocol::candump::read_log_file(&a.log)?;
     let mut out = McapFile::create(&a.out).context("--out")?;
     let mut rec = Recorder::new(ids, catalog);
     let mut decided = Vec::new();

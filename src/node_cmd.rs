@@ -100,9 +100,7 @@ pub fn run(a: NodeArgs) -> Result<ExitCode> {
 /// The log through the node on the log's own clock: each record's time ticks the node before
 /// the record is processed, as a live node's clock would have.
 fn replay(mut node: NodeService, log: &Path, json: bool) -> Result<ExitCode> {
-    let file = std::fs::File::open(log).with_context(|| format!("opening {}", log.display()))?;
-    let records = protocol::candump::read_log(std::io::BufReader::new(file))
-        .with_context(|| format!("reading {}", log.display()))?;
+    let records = protocol::candump::read_log_file(log)?;
     let catalog = node.catalog().clone();
     node.replay(records.iter().map(|r| &r.stamped), &mut |t_us, o| {
         if let Output::Class { foot, class } = o {

@@ -388,3 +388,20 @@ pub fn evaluate(
         novel,
     })
 }
+
+/// The CSV header of [`write_steps`]: one row per step the node decided.
+pub const STEPS_CSV_HEADER: &str = "t_s,step,true_terrain,classified,confidence_pct,gait,speed_m_s";
+
+/// Writes `rows` as CSV (`presrs demo --csv`): time (s), the node's step counter, the true
+/// terrain, the one the node said, its confidence (%), the gait the leg ran and its speed (m/s).
+pub fn write_steps(mut w: impl std::io::Write, rows: &[StepRecord]) -> std::io::Result<()> {
+    writeln!(w, "{STEPS_CSV_HEADER}")?;
+    for r in rows {
+        writeln!(
+            w,
+            "{:.3},{},{},{},{:.1},{},{:.3}",
+            r.t_s, r.step, r.truth, r.classified, r.confidence_pct, r.gait, r.speed_m_s
+        )?;
+    }
+    w.flush()
+}

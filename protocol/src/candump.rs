@@ -139,6 +139,40 @@ pub fn parse_line(line: &str, line_no: usize) -> Result<Option<LogRecord>, LogEr
     }))
 }
 
+/// A log file that could not be read: which file, and why.
+#[derive(Debug, thiserror::Error)]
+pub enum LogFileError {
+    /// The file could not be opened.
+    #[error("opening {path}: {source}")]
+    Open {
+        /// The file.
+        path: String,
+        /// What the OS said.
+        source: std::io::Error,
+    },
+    /// A line is not a candump `-L` record.
+    #[error("reading {path}: {source}")]
+    Line {
+        /// The file.
+        path: String,
+        /// The line and what is wrong with it.
+        source: LogError,
+    },
+}
+
+/// Reads every record of the log file at `path` ([`read_log`]); the error names the file.
+pub fn read_log_file(path: &std::path::Path) -> Result<Vec<LogRecord>, LogFileError> {
+    let name = || path.display().to_string();
+    let file = std::fs::File::open(path).map_err(|source| LogFileError::Open {
+        path: name(),
+        source,
+    })?;
+    read_log(std::io::BufReader::new(file)).map_err(|source| LogFileError::Line {
+        path: name(),
+        source,
+    })
+}
+
 /// Reads every record of a log. Stops at the first bad line with its number.
 pub fn read_log(r: impl BufRead) -> Result<Vec<LogRecord>, LogError> {
     let mut out = Vec::new();
