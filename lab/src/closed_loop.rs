@@ -15,7 +15,6 @@ use controller::service::ControllerService;
 use node::NodeConfig;
 use node::NodeService;
 use node::classifier::Model;
-use protocol::TerrainCatalog;
 use protocol::bus::InProcBus;
 use protocol::component::{Component, LockStep};
 use sim::runner::{SimConfig, SimRobot, Track};
@@ -135,11 +134,9 @@ pub fn run_recorded(
     // Lock-step simulated time: a refit lands at the step that asked for it, as in a replay.
     node_cfg.refit = node_cfg.refit.reproducible();
     let restart_with = p.node_restart.map(|_| (node_cfg.clone(), model.clone()));
-    let mut node = Some(NodeService::new(node_cfg, model)?);
-    let catalog = node
-        .as_ref()
-        .map(|n| n.catalog().clone())
-        .unwrap_or_else(TerrainCatalog::paper);
+    let first = NodeService::new(node_cfg, model)?;
+    let catalog = first.catalog().clone();
+    let mut node = Some(first);
     let new_controller = || {
         p.controller
             .map(|c| ControllerService::new(c.clone()))

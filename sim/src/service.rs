@@ -111,7 +111,6 @@ pub struct SimService<'a> {
     t_us: u64,
     /// Robot time given up because the machine could not keep up (see `tick`).
     stretched_us: u64,
-    frames: Vec<protocol::CanFrame>,
 }
 
 impl<'a> SimService<'a> {
@@ -134,7 +133,6 @@ impl<'a> SimService<'a> {
             end_us: duration_s.map(|d| (d * 1e6) as u64),
             t_us: 0,
             stretched_us: 0,
-            frames: Vec::with_capacity(128),
         }
     }
 
@@ -205,13 +203,9 @@ impl Component for SimService<'_> {
         }
         let before = self.t_us;
         self.t_us = target.min(self.t_us + MAX_LAG_US);
-        let frames = &mut self.frames;
-        self.robot.advance_to(self.t_us, &mut |f| frames.push(f));
+        self.robot.advance_to(self.t_us, &mut |f| out.push(f));
         if self.t_us / 10_000 != before / 10_000 {
             (self.observe)(self.t_us, &self.robot);
-        }
-        for f in self.frames.drain(..) {
-            out.push(f);
         }
     }
 

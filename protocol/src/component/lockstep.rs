@@ -40,11 +40,6 @@ impl LockStep {
         }
     }
 
-    /// The simulated time, µs.
-    pub fn now_us(&self) -> u64 {
-        self.t_us
-    }
-
     /// Part `i` (re)starts: its filters are set, frames queued for it are dropped (a new
     /// process hears only what comes after it), and it is [`Component::start`]ed now.
     pub fn start(

@@ -67,7 +67,7 @@ pub use lockstep::LockStep;
 pub use run::{RunOptions, RunStats, run, run_opened};
 pub use threaded::{Link, LinkStats, Threaded, spawn};
 
-use crate::bus::BusHealth;
+use crate::bus::ControllerState;
 use crate::frame::{CanFrame, Stamped};
 
 /// The frames a component sends, collected during one call and sent by the runner after it.
@@ -91,19 +91,9 @@ impl Outbox {
         self.frames.push(frame);
     }
 
-    /// The frames queued so far.
-    pub fn frames(&self) -> &[CanFrame] {
-        &self.frames
-    }
-
     /// Takes the frames queued, oldest first.
     pub fn drain(&mut self) -> std::vec::Drain<'_, CanFrame> {
         self.frames.drain(..)
-    }
-
-    /// Nothing queued.
-    pub fn is_empty(&self) -> bool {
-        self.frames.is_empty()
     }
 }
 
@@ -133,9 +123,10 @@ pub trait Component {
     fn tick(&mut self, now_us: u64, out: &mut Outbox);
 
     /// The CAN controller under its bus handle changed state (error-passive, bus-off, back to
-    /// active). The runner logs the change with its fix; a component reports it on the bus.
-    fn on_health(&mut self, health: &BusHealth, now_us: u64) {
-        let _ = (health, now_us);
+    /// active). The runner logs the change with its fix and keeps it in
+    /// [`LinkStats::controller`]; a component reports it on the bus.
+    fn on_health(&mut self, state: ControllerState, now_us: u64) {
+        let _ = (state, now_us);
     }
 
     /// The run ends; frames written here are sent if the bus is open (a last status).

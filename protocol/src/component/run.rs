@@ -46,7 +46,7 @@ impl Default for RunOptions {
     }
 }
 
-/// What one [`run`] did.
+/// What one [`run`] did (the frame counts are its share of [`LinkStats`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct RunStats {
     /// Frames received and given to the component.
@@ -101,6 +101,13 @@ pub fn run_opened(
     let mut watch = HealthWatch::default();
     let filters = component.filters();
     let link = opts.link.clone().unwrap_or_default();
+    // The run's counts are the link's, from here on (a caller's link may count from before).
+    let load = |c: &std::sync::atomic::AtomicU64| c.load(Ordering::Relaxed);
+    let (rx0, tx0, dropped0) = (
+        load(&link.rx_frames),
+        load(&link.tx_frames),
+        load(&link.tx_dropped),
+    );
     let failed = |e: &BusError, backoff: &mut Backoff, stats: &mut RunStats| {
         LinkStats::add(&link.bus_errors, 1);
         link.set_link(Link::Failing);
@@ -124,15 +131,7 @@ pub fn run_opened(
         backoff.reset();
         link.set_link(Link::Open);
         component.start(now_us(), &mut out);
-        if let Err(e) = flush(
-            &mut out,
-            b.as_mut(),
-            opts,
-            &link,
-            &mut stats,
-            now_us(),
-            name,
-        ) {
+        if let Err(e) = flush(&mut out, b.as_mut(), opts, &link, now_us(), name) {
             failed(&e, &mut backoff, &mut stats);
             continue 'open;
         }
@@ -144,7 +143,6 @@ pub fn run_opened(
             for _ in 0..opts.max_burst.max(1) {
                 match b.recv(wait) {
                     Ok(Some(st)) => {
-                        stats.received += 1;
                         LinkStats::add(&link.rx_frames, 1);
                         if let Some(t) = &opts.tap
                             && !component.is_own(&st.frame)
@@ -162,16 +160,15 @@ pub fn run_opened(
                 }
             }
             let now = now_us();
-            let health = b.health();
-            if let Some(state) = watch.update(name, &iface, &health) {
+            if let Some(state) = watch.update(name, &iface, &b.health()) {
                 link.set_controller(state);
-                component.on_health(&health, now);
+                component.on_health(state, now);
             }
             if Instant::now() >= next_tick {
                 component.tick(now, &mut out);
                 next_tick = Instant::now() + opts.tick;
             }
-            if let Err(e) = flush(&mut out, b.as_mut(), opts, &link, &mut stats, now, name) {
+            if let Err(e) = flush(&mut out, b.as_mut(), opts, &link, now, name) {
                 failed(&e, &mut backoff, &mut stats);
                 continue 'open;
             }
@@ -183,10 +180,13 @@ pub fn run_opened(
     component.stop(end, &mut out);
     match bus.as_mut() {
         Some(b) => {
-            let _ = flush(&mut out, b.as_mut(), opts, &link, &mut stats, end, name);
+            let _ = flush(&mut out, b.as_mut(), opts, &link, end, name);
         }
         None => out.drain().for_each(drop),
     }
+    stats.received = load(&link.rx_frames) - rx0;
+    stats.sent = load(&link.tx_frames) - tx0;
+    stats.send_errors = load(&link.tx_dropped) - dropped0;
     stats.end_us = end;
     stats
 }
@@ -198,7 +198,6 @@ fn flush(
     bus: &mut dyn CanBus,
     opts: &RunOptions,
     link: &LinkStats,
-    stats: &mut RunStats,
     now_us: u64,
     name: &str,
 ) -> Result<(), BusError> {
@@ -209,7 +208,6 @@ fn flush(
         }
         match bus.send(&f) {
             Ok(()) => {
-                stats.sent += 1;
                 LinkStats::add(&link.tx_frames, 1);
                 if let Some(t) = &opts.tap {
                     t.offer(&Stamped {
@@ -220,14 +218,9 @@ fn flush(
             }
             Err(e @ (BusError::Down { .. } | BusError::Closed)) => down = Some(e),
             Err(e) => {
-                stats.send_errors += 1;
-                LinkStats::add(&link.tx_dropped, 1);
-                if stats.send_errors.is_power_of_two() {
-                    tracing::warn!(
-                        role = name,
-                        "send: {e} ({} send errors so far)",
-                        stats.send_errors
-                    );
+                let dropped = LinkStats::add(&link.tx_dropped, 1);
+                if dropped.is_power_of_two() {
+                    tracing::warn!(role = name, "send: {e} ({dropped} send errors so far)");
                 }
             }
         }

@@ -81,8 +81,9 @@ impl LinkStats {
         self.controller.store(c as u8, Ordering::Relaxed);
     }
 
-    pub(crate) fn add(counter: &AtomicU64, n: u64) {
-        counter.fetch_add(n, Ordering::Relaxed);
+    /// Adds `n` to `counter`; returns its new value.
+    pub(crate) fn add(counter: &AtomicU64, n: u64) -> u64 {
+        counter.fetch_add(n, Ordering::Relaxed) + n
     }
 }
 
@@ -256,7 +257,9 @@ fn receive_loop(
                     LinkStats::add(&link.rx_frames, 1);
                     match to_component.try_send(st) {
                         Ok(()) => {}
-                        Err(TrySendError::Full(_)) => LinkStats::add(&link.rx_dropped, 1),
+                        Err(TrySendError::Full(_)) => {
+                            LinkStats::add(&link.rx_dropped, 1);
+                        }
                         Err(TrySendError::Disconnected(_)) => return,
                     }
                 }
@@ -334,13 +337,7 @@ fn component_loop<C: Component>(
         let health = link.controller();
         if health != seen {
             seen = health;
-            c.on_health(
-                &crate::bus::BusHealth {
-                    state: health,
-                    ..Default::default()
-                },
-                now_us(),
-            );
+            c.on_health(health, now_us());
         }
         // Ticks at most once per `tick` of its clock, not per frame (about 20,000 frames/s
         // for six feet): deadlines and heartbeats need no finer grain. A clock that jumped
@@ -379,7 +376,9 @@ fn send_loop(
                 Err(RecvTimeoutError::Disconnected) => break 'open,
             };
             match tx.send(&f) {
-                Ok(()) => LinkStats::add(&link.tx_frames, 1),
+                Ok(()) => {
+                    LinkStats::add(&link.tx_frames, 1);
+                }
                 Err(e) => {
                     LinkStats::add(&link.bus_errors, 1);
                     LinkStats::add(&link.tx_dropped, 1);
