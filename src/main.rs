@@ -12,6 +12,7 @@ mod cli;
 mod controller_cmd;
 mod demo;
 mod experiment;
+mod leg_cmd;
 mod mcap_cmd;
 mod node_cmd;
 mod runtime;
@@ -46,6 +47,9 @@ enum Cmd {
     Node(node_cmd::NodeArgs),
     /// The gait controller on a CAN interface: LegCommand out, gait switched per terrain.
     Controller(controller_cmd::ControllerArgs),
+    /// The leg bridge on a CAN interface: LegCommand to the motor drivers (moteus, ODrive,
+    /// MIT protocol), LegState and LegStatus from their encoders.
+    Leg(leg_cmd::LegArgs),
     /// A training set from the robot's own runs: one image per step (the node's stance logic),
     /// labelled, into DIR/<terrain>/ with a manifest.
     Capture(capture_cmd::CaptureArgs),
@@ -126,6 +130,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
         }
         Cmd::Node(a) => node_cmd::run(a),
         Cmd::Controller(a) => controller_cmd::run(a),
+        Cmd::Leg(a) => leg_cmd::run(a),
         Cmd::Sim(a) => sim_cmd::run(a),
         Cmd::Capture(a) => capture_cmd::run(a),
         Cmd::Mcap(a) => mcap_cmd::run(a),

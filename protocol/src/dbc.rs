@@ -154,6 +154,14 @@ pub fn signals(kind: MessageKind) -> Vec<Signal> {
             sig("LegLength", 16, 16, false, LENGTH_SCALE_M, "m"),
             sig("TimestampUs", 32, 32, false, 1.0, "us"),
         ],
+        MessageKind::LegStatus => vec![
+            sig("Mode", 0, 8, false, 1.0, "")
+                .range(0.0, 6.0)
+                .values("LegMode"),
+            sig("Joint", 8, 8, false, 1.0, "").range(0.0, 2.0),
+            sig("CommandAgeMs", 16, 16, false, 1.0, "ms"),
+            sig("FaultCode", 32, 32, false, 1.0, ""),
+        ],
         MessageKind::TerrainClass => vec![
             sig("Step", 0, 16, false, 1.0, ""),
             sig("TerrainId", 16, 8, false, 1.0, "").values("Terrain"),
@@ -242,6 +250,17 @@ fn comment(kind: MessageKind, signal: &str) -> Option<&'static str> {
             "0 starting, 1 running, 2 degraded, 3 no model, 4 stopping, 5 wrong image size, \
              6 CAN controller error-passive, 7 CAN controller bus-off (from error frames)."
         }
+        (MessageKind::LegStatus, "Mode") => {
+            "0 waiting (nothing moved yet), 1 running, 2-4 damped stop (command timeout, driver \
+             fault, driver silent), 5 stopped at exit, 6 check (reading, moving nothing)."
+        }
+        (MessageKind::LegStatus, "Joint") => "The joint at fault: 0 none, 1 hip, 2 length/knee.",
+        (MessageKind::LegStatus, "CommandAgeMs") => {
+            "Age of the last LegCommand; 65535: none yet (saturating)."
+        }
+        (MessageKind::LegStatus, "FaultCode") => {
+            "The driver's own code: moteus fault register, ODrive axis error, MIT error byte."
+        }
         (MessageKind::NodeStatus, "CrcFailures" | "IncompleteFrames") => {
             "Low 8 bits of a running total: it wraps; take differences mod 256."
         }
@@ -259,7 +278,7 @@ fn sender(kind: MessageKind) -> &'static str {
         MessageKind::FootContact | MessageKind::TactileFrame | MessageKind::TactileFrameClassic => {
             "Foot"
         }
-        MessageKind::LegState => "Leg",
+        MessageKind::LegState | MessageKind::LegStatus => "Leg",
         MessageKind::TerrainClass | MessageKind::NodeStatus => "Node",
     }
 }
@@ -269,7 +288,10 @@ fn receivers(kind: MessageKind) -> &'static str {
         MessageKind::LegCommand => "Leg",
         MessageKind::TactileFrame | MessageKind::TactileFrameClassic => "Node",
         MessageKind::FootContact => "Node,Controller",
-        MessageKind::LegState | MessageKind::TerrainClass | MessageKind::NodeStatus => "Controller",
+        MessageKind::LegState
+        | MessageKind::LegStatus
+        | MessageKind::TerrainClass
+        | MessageKind::NodeStatus => "Controller",
         MessageKind::GaitStatus => "Node",
     }
 }
@@ -284,7 +306,7 @@ fn fmt_num(v: f64) -> String {
 }
 
 /// The names of the DBC's value tables.
-pub const VALUE_TABLES: [&str; 4] = ["Terrain", "Phase", "NodeState", "GaitReason"];
+pub const VALUE_TABLES: [&str; 5] = ["Terrain", "Phase", "NodeState", "GaitReason", "LegMode"];
 
 /// The value table `name` (one of [`VALUE_TABLES`]): each value with its label, the catalog's
 /// terrains for `Terrain`. Empty for another name.
@@ -316,6 +338,15 @@ pub fn value_table(name: &str, terrains: &TerrainCatalog) -> Vec<(u32, String)> 
             "bus_off",
         ]),
         "GaitReason" => fixed(&["initial", "terrain", "unknown", "node_lost"]),
+        "LegMode" => fixed(&[
+            "waiting",
+            "running",
+            "command_timeout",
+            "driver_fault",
+            "driver_silent",
+            "stopped",
+            "check",
+        ]),
         _ => Vec::new(),
     }
 }

@@ -22,6 +22,8 @@ pub enum MessageKind {
     FootContact,
     /// Leg angle and length.
     LegState,
+    /// Leg -> all: the leg bridge's state, its faulted joint and the command's age.
+    LegStatus,
     /// Node -> all: the terrain of one step.
     TerrainClass,
     /// Node heartbeat.
@@ -36,10 +38,11 @@ pub enum MessageKind {
 
 impl MessageKind {
     /// Every kind, in priority order (lowest identifier first).
-    pub const ALL: [MessageKind; 8] = [
+    pub const ALL: [MessageKind; 9] = [
         MessageKind::LegCommand,
         MessageKind::FootContact,
         MessageKind::LegState,
+        MessageKind::LegStatus,
         MessageKind::TerrainClass,
         MessageKind::NodeStatus,
         MessageKind::GaitStatus,
@@ -58,6 +61,7 @@ impl MessageKind {
             MessageKind::LegCommand => "LegCommand",
             MessageKind::FootContact => "FootContact",
             MessageKind::LegState => "LegState",
+            MessageKind::LegStatus => "LegStatus",
             MessageKind::TerrainClass => "TerrainClass",
             MessageKind::NodeStatus => "NodeStatus",
             MessageKind::GaitStatus => "GaitStatus",
@@ -93,6 +97,8 @@ pub struct IdConfig {
     pub foot_contact: u32,
     /// Base identifier of LegState.
     pub leg_state: u32,
+    /// Base identifier of LegStatus.
+    pub leg_status: u32,
     /// Base identifier of TerrainClass.
     pub terrain_class: u32,
     /// Identifier of NodeStatus.
@@ -112,6 +118,7 @@ impl Default for IdConfig {
             leg_command: 0x0A0,
             foot_contact: 0x100,
             leg_state: 0x120,
+            leg_status: 0x140,
             terrain_class: 0x200,
             node_status: 0x280,
             gait_status: 0x290,
@@ -167,6 +174,7 @@ impl IdConfig {
             leg_command: 0x040,
             foot_contact: 0x048,
             leg_state: 0x050,
+            leg_status: 0x068,
             terrain_class: 0x058,
             node_status: 0x060,
             gait_status: 0x061,
@@ -181,6 +189,7 @@ impl IdConfig {
             MessageKind::LegCommand => self.leg_command,
             MessageKind::FootContact => self.foot_contact,
             MessageKind::LegState => self.leg_state,
+            MessageKind::LegStatus => self.leg_status,
             MessageKind::TerrainClass => self.terrain_class,
             MessageKind::NodeStatus => self.node_status,
             MessageKind::GaitStatus => self.gait_status,

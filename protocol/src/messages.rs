@@ -264,6 +264,95 @@ pub struct GaitStatus {
     pub foot: u8,
 }
 
+/// What the leg bridge is doing with its motors.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum LegMode {
+    /// No LegCommand yet: no joint has been moved since start-up.
+    #[default]
+    Waiting = 0,
+    /// Following fresh LegCommands.
+    Running = 1,
+    /// Damped stop: no LegCommand for the command timeout; fresh commands resume.
+    CommandTimeout = 2,
+    /// Damped stop: a driver reported a fault (its code in FaultCode).
+    DriverFault = 3,
+    /// Damped stop: a driver stopped replying.
+    DriverSilent = 4,
+    /// Every motor stopped at exit.
+    Stopped = 5,
+    /// `presrs leg --check`: reading the joints, moving nothing.
+    Check = 6,
+}
+
+impl LegMode {
+    /// The mode with wire value `v`.
+    pub fn from_u8(v: u8) -> Option<Self> {
+        Some(match v {
+            0 => Self::Waiting,
+            1 => Self::Running,
+            2 => Self::CommandTimeout,
+            3 => Self::DriverFault,
+            4 => Self::DriverSilent,
+            5 => Self::Stopped,
+            6 => Self::Check,
+            _ => return None,
+        })
+    }
+
+    /// True where every joint is held in the damped stop (or never moved).
+    pub fn is_stopped(self) -> bool {
+        !matches!(self, Self::Running)
+    }
+}
+
+/// Leg -> all, 10 Hz and at every change: the leg bridge's health.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct LegStatus {
+    /// What the bridge does with the motors.
+    pub mode: LegMode,
+    /// The joint at fault: 0 none, 1 the hip, 2 the length joint (knee or screw).
+    pub joint: u8,
+    /// Age of the last LegCommand, ms (saturating; 65535: none yet).
+    pub command_age_ms: u16,
+    /// The driver's own fault code (moteus fault, ODrive axis error, MIT error byte); 0 none.
+    pub fault_code: u32,
+}
+
+impl LegStatus {
+    /// The 8 data bytes (layout in docs/protocol.md).
+    pub fn encode(&self) -> [u8; 8] {
+        let mut d = [0u8; 8];
+        d[0] = self.mode as u8;
+        d[1] = self.joint;
+        d[2..4].copy_from_slice(&self.command_age_ms.to_le_bytes());
+        d[4..8].copy_from_slice(&self.fault_code.to_le_bytes());
+        d
+    }
+
+    /// Decodes the data bytes; a short payload or an invalid field is an error.
+    pub fn decode(d: &[u8]) -> Result<Self, DecodeError> {
+        need("LegStatus", d, 8)?;
+        let mode = LegMode::from_u8(d[0]).ok_or(DecodeError::BadValue {
+            message: "LegStatus",
+            field: "Mode",
+            value: d[0] as u32,
+        })?;
+        if d[1] > 2 {
+            return Err(DecodeError::BadValue {
+                message: "LegStatus",
+                field: "Joint",
+                value: d[1] as u32,
+            });
+        }
+        Ok(Self {
+            mode,
+            joint: d[1],
+            command_age_ms: u16_at(d, 2),
+            fault_code: u32_at(d, 4),
+        })
+    }
+}
+
 impl LegCommand {
     /// The 8 data bytes (layout in docs/protocol.md).
     pub fn encode(&self) -> [u8; 8] {
@@ -458,6 +547,8 @@ pub enum Message {
     FootContact(FootContact),
     /// Leg angle and length.
     LegState(LegState),
+    /// The leg bridge's health.
+    LegStatus(LegStatus),
     /// The terrain of one step.
     TerrainClass(TerrainClass),
     /// Node heartbeat.
@@ -475,6 +566,7 @@ impl Message {
             Message::LegCommand(_) => MessageKind::LegCommand,
             Message::FootContact(_) => MessageKind::FootContact,
             Message::LegState(_) => MessageKind::LegState,
+            Message::LegStatus(_) => MessageKind::LegStatus,
             Message::TerrainClass(_) => MessageKind::TerrainClass,
             Message::NodeStatus(_) => MessageKind::NodeStatus,
             Message::GaitStatus(_) => MessageKind::GaitStatus,
@@ -492,6 +584,7 @@ impl Message {
             Message::LegCommand(m) => m.encode(),
             Message::FootContact(m) => m.encode(),
             Message::LegState(m) => m.encode(),
+            Message::LegStatus(m) => m.encode(),
             Message::TerrainClass(m) => m.encode(),
             Message::NodeStatus(m) => m.encode(),
             Message::GaitStatus(m) => m.encode(),
@@ -531,6 +624,7 @@ pub fn decode(frame: &CanFrame, ids: &IdConfig) -> Result<Option<(u8, Message)>,
         MessageKind::LegCommand => Message::LegCommand(LegCommand::decode(d)?),
         MessageKind::FootContact => Message::FootContact(FootContact::decode(d)?),
         MessageKind::LegState => Message::LegState(LegState::decode(d)?),
+        MessageKind::LegStatus => Message::LegStatus(LegStatus::decode(d)?),
         MessageKind::TerrainClass => Message::TerrainClass(TerrainClass::decode(d)?),
         MessageKind::NodeStatus => Message::NodeStatus(NodeStatus::decode(d)?),
         MessageKind::GaitStatus => Message::GaitStatus(GaitStatus::decode(d)?),

@@ -35,6 +35,7 @@ impl Topic {
                 MessageKind::TerrainClass => format!("/foot{f}/terrain"),
                 MessageKind::LegState => format!("/leg{f}/state"),
                 MessageKind::LegCommand => format!("/leg{f}/command"),
+                MessageKind::LegStatus => format!("/leg{f}/status"),
                 MessageKind::NodeStatus => "/node/status".into(),
                 MessageKind::GaitStatus => "/gait".into(),
                 MessageKind::TactileFrame | MessageKind::TactileFrameClassic => {

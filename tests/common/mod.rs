@@ -26,6 +26,12 @@ pub fn signals(m: &Message) -> BTreeMap<&'static str, f64> {
             s.insert("LegLength", c.leg_length_m);
             s.insert("TimestampUs", c.timestamp_us as f64);
         }
+        Message::LegStatus(c) => {
+            s.insert("Mode", c.mode as u8 as f64);
+            s.insert("Joint", c.joint as f64);
+            s.insert("CommandAgeMs", c.command_age_ms as f64);
+            s.insert("FaultCode", c.fault_code as f64);
+        }
         Message::TerrainClass(c) => {
             s.insert("Step", c.step as f64);
             s.insert("TerrainId", c.terrain as f64);
@@ -87,6 +93,12 @@ pub fn random_messages(rng: &mut impl rand::Rng, foot: u8) -> Vec<Message> {
             leg_angle_rad: rng.random_range(-1.0..1.0),
             leg_length_m: rng.random_range(0.0..0.6),
             timestamp_us: rng.random(),
+        }),
+        Message::LegStatus(LegStatus {
+            mode: LegMode::from_u8(rng.random_range(0..7)).unwrap_or_default(),
+            joint: rng.random_range(0..3),
+            command_age_ms: rng.random(),
+            fault_code: rng.random(),
         }),
         Message::TerrainClass(TerrainClass {
             step: rng.random(),

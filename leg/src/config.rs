@@ -1,0 +1,805 @@
+//! `leg.toml`: the leg's geometry, its two joints and their drivers, the impedance, rates and
+//! timeouts. Every check names the key at fault.
+//!
+//! ```toml
+//! foot = 0
+//! rate_hz = 500              # commands to the motors, and LegState
+//! command_timeout_ms = 50    # no LegCommand for this long: damped stop
+//! reply_timeout_ms = 50      # a driver silent this long: damped stop, its fault named
+//! motor_iface = "can1"       # the motors' own bus (default: the one LegCommand comes on)
+//!
+//! [kinematics]
+//! type = "prismatic"         # or "two-link" with thigh_m, shank_m, knee_sign
+//! min_length_m = 0.10
+//! max_length_m = 0.20
+//!
+//! [impedance]
+//! stance_stiffness_n_per_m = 1000.0   # the AER law's leg spring
+//! stance_damping_n_s_per_m = 2.0
+//! flight_stiffness_n_per_m = 1000.0
+//! flight_damping_n_s_per_m = 20.0
+//! hip_stiffness_nm_per_rad = 20.0     # holds the touchdown angle in flight; 0 in stance
+//! hip_damping_nm_s_per_rad = 0.5
+//!
+//! [hip]
+//! driver = "mit"             # "moteus", "odrive" or "mit"
+//! id = 1
+//! mit_model = "AK80-6-V1.1"
+//!
+//! [length]                   # the screw, belt or rack; the knee of a two-link leg
+//! driver = "mit"
+//! id = 2
+//! metres_per_turn = 0.25     # prismatic only: leg length per turn of the joint
+//! mit_model = "AK80-6-V1.1"
+//! ```
+
+use std::f64::consts::TAU;
+use std::path::Path;
+
+use protocol::IdConfig;
+use protocol::config::{ConfigFileError, Invalid};
+use serde::{Deserialize, Serialize};
+
+use crate::driver::mit::{Mit, Ranges};
+use crate::driver::moteus::Moteus;
+use crate::driver::odrive::Odrive;
+use crate::driver::{BusId, Driver};
+use crate::kinematics::Kinematics;
+
+/// The protocol a joint's driver speaks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DriverKind {
+    /// mjbots moteus (CAN FD).
+    Moteus,
+    /// ODrive CANSimple.
+    Odrive,
+    /// MIT mini-cheetah protocol.
+    Mit,
+}
+
+/// One joint: its driver and how the driver's shaft maps to the joint.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JointConfig {
+    /// The protocol.
+    pub driver: Option<DriverKind>,
+    /// CAN id (moteus 1..127, ODrive node 0..63, MIT 1..255).
+    pub id: Option<u8>,
+    /// Driver shaft turns per joint turn (a gearbox after the driver's output).
+    #[serde(default = "one")]
+    pub gear_ratio: f64,
+    /// +1, or -1 when the driver's positive turns the joint negative.
+    #[serde(default = "one")]
+    pub direction: f64,
+    /// The joint coordinate (rad; m for a prismatic leg's length) where the driver reads 0.
+    #[serde(default)]
+    pub zero_offset: f64,
+    /// Prismatic leg's length joint: leg metres per turn of the joint.
+    pub metres_per_turn: Option<f64>,
+    /// MIT: a known model's ranges (`Ranges::MODELS`).
+    pub mit_model: Option<String>,
+    /// MIT: explicit ranges instead of a model.
+    pub mit_ranges: Option<Ranges>,
+    /// MIT: the id replies come on.
+    #[serde(default)]
+    pub mit_master_id: u8,
+    /// moteus: its configured `servo.pid_position.kp`, N m/rev (the scales' 1.0).
+    pub moteus_kp: Option<f64>,
+    /// moteus: its configured `servo.pid_position.kd`, N m s/rev.
+    pub moteus_kd: Option<f64>,
+    /// moteus: the source id the bridge sends from (replies come back to it).
+    #[serde(default)]
+    pub moteus_source: u8,
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+/// The leg's spring and the hip's hold.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Impedance {
+    /// The leg spring in stance (eq. 4's spring), N/m.
+    pub stance_stiffness_n_per_m: f64,
+    /// Leg damping in stance, N s/m.
+    pub stance_damping_n_s_per_m: f64,
+    /// The leg's length hold in flight, N/m.
+    pub flight_stiffness_n_per_m: f64,
+    /// Leg damping in flight, N s/m.
+    pub flight_damping_n_s_per_m: f64,
+    /// The hip's hold on the touchdown angle in flight, N m/rad (0 in stance: the leg sweeps).
+    pub hip_stiffness_nm_per_rad: f64,
+    /// Hip damping, N m s/rad (also the hip's damped stop).
+    pub hip_damping_nm_s_per_rad: f64,
+    /// Leg damping in the damped stop, N s/m.
+    pub stop_damping_n_s_per_m: f64,
+}
+
+impl Default for Impedance {
+    fn default() -> Self {
+        // The simulated hopper's leg (sim::HopperParams: 1 kN/m, 2 N s/m).
+        Self {
+            stance_stiffness_n_per_m: 1000.0,
+            stance_damping_n_s_per_m: 2.0,
+            flight_stiffness_n_per_m: 1000.0,
+            flight_damping_n_s_per_m: 20.0,
+            hip_stiffness_nm_per_rad: 20.0,
+            hip_damping_nm_s_per_rad: 0.5,
+            stop_damping_n_s_per_m: 20.0,
+        }
+    }
+}
+
+/// The whole file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LegConfig {
+    /// The foot (leg) whose LegCommand this leg follows.
+    #[serde(default)]
+    pub foot: u8,
+    /// Commands to the motors and LegState, Hz.
+    #[serde(default = "default_rate")]
+    pub rate_hz: f64,
+    /// No LegCommand for this long: the damped stop, ms.
+    #[serde(default = "default_timeout")]
+    pub command_timeout_ms: u64,
+    /// A driver silent this long: the damped stop, ms.
+    #[serde(default = "default_timeout")]
+    pub reply_timeout_ms: u64,
+    /// The motors' own bus; `None`: the bus LegCommand comes on.
+    pub motor_iface: Option<String>,
+    /// The leg's geometry.
+    pub kinematics: Kinematics,
+    /// Spring and damping.
+    #[serde(default)]
+    pub impedance: Impedance,
+    /// The hip joint.
+    pub hip: JointConfig,
+    /// The length joint: a prismatic leg's screw or belt, a two-link leg's knee.
+    pub length: JointConfig,
+    /// Our identifiers (for the collision check on a shared bus).
+    #[serde(default)]
+    pub ids: IdConfig,
+}
+
+fn default_rate() -> f64 {
+    500.0
+}
+fn default_timeout() -> u64 {
+    50
+}
+
+/// A joint's mapping between its coordinate and its driver's shaft.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct JointMap {
+    /// Driver rad per joint unit (rad, or m for a prismatic length), with the direction.
+    pub scale: f64,
+    /// The joint coordinate at the driver's zero.
+    pub zero: f64,
+}
+
+impl JointMap {
+    /// Driver position for a joint coordinate.
+    pub fn to_driver(&self, x: f64) -> f64 {
+        self.scale * (x - self.zero)
+    }
+    /// Joint coordinate for a driver position.
+    pub fn to_joint(&self, p: f64) -> f64 {
+        p / self.scale + self.zero
+    }
+    /// A joint stiffness (per joint unit) at the driver: `k / scale^2`.
+    pub fn stiffness_to_driver(&self, k: f64) -> f64 {
+        k / (self.scale * self.scale)
+    }
+}
+
+impl LegConfig {
+    /// Reads and checks a leg config (TOML, or JSON by extension).
+    pub fn from_file(path: &Path) -> Result<Self, ConfigFileError> {
+        let (text, name) = protocol::config::read_text(path)?;
+        Self::from_text(&text, &name)
+    }
+
+    /// Parses and checks a config's text; `name` names it in errors.
+    pub fn from_text(text: &str, name: &str) -> Result<Self, ConfigFileError> {
+        let c: Self = protocol::config::parse(text, name)?;
+        c.validate()
+            .map_err(|e| ConfigFileError::invalid(name, e))?;
+        Ok(c)
+    }
+
+    fn joint(&self, which: usize) -> (&'static str, &JointConfig) {
+        if which == 0 {
+            ("hip", &self.hip)
+        } else {
+            ("length", &self.length)
+        }
+    }
+
+    /// The joint's coordinate-to-driver map (`which`: 0 hip, 1 length joint).
+    pub fn map(&self, which: usize) -> JointMap {
+        let (_, j) = self.joint(which);
+        let per_unit = match (which, &self.kinematics) {
+            (1, Kinematics::Prismatic { .. }) => TAU / j.metres_per_turn.unwrap_or(1.0),
+            _ => 1.0,
+        };
+        JointMap {
+            scale: j.direction.signum() * j.gear_ratio * per_unit,
+            zero: j.zero_offset,
+        }
+    }
+
+    /// The joint's driver (`which`: 0 hip, 1 length joint); the config must be valid.
+    pub fn driver(&self, which: usize) -> Driver {
+        let (_, j) = self.joint(which);
+        let id = j.id.unwrap_or(0);
+        match j.driver.unwrap_or(DriverKind::Mit) {
+            DriverKind::Moteus => Driver::Moteus(Moteus::new(
+                id,
+                j.moteus_source,
+                j.moteus_kp.unwrap_or(0.0),
+                j.moteus_kd.unwrap_or(0.0),
+                self.command_timeout_ms as f64 * 1e-3,
+            )),
+            DriverKind::Odrive => Driver::Odrive(Odrive::new(id)),
+            DriverKind::Mit => Driver::Mit(Mit::new(
+                id,
+                j.mit_master_id,
+                self.mit_ranges(j).unwrap_or(Ranges {
+                    p_max: 12.5,
+                    v_max: 50.0,
+                    kp_max: 500.0,
+                    kd_max: 5.0,
+                    t_max: 18.0,
+                }),
+            )),
+        }
+    }
+
+    fn mit_ranges(&self, j: &JointConfig) -> Option<Ranges> {
+        j.mit_ranges
+            .or_else(|| j.mit_model.as_deref().and_then(Ranges::of_model))
+    }
+
+    /// The largest stiffness and damping the length joint's driver must give over the
+    /// workspace (N m/rad, N m s/rad at the driver).
+    pub fn length_gains_needed(&self) -> (f64, f64) {
+        let imp = &self.impedance;
+        let k = imp
+            .stance_stiffness_n_per_m
+            .max(imp.flight_stiffness_n_per_m);
+        let b = imp
+            .stance_damping_n_s_per_m
+            .max(imp.flight_damping_n_s_per_m)
+            .max(imp.stop_damping_n_s_per_m);
+        let (lo, hi) = self.kinematics.length_range();
+        let m = self.map(1);
+        let mut g2: f64 = 0.0;
+        for i in 0..=50 {
+            let l = lo + (hi - lo) * i as f64 / 50.0;
+            let q = self.kinematics.inverse(l, 0.0).joints;
+            g2 = g2.max(self.kinematics.length_gain(q).powi(2));
+        }
+        (m.stiffness_to_driver(k * g2), m.stiffness_to_driver(b * g2))
+    }
+
+    /// Every check; the first failure, naming its key.
+    pub fn validate(&self) -> Result<(), Invalid> {
+        let pos = |key: &str, v: f64| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(Invalid::range(key, v, "a finite value > 0"))
+            }
+        };
+        let nonneg = |key: &str, v: f64| {
+            if v.is_finite() && v >= 0.0 {
+                Ok(())
+            } else {
+                Err(Invalid::range(key, v, "a finite value >= 0"))
+            }
+        };
+        if self.foot >= protocol::ids::MAX_FEET {
+            return Err(Invalid::range("foot", self.foot, "0..=7"));
+        }
+        if !(self.rate_hz.is_finite() && self.rate_hz >= 10.0 && self.rate_hz <= 2000.0) {
+            return Err(Invalid::range("rate_hz", self.rate_hz, "10..=2000"));
+        }
+        let period_ms = 1000.0 / self.rate_hz;
+        for (key, v) in [
+            ("command_timeout_ms", self.command_timeout_ms),
+            ("reply_timeout_ms", self.reply_timeout_ms),
+        ] {
+            if (v as f64) < 2.0 * period_ms || v > 10_000 {
+                return Err(Invalid::range(
+                    key,
+                    v,
+                    format!(
+                        "at least two periods of rate_hz ({:.1} ms) and at most 10000",
+                        2.0 * period_ms
+                    ),
+                ));
+            }
+        }
+        match self.kinematics {
+            Kinematics::Prismatic {
+                min_length_m,
+                max_length_m,
+            } => {
+                pos("kinematics.min_length_m", min_length_m)?;
+                if max_length_m.is_nan() || max_length_m <= min_length_m {
+                    return Err(Invalid::range(
+                        "kinematics.max_length_m",
+                        max_length_m,
+                        format!("> min_length_m ({min_length_m})"),
+                    ));
+                }
+            }
+            Kinematics::TwoLink {
+                thigh_m,
+                shank_m,
+                knee_sign,
+                min_length_m,
+                max_length_m,
+            } => {
+                pos("kinematics.thigh_m", thigh_m)?;
+                pos("kinematics.shank_m", shank_m)?;
+                if knee_sign.abs() != 1.0 {
+                    return Err(Invalid::range("kinematics.knee_sign", knee_sign, "1 or -1"));
+                }
+                let (lo, hi) = ((thigh_m - shank_m).abs(), thigh_m + shank_m);
+                if min_length_m.is_nan() || min_length_m <= lo {
+                    return Err(Invalid::range(
+                        "kinematics.min_length_m",
+                        min_length_m,
+                        format!("> |thigh_m - shank_m| ({lo})"),
+                    ));
+                }
+                // A straight knee is singular: the knee cannot spring the length there.
+                if !(max_length_m > min_length_m && max_length_m < 0.99 * hi) {
+                    return Err(Invalid::range(
+                        "kinematics.max_length_m",
+                        max_length_m,
+                        format!(
+                            "> min_length_m and < 0.99 (thigh_m + shank_m) = {:.4}",
+                            0.99 * hi
+                        ),
+                    ));
+                }
+            }
+        }
+        let imp = &self.impedance;
+        for (k, v) in [
+            (
+                "impedance.stance_stiffness_n_per_m",
+                imp.stance_stiffness_n_per_m,
+            ),
+            (
+                "impedance.stance_damping_n_s_per_m",
+                imp.stance_damping_n_s_per_m,
+            ),
+            (
+                "impedance.flight_stiffness_n_per_m",
+                imp.flight_stiffness_n_per_m,
+            ),
+            (
+                "impedance.flight_damping_n_s_per_m",
+                imp.flight_damping_n_s_per_m,
+            ),
+            (
+                "impedance.hip_stiffness_nm_per_rad",
+                imp.hip_stiffness_nm_per_rad,
+            ),
+            (
+                "impedance.hip_damping_nm_s_per_rad",
+                imp.hip_damping_nm_s_per_rad,
+            ),
+            (
+                "impedance.stop_damping_n_s_per_m",
+                imp.stop_damping_n_s_per_m,
+            ),
+        ] {
+            nonneg(k, v)?;
+        }
+        pos(
+            "impedance.stance_stiffness_n_per_m",
+            imp.stance_stiffness_n_per_m,
+        )?;
+        pos(
+            "impedance.stop_damping_n_s_per_m",
+            imp.stop_damping_n_s_per_m,
+        )?;
+        pos(
+            "impedance.hip_damping_nm_s_per_rad",
+            imp.hip_damping_nm_s_per_rad,
+        )?;
+        for which in 0..2 {
+            self.validate_joint(which)?;
+        }
+        self.validate_ids()
+    }
+
+    fn validate_joint(&self, which: usize) -> Result<(), Invalid> {
+        let (name, j) = self.joint(which);
+        let key = |k: &str| format!("{name}.{k}");
+        let Some(kind) = j.driver else {
+            return Err(Invalid::new(
+                key("driver"),
+                format!(
+                    "{}: missing; one of \"moteus\", \"odrive\", \"mit\"",
+                    key("driver")
+                ),
+            ));
+        };
+        let Some(id) = j.id else {
+            return Err(Invalid::new(
+                key("id"),
+                format!("{}: missing: the joint's driver has no CAN id", key("id")),
+            ));
+        };
+        let id_range = match kind {
+            DriverKind::Moteus => 1..=127,
+            DriverKind::Odrive => 0..=63,
+            DriverKind::Mit => 1..=255,
+        };
+        if !id_range.contains(&id) {
+            return Err(Invalid::range(
+                &key("id"),
+                id,
+                format!("{}..={} for {kind:?}", id_range.start(), id_range.end()),
+            ));
+        }
+        if !(j.gear_ratio.is_finite() && j.gear_ratio > 0.0) {
+            return Err(Invalid::range(
+                &key("gear_ratio"),
+                j.gear_ratio,
+                "a finite value > 0",
+            ));
+        }
+        if j.direction.abs() != 1.0 {
+            return Err(Invalid::range(&key("direction"), j.direction, "1 or -1"));
+        }
+        if !j.zero_offset.is_finite() {
+            return Err(Invalid::range(
+                &key("zero_offset"),
+                j.zero_offset,
+                "a finite value",
+            ));
+        }
+        let prismatic_length =
+            which == 1 && matches!(self.kinematics, Kinematics::Prismatic { .. });
+        match (prismatic_length, j.metres_per_turn) {
+            (true, Some(m)) if m.is_finite() && m > 0.0 => {}
+            (true, v) => {
+                return Err(Invalid::new(
+                    key("metres_per_turn"),
+                    format!(
+                        "{} = {v:?}: a prismatic leg's length joint needs its metres per turn (> 0)",
+                        key("metres_per_turn")
+                    ),
+                ));
+            }
+            (false, Some(_)) => {
+                return Err(Invalid::new(
+                    key("metres_per_turn"),
+                    format!(
+                        "{}: only a prismatic leg's length joint has one",
+                        key("metres_per_turn")
+                    ),
+                ));
+            }
+            (false, None) => {}
+        }
+        // The gains the joint must give, at the driver.
+        let imp = &self.impedance;
+        let (kp, kd) = if which == 0 {
+            let m = self.map(0);
+            (
+                m.stiffness_to_driver(imp.hip_stiffness_nm_per_rad),
+                m.stiffness_to_driver(imp.hip_damping_nm_s_per_rad),
+            )
+        } else {
+            self.length_gains_needed()
+        };
+        let stiff_key = if which == 0 {
+            "impedance.hip_stiffness_nm_per_rad"
+        } else {
+            "impedance.stance_stiffness_n_per_m"
+        };
+        match kind {
+            DriverKind::Mit => {
+                let r = match (&j.mit_ranges, &j.mit_model) {
+                    (Some(r), _) => *r,
+                    (None, Some(m)) => Ranges::of_model(m).ok_or_else(|| {
+                        Invalid::new(
+                            key("mit_model"),
+                            format!("{} = {m:?}: not a known model; one of {:?}, or give [{}] with p_max, v_max, kp_max, kd_max, t_max", key("mit_model"), Ranges::MODELS, key("mit_ranges")),
+                        )
+                    })?,
+                    (None, None) => {
+                        return Err(Invalid::new(
+                            key("mit_model"),
+                            format!("{}: missing: an MIT motor needs its model (or {}) for its ranges", key("mit_model"), key("mit_ranges")),
+                        ));
+                    }
+                };
+                for (k, v) in [
+                    ("p_max", r.p_max),
+                    ("v_max", r.v_max),
+                    ("kp_max", r.kp_max),
+                    ("kd_max", r.kd_max),
+                    ("t_max", r.t_max),
+                ] {
+                    if !(v.is_finite() && v > 0.0) {
+                        return Err(Invalid::range(
+                            &key(&format!("mit_ranges.{k}")),
+                            v,
+                            "a finite value > 0",
+                        ));
+                    }
+                }
+                if kp > r.kp_max {
+                    return Err(Invalid::new(
+                        stiff_key,
+                        format!(
+                            "{stiff_key}: needs {kp:.3} N m/rad at {name}'s MIT motor, over its kp_max {}",
+                            r.kp_max
+                        ),
+                    ));
+                }
+                if kd > r.kd_max {
+                    return Err(Invalid::new(
+                        stiff_key,
+                        format!(
+                            "{stiff_key}: the damping needs {kd:.3} N m s/rad at {name}'s MIT motor, over its kd_max {}",
+                            r.kd_max
+                        ),
+                    ));
+                }
+            }
+            DriverKind::Moteus => {
+                let kp_full = j.moteus_kp.unwrap_or(f64::NAN);
+                let kd_full = j.moteus_kd.unwrap_or(f64::NAN);
+                if !(kp_full.is_finite() && kp_full > 0.0) {
+                    return Err(Invalid::range(
+                        &key("moteus_kp"),
+                        kp_full,
+                        "the controller's servo.pid_position.kp, N m/rev (> 0)",
+                    ));
+                }
+                if !(kd_full.is_finite() && kd_full > 0.0) {
+                    return Err(Invalid::range(
+                        &key("moteus_kd"),
+                        kd_full,
+                        "the controller's servo.pid_position.kd, N m s/rev (> 0)",
+                    ));
+                }
+                if j.moteus_source > 127 {
+                    return Err(Invalid::range(
+                        &key("moteus_source"),
+                        j.moteus_source,
+                        "0..=127",
+                    ));
+                }
+                if kp > kp_full / TAU {
+                    return Err(Invalid::new(
+                        stiff_key,
+                        format!(
+                            "{stiff_key}: needs {:.3} N m/rev at {name}'s moteus, over its servo.pid_position.kp {kp_full} (kp_scale can only lower it)",
+                            kp * TAU
+                        ),
+                    ));
+                }
+                if kd > kd_full / TAU {
+                    return Err(Invalid::new(
+                        stiff_key,
+                        format!(
+                            "{stiff_key}: the damping needs {:.3} N m s/rev at {name}'s moteus, over its servo.pid_position.kd {kd_full}",
+                            kd * TAU
+                        ),
+                    ));
+                }
+            }
+            DriverKind::Odrive => {
+                // Cascaded loops: stiffness is pos_gain * vel_gain, with vel_gain the damping.
+                let damp_key = if which == 0 {
+                    "impedance.hip_damping_nm_s_per_rad"
+                } else {
+                    "impedance.stance_damping_n_s_per_m"
+                };
+                let imp_d = if which == 0 {
+                    imp.hip_damping_nm_s_per_rad
+                } else {
+                    imp.stance_damping_n_s_per_m
+                        .min(imp.flight_damping_n_s_per_m)
+                };
+                if imp_d <= 0.0 {
+                    return Err(Invalid::new(
+                        damp_key,
+                        format!(
+                            "{damp_key} = {imp_d}: an ODrive gives stiffness only with damping (its position loop drives its velocity loop); > 0"
+                        ),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn validate_ids(&self) -> Result<(), Invalid> {
+        let hip = self.driver(0).bus_ids();
+        let len = self.driver(1).bus_ids();
+        // Two joints on one id: the same protocol with the same id (replies to a shared MIT
+        // master id or a shared moteus source are told apart by the motor's id).
+        if self.hip.driver == self.length.driver && self.hip.id == self.length.id {
+            return Err(Invalid::new(
+                "length.id",
+                format!(
+                    "hip.id and length.id are both {:?} on {:?}: two joints on one id",
+                    self.hip.id, self.hip.driver
+                ),
+            ));
+        }
+        let shared_reply = |a: &BusId| a.what.contains("reply") || a.what.contains("master");
+        for a in &hip {
+            for b in &len {
+                if a.id == b.id && a.extended == b.extended && !(shared_reply(a) && shared_reply(b))
+                {
+                    return Err(Invalid::new(
+                        "length.id",
+                        format!(
+                            "hip's {} and length's {} share id 0x{:X}",
+                            a.what, b.what, a.id
+                        ),
+                    ));
+                }
+            }
+        }
+        if self.motor_iface.is_some() {
+            return Ok(());
+        }
+        // On the bus our messages use, no driver id may be one of ours.
+        for (name, ids) in [("hip", &hip), ("length", &len)] {
+            for b in ids.iter() {
+                if let Some((kind, foot)) = self.ids.lookup(b.id, b.extended) {
+                    let ours = if kind.per_foot() {
+                        format!("{} of foot {foot}", kind.name())
+                    } else {
+                        kind.name().to_string()
+                    };
+                    return Err(Invalid::new(
+                        format!("{name}.id"),
+                        format!(
+                            "{name}.id: {} (0x{:X}) is {ours}'s identifier on the shared bus; pick another id, move ours with [ids], or put the motors on their own bus (motor_iface)",
+                            b.what, b.id
+                        ),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    pub(crate) const MIT_PRISMATIC: &str = r#"
+foot = 0
+[kinematics]
+type = "prismatic"
+min_length_m = 0.10
+max_length_m = 0.20
+[hip]
+driver = "mit"
+id = 1
+mit_model = "AK80-6-V1.1"
+[length]
+driver = "mit"
+id = 2
+metres_per_turn = 0.25
+mit_model = "AK80-6-V1.1"
+"#;
+
+    fn refused(text: &str) -> String {
+        match LegConfig::from_text(text, "leg.toml") {
+            Ok(_) => panic!("accepted:\n{text}"),
+            Err(e) => e.to_string(),
+        }
+    }
+
+    #[test]
+    fn the_shipped_example_is_valid() {
+        let c = LegConfig::from_text(include_str!("../../examples/leg.toml"), "examples/leg.toml")
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(c.rate_hz, 500.0);
+    }
+
+    #[test]
+    fn the_example_is_valid_and_maps_joints() {
+        let c = LegConfig::from_text(MIT_PRISMATIC, "leg.toml").unwrap();
+        let m = c.map(1);
+        // 0.25 m per turn: 1 cm of leg is 0.04 turns.
+        assert!((m.to_driver(0.01) - 0.04 * TAU).abs() < 1e-12);
+        assert!((m.to_joint(m.to_driver(0.137)) - 0.137).abs() < 1e-12);
+        let (kp, _) = c.length_gains_needed();
+        // 1000 N/m through 0.25 m/turn: 1000 * (0.25 / 2 pi)^2 N m/rad.
+        assert!((kp - 1000.0 * (0.25 / TAU).powi(2)).abs() < 1e-9);
+    }
+
+    #[test]
+    fn bad_configs_are_refused_naming_the_key() {
+        let e = refused(&MIT_PRISMATIC.replace("id = 2\n", ""));
+        assert!(e.contains("length.id") && e.contains("no CAN id"), "{e}");
+        let two_link = MIT_PRISMATIC
+            .replace(
+                "type = \"prismatic\"",
+                "type = \"two-link\"\nthigh_m = 0.0\nshank_m = 0.1\nknee_sign = 1.0",
+            )
+            .replace("metres_per_turn = 0.25\n", "");
+        let e = refused(&two_link);
+        assert!(e.contains("kinematics.thigh_m"), "{e}");
+        let e = refused(&MIT_PRISMATIC.replace(
+            "foot = 0",
+            "foot = 0\n[impedance]\nhip_stiffness_nm_per_rad = 900.0",
+        ));
+        assert!(
+            e.contains("impedance.hip_stiffness_nm_per_rad") && e.contains("kp_max"),
+            "{e}"
+        );
+        let e = refused(&MIT_PRISMATIC.replace("id = 2", "id = 1"));
+        assert!(
+            e.contains("length.id") && e.contains("two joints on one id"),
+            "{e}"
+        );
+        let e = refused(&MIT_PRISMATIC.replace("AK80-6-V1.1\"\n[length]", "AK99\"\n[length]"));
+        assert!(e.contains("hip.mit_model"), "{e}");
+        let e = refused(&MIT_PRISMATIC.replace("metres_per_turn = 0.25\n", ""));
+        assert!(e.contains("length.metres_per_turn"), "{e}");
+        let e = refused(&MIT_PRISMATIC.replace(
+            "[hip]\ndriver = \"mit\"\nid = 1",
+            "[hip]\ndriver = \"odrive\"\nid = 8",
+        ));
+        assert!(
+            e.contains("hip.id") && e.contains("FootContact") && e.contains("0x100"),
+            "{e}"
+        );
+        let e = refused(&MIT_PRISMATIC.replace("foot = 0", "foot = 0\nrate_hz = 5000"));
+        assert!(e.contains("rate_hz"), "{e}");
+        let e = refused(&MIT_PRISMATIC.replace("foot = 0", "foot = 0\nbogus = 1"));
+        assert!(e.contains("bogus"), "{e}");
+    }
+
+    #[test]
+    fn a_colliding_driver_is_fine_on_its_own_bus() {
+        let own = MIT_PRISMATIC
+            .replace("foot = 0", "foot = 0\nmotor_iface = \"can1\"")
+            .replace(
+                "[hip]\ndriver = \"mit\"\nid = 1",
+                "[hip]\ndriver = \"odrive\"\nid = 8",
+            );
+        LegConfig::from_text(&own, "leg.toml").unwrap();
+    }
+
+    #[test]
+    fn moteus_stiffness_over_its_configured_kp_is_refused() {
+        let m = MIT_PRISMATIC
+            .replace("[hip]\ndriver = \"mit\"\nid = 1\nmit_model = \"AK80-6-V1.1\"", "[hip]\ndriver = \"moteus\"\nid = 3\nmoteus_kp = 200.0\nmoteus_kd = 2.0")
+            .replace("foot = 0", "foot = 0\n[impedance]\nhip_stiffness_nm_per_rad = 20.0\nhip_damping_nm_s_per_rad = 0.1");
+        LegConfig::from_text(&m, "leg.toml").unwrap();
+        let e = refused(
+            &m.replace(
+                "hip_stiffness_nm_per_rad = 20.0",
+                "hip_stiffness_nm_per_rad = 9.0",
+            )
+            .replace("moteus_kp = 200.0", "moteus_kp = 10.0"),
+        );
+        assert!(
+            e.contains("impedance.hip_stiffness_nm_per_rad") && e.contains("servo.pid_position.kp"),
+            "{e}"
+        );
+    }
+}
