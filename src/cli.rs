@@ -71,6 +71,29 @@ pub fn load_track(
 
 /// `--config FILE` of the node (defaults without one), its `terrains` key overridden by
 /// `--terrains` when given.
+/// `--leg PROTOCOL [--leg-config FILE]`: the file's leg, whose drivers must speak PROTOCOL, or
+/// the built-in prismatic leg on that protocol's motors.
+pub fn leg_config(
+    kind: Option<leg::DriverKind>,
+    path: Option<&Path>,
+) -> Result<Option<leg::LegConfig>> {
+    let Some(kind) = kind else {
+        return Ok(None);
+    };
+    let Some(p) = path else {
+        return Ok(Some(leg::LegConfig::example(kind)));
+    };
+    let c = leg::LegConfig::from_file(p).context("--leg-config")?;
+    anyhow::ensure!(
+        c.speaks(kind),
+        "--leg-config {}: its joints' drivers are {:?} and {:?}, not --leg {kind:?} on both",
+        p.display(),
+        c.hip.driver,
+        c.length.driver
+    );
+    Ok(Some(c))
+}
+
 pub fn load_node_config(path: Option<&Path>, terrains: &TerrainsArg) -> Result<NodeConfig> {
     let mut cfg = match path {
         Some(p) => NodeConfig::load(p).context("--config")?,

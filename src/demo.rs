@@ -51,6 +51,15 @@ pub struct DemoArgs {
     /// For the track's terrain names and the node's and controller's catalogs.
     #[command(flatten)]
     pub terrains: crate::cli::TerrainsArg,
+    /// The leg through motors: the simulated leg answers as two motors of this protocol
+    /// (moteus, odrive, mit) and a leg bridge (`presrs leg`) stands between the controller and
+    /// them.
+    #[arg(long, value_name = "PROTOCOL", conflicts_with = "realtime")]
+    pub leg: Option<leg::DriverKind>,
+    /// The leg's config for `--leg` (default: a prismatic leg on that protocol's motors,
+    /// `LegConfig::example`).
+    #[arg(long, value_name = "FILE", requires = "leg")]
+    pub leg_config: Option<PathBuf>,
     /// `--mcap FILE` records every frame on the bus and the simulator's truth; `--foxglove`
     /// serves them live, with the loop paced to real time so there is something to watch.
     #[command(flatten)]
@@ -97,6 +106,7 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
         controller_restart: None,
         node_restart: None,
         link_down: None,
+        leg: crate::cli::leg_config(a.leg, a.leg_config.as_deref())?,
     };
     let show = !a.json;
     let recording = a.live.mcap.is_some() || a.live.foxglove.is_some();
@@ -104,6 +114,7 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
         !(recording && a.realtime),
         "--mcap and --foxglove record the lock-step demo (paced to real time with --foxglove); drop --realtime"
     );
+    let mut leg_report = None;
     let (falls, rows) = if a.realtime {
         if show {
             eprintln!(
@@ -162,9 +173,11 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
             r.finish_logged();
         }
         let run = run?;
-        (run.falls(), run.rows)
+        let falls = run.falls();
+        leg_report = run.leg_state.zip(run.leg_counters);
+        (falls, run.rows)
     };
-    summarize(&rows, falls, &track, &ctrl_cfg, &known, &a)
+    summarize(&rows, falls, &track, &ctrl_cfg, &known, &a, leg_report)
 }
 
 /// The closed loop on the wall clock: `presrs sim`, `presrs node` and `presrs controller`'s own
@@ -185,6 +198,7 @@ fn summarize(
     cfg: &ControllerConfig,
     known: &[String],
     a: &DemoArgs,
+    leg: Option<(sim::service::LegStateCheck, leg::LegCounters)>,
 ) -> Result<ExitCode> {
     let sum = Summary::of(rows, &cfg.terrain_gaits).with_unknown(rows, known, cfg.safe_gait);
     let (n, correct, accuracy, switches) = (sum.steps, sum.correct, sum.accuracy, sum.switches);
@@ -215,6 +229,11 @@ fn summarize(
                 "steps_to_safe_gait": u.steps_to_safe_gait,
             })).collect::<Vec<_>>(),
             "csv": a.csv.display().to_string(),
+            "leg": leg.map(|(state, counters)| serde_json::json!({
+                "protocol": a.leg.map(|k| format!("{k:?}").to_lowercase()),
+                "leg_state": state,
+                "bridge": counters,
+            })),
         });
         println!("{j}");
     } else {
@@ -224,6 +243,23 @@ fn summarize(
         );
         println!("steps from a terrain change to its gait: {delays:?} (max {max_delay})");
         println!("falls: {falls}");
+        if let Some((st, c)) = leg {
+            println!(
+                "leg through {:?} motors: {} LegState from the encoders ({} at their own timestamp); error against the truth, median / 95th percentile / largest: angle {:.4} / {:.4} / {:.4} rad, length {:.2} / {:.2} / {:.2} mm; {} LegCommands, {} clamped, {} malformed replies",
+                a.leg.unwrap_or(leg::DriverKind::Mit),
+                st.frames,
+                st.at_timestamp,
+                st.angle_err_rad[0],
+                st.angle_err_rad[1],
+                st.angle_err_rad[2],
+                st.length_err_m[0] * 1e3,
+                st.length_err_m[1] * 1e3,
+                st.length_err_m[2] * 1e3,
+                c.commands,
+                c.clamped,
+                c.malformed_replies
+            );
+        }
         for (t, u) in &sum.unknown_terrains {
             let to_safe: Vec<String> = u
                 .steps_to_safe_gait

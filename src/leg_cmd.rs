@@ -13,11 +13,15 @@ use crate::runtime::Signals;
 #[derive(clap::Args)]
 pub struct LegArgs {
     /// CAN interface LegCommand comes on (can0, vcan0).
-    #[arg(long)]
-    pub iface: String,
+    #[arg(long, required_unless_present = "example")]
+    pub iface: Option<String>,
     /// The leg: geometry, joints and drivers, impedance, timeouts (docs/real-robot.md, "The leg").
-    #[arg(long)]
-    pub config: PathBuf,
+    #[arg(long, required_unless_present = "example")]
+    pub config: Option<PathBuf>,
+    /// Print the built-in prismatic leg on this protocol's motors (moteus, odrive, mit) as a
+    /// config file to start from, and exit.
+    #[arg(long, value_name = "PROTOCOL", conflicts_with_all = ["iface", "config"])]
+    pub example: Option<leg::DriverKind>,
     /// Read every joint and send LegState, move nothing (bring-up).
     #[arg(long)]
     pub check: bool,
@@ -32,21 +36,27 @@ pub fn run(a: LegArgs) -> Result<ExitCode> {
         "--time-scale {}: expected a positive factor (1 = real time)",
         a.time_scale
     );
-    let cfg = leg::LegConfig::from_file(&a.config).context("--config")?;
+    if let Some(kind) = a.example {
+        print!("{}", leg::LegConfig::example(kind).to_toml()?);
+        return Ok(ExitCode::SUCCESS);
+    }
+    let (Some(iface), Some(path)) = (a.iface, a.config) else {
+        anyhow::bail!("--iface and --config are required (or --example PROTOCOL)");
+    };
+    let cfg = leg::LegConfig::from_file(&path).context("--config")?;
     if let Some(m) = &cfg.motor_iface {
         anyhow::ensure!(
-            m == &a.iface,
-            "{}: motor_iface = {m:?}: a second bus for the motors is not supported yet; \
-             put the motors on --iface {} (the config check refuses ids that collide with ours)",
-            a.config.display(),
-            a.iface
+            m == &iface,
+            "{}: motor_iface = {m:?}: a second bus for the motors is not supported yet; put the \
+             motors on --iface {iface} (the config check refuses ids that collide with ours)",
+            path.display(),
         );
     }
     let signals = Signals::install()?;
     let c = leg::bridge::run(
         cfg,
         a.check,
-        &BusSource::Iface(a.iface),
+        &BusSource::Iface(iface),
         a.time_scale,
         &signals.stop,
     );

@@ -57,6 +57,18 @@ pub struct SimArgs {
     /// Track terrains and reported names come from this catalog.
     #[command(flatten)]
     pub terrains: crate::cli::TerrainsArg,
+    /// The leg as two motors of this protocol (moteus, odrive, mit): the simulator takes their
+    /// commands from a leg bridge (`presrs leg`) instead of LegCommand and answers as the
+    /// drivers do; LegState is then the bridge's.
+    #[arg(long, value_name = "PROTOCOL", conflicts_with = "log")]
+    pub leg: Option<leg::DriverKind>,
+    /// The leg's config for `--leg` (the same file `presrs leg` runs with); default: the
+    /// built-in prismatic leg on that protocol's motors.
+    #[arg(long, value_name = "FILE", requires = "leg")]
+    pub leg_config: Option<PathBuf>,
+    /// Fault drill for `--leg`: the length joint's driver goes silent at this robot time (s).
+    #[arg(long, value_name = "SECONDS", requires = "leg")]
+    pub leg_silent_at: Option<f64>,
     /// `--mcap FILE`: every frame on the bus (or, with --log, every frame the robot sends) and
     /// the simulator's truth per leg (`/sim/legN`: speed, position, true terrain) as MCAP;
     /// `--foxglove`: the same live.
@@ -84,6 +96,8 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
             ..Default::default()
         },
         sensor: a.foot.sensor,
+        leg: crate::cli::leg_config(a.leg, a.leg_config.as_deref())?,
+        leg_silent_at_s: a.leg_silent_at,
         ..Default::default()
     };
     let ids = cfg.ids.clone();

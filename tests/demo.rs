@@ -124,3 +124,53 @@ fn sand_the_model_never_saw_is_unknown_and_gets_the_safe_gait() {
     assert_eq!(j["falls"], 0, "{j}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Issue 27: the closed loop through each motor protocol (the simulated leg answering as two
+/// motors, a leg bridge between the controller and them) hops as the direct leg does: no fall,
+/// accuracy within 2 points and gait switching within 1 step of the direct leg on the same
+/// seed, and the bridge's LegState (from the encoders) within 0.01 rad and 2 mm of the truth.
+#[test]
+fn demo_through_each_motor_protocol_matches_the_direct_leg() {
+    let dir = std::env::temp_dir().join(format!("presrs-demo-leg-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let run = |leg: Option<&str>| -> serde_json::Value {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_presrs"));
+        c.args(["demo", "--steps", "120", "--json", "--csv"])
+            .arg(dir.join("steps.csv"))
+            .env("XDG_CACHE_HOME", &dir);
+        if let Some(l) = leg {
+            c.args(["--leg", l]);
+        }
+        serde_json::from_slice(&common::output_ok(&mut c).stdout).unwrap()
+    };
+    let direct = run(None);
+    let acc = |j: &serde_json::Value| j["accuracy"].as_f64().unwrap();
+    let delay = |j: &serde_json::Value| j["steps_to_switch_max"].as_u64().unwrap();
+    for proto in ["mit", "moteus", "odrive"] {
+        let j = run(Some(proto));
+        eprintln!(
+            "--leg {proto}: accuracy {:.3} (direct {:.3}), max steps to switch {} (direct {}), falls {}, leg {}",
+            acc(&j),
+            acc(&direct),
+            delay(&j),
+            delay(&direct),
+            j["falls"],
+            j["leg"]
+        );
+        assert_eq!(j["falls"], 0, "{proto}: {j}");
+        assert!(acc(&j) >= acc(&direct) - 0.02, "{proto}: {j}");
+        assert!(delay(&j) <= delay(&direct) + 1, "{proto}: {j}");
+        let ls = &j["leg"]["leg_state"];
+        assert!(ls["frames"].as_u64().unwrap() > 10_000, "{proto}: {ls}");
+        assert!(
+            ls["angle_err_rad"][2].as_f64().unwrap() < 0.01,
+            "{proto}: {ls}"
+        );
+        assert!(
+            ls["length_err_m"][2].as_f64().unwrap() < 0.002,
+            "{proto}: {ls}"
+        );
+        assert_eq!(j["leg"]["bridge"]["malformed_replies"], 0, "{proto}: {j}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

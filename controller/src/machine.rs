@@ -4,11 +4,14 @@
 //! Time is passed in (`now_us`), so tests and the demo drive it with a simulated clock.
 //!
 //! Stance timing runs on the *foot's* clock: the touchdown is the FootContact edge's own
-//! timestamp, bounce is judged between edge timestamps, and "now" in stance is the latest foot
-//! timestamp (FootContact, LegState) plus our time since it arrived. Frames from the leg can
-//! arrive late and in bursts (a loaded computer, a slow simulator); judged by arrival time, a
-//! burst holding a touchdown and the liftoff looks like one bounce, and the stance law runs
-//! late by the delay.
+//! timestamp, bounce is judged between edge timestamps, and "now" in stance is the latest
+//! FootContact timestamp (the foot reports at 100 Hz besides its edges) plus our time since it
+//! arrived. Frames from the leg can arrive late and in bursts (a loaded computer, a slow
+//! simulator); judged by arrival time, a burst holding a touchdown and the liftoff looks like
+//! one bounce, and the stance law runs late by the delay. LegState runs on the leg's clock,
+//! another device's (the leg bridge's, `presrs leg`): its timestamps judge gaps in the leg's
+//! own stream only. Mixed into the foot's clock they put the stance law a second off when the
+//! two clocks started a second apart (every hop fell, measured with the bridge on vcan).
 
 use std::collections::BTreeMap;
 
@@ -198,6 +201,19 @@ impl ControllerConfig {
     }
 }
 
+/// Unwraps a 32-bit µs timestamp (wrapping every 71 min) on `clock`, relative to its latest
+/// (a step of up to +-35 min either way), and moves the clock on when it is newer.
+fn unwrap_clock(clock: &mut Option<(u64, u64)>, ts: u32, now_us: u64) -> u64 {
+    let t = match *clock {
+        Some((last, _)) => last.wrapping_add(ts.wrapping_sub(last as u32) as i32 as i64 as u64),
+        None => ts as u64,
+    };
+    if clock.is_none_or(|(last, _)| t >= last) {
+        *clock = Some((t, now_us));
+    }
+    t
+}
+
 /// How far the foot's clock is extrapolated past its latest timestamp, µs (two frame periods).
 pub const FOOT_CLOCK_HOLDOVER_US: u64 = 20_000;
 /// A stance outside these bounds (µs) was not a step of the gait (the paper's: ~140 ms).
@@ -299,6 +315,8 @@ pub struct Controller {
     touchdown_us: u64,
     /// The foot's clock: its latest timestamp (unwrapped to 64 bits) and our time when it came.
     foot_clock: Option<(u64, u64)>,
+    /// The leg's clock likewise (LegState timestamps: another device's clock).
+    leg_clock: Option<(u64, u64)>,
     leg_angle: f64,
     /// The beta_des eq. (5) aims at: the gait's, reached in steps after a switch.
     beta_des: f64,
@@ -358,6 +376,7 @@ impl Controller {
             last_edge_us: None,
             touchdown_us: 0,
             foot_clock: None,
+            leg_clock: None,
             leg_angle: 0.0,
             beta_des: b,
             beta_td: b,
@@ -395,22 +414,14 @@ impl Controller {
 
     /// Takes a foot timestamp (32-bit µs, wrapping every 71 min) and returns it unwrapped.
     fn foot_time(&mut self, ts: u32, now_us: u64) -> u64 {
-        let t = match self.foot_clock {
-            // Relative to the last one: a step of up to +-35 min either way.
-            Some((last, _)) => last.wrapping_add(ts.wrapping_sub(last as u32) as i32 as i64 as u64),
-            None => ts as u64,
-        };
-        if self.foot_clock.is_none_or(|(last, _)| t >= last) {
-            self.foot_clock = Some((t, now_us));
-        }
-        t
+        unwrap_clock(&mut self.foot_clock, ts, now_us)
     }
 
     /// A LegState stamped `ts`: a gap in the leg's regular stream ([`LEG_GAP_US`]) makes the
     /// phase unknown. Only a stream that was regular counts (the last interval within the
     /// gap): a leg that reports now and then has no gaps to find.
     fn leg_state(&mut self, ts: u32, now_us: u64) {
-        let t = self.foot_time(ts, now_us);
+        let t = unwrap_clock(&mut self.leg_clock, ts, now_us);
         if let Some(last) = self.last_leg_state_us {
             let gap = t.saturating_sub(last) > LEG_GAP_US;
             if gap && self.leg_state_regular {
@@ -431,8 +442,8 @@ impl Controller {
     }
 
     /// Now on the foot's clock: its latest timestamp plus our time since, for at most
-    /// [`FOOT_CLOCK_HOLDOVER_US`]. The leg reports every 10 ms; when its reports stop (a
-    /// stalled simulator, a loaded bus) the stance law waits for the leg instead of running
+    /// [`FOOT_CLOCK_HOLDOVER_US`]. The foot reports every 10 ms; when its reports stop (a
+    /// stalled simulator, a loaded bus) the stance law waits for the foot instead of running
     /// ahead of it.
     fn foot_now(&self, now_us: u64) -> u64 {
         match self.foot_clock {
@@ -1097,13 +1108,10 @@ mod tests {
         c.on_message(0, &contact(false, 1_000_400), 1_000_400, &mut |m| {
             out.push(m)
         }); // bounce
-        // The leg's 100 Hz report keeps the foot's clock fresh.
-        let ls = Message::LegState(protocol::messages::LegState {
-            leg_angle_rad: 0.4,
-            leg_length_m: 0.14,
-            timestamp_us: 1_060_000,
+        // The foot's 100 Hz report keeps its clock fresh.
+        c.on_message(0, &contact(true, 1_060_000), 1_060_000, &mut |m| {
+            out.push(m)
         });
-        c.on_message(0, &ls, 1_060_000, &mut |m| out.push(m));
         out.clear();
         c.tick(1_070_000, &mut |m| out.push(m));
         let g = c.gait().clone();
@@ -1140,16 +1148,18 @@ mod tests {
         c.on_message(0, &contact(true, 5_400_000), 9_001_000, &mut |m| {
             out.push(m)
         });
-        // The leg reports at foot time 5.460 s, arriving at our 9.061 s; at our 9.071 s the
+        // The foot reports at its time 5.460 s, arriving at our 9.061 s; at our 9.071 s the
         // stance law is at 70 ms of the foot's stance.
-        let ls = |foot_us: u32| {
-            Message::LegState(protocol::messages::LegState {
-                leg_angle_rad: 0.4,
-                leg_length_m: 0.14,
-                timestamp_us: foot_us,
-            })
-        };
-        c.on_message(0, &ls(5_460_000), 9_061_000, &mut |m| out.push(m));
+        c.on_message(0, &contact(true, 5_460_000), 9_061_000, &mut |m| {
+            out.push(m)
+        });
+        // A LegState on the leg's own clock (another device's, seconds apart) moves nothing.
+        let ls = Message::LegState(protocol::messages::LegState {
+            leg_angle_rad: 0.4,
+            leg_length_m: 0.14,
+            timestamp_us: 1_000_000,
+        });
+        c.on_message(0, &ls, 9_062_000, &mut |m| out.push(m));
         let stance_len = |c: &mut Controller, now: u64| {
             let mut out = Vec::new();
             c.next_cmd_us = 0;
@@ -1164,7 +1174,7 @@ mod tests {
         let g = c.gait().clone();
         let law = |t: f64| laws::aer_leg_length(t, g.zeta0, g.zeta_dev, g.omega, g.phi);
         assert!((stance_len(&mut c, 9_071_000) - law(0.07)).abs() < 1e-9);
-        // The leg's reports stop: the stance law holds 20 ms past the last one (80 ms), not
+        // The foot's reports stop: the stance law holds 20 ms past the last one (80 ms), not
         // 200 ms on.
         assert!((stance_len(&mut c, 9_261_000) - law(0.08)).abs() < 1e-9);
         // The foot's 32-bit clock wraps: an edge just after the wrap is still 100 ms later.

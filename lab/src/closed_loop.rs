@@ -46,6 +46,9 @@ pub struct LoopParams<'a> {
     /// The bus carries nothing from `.0` (simulated µs) for `.1` µs: every frame sent is lost,
     /// as on an interface that is down.
     pub link_down: Option<(u64, u64)>,
+    /// The leg through motors: the simulator's leg `foot` answers as this config's drivers and
+    /// a leg bridge ([`leg::LegService`]) between the controller and them (`presrs demo --leg`).
+    pub leg: Option<leg::LegConfig>,
 }
 
 impl<'a> LoopParams<'a> {
@@ -61,6 +64,7 @@ impl<'a> LoopParams<'a> {
             controller_restart: None,
             node_restart: None,
             link_down: None,
+            leg: None,
         }
     }
 }
@@ -72,6 +76,10 @@ pub struct LoopRun {
     pub rows: Vec<StepRecord>,
     /// When the hopper fell, simulated µs.
     pub fall_times_us: Vec<u64>,
+    /// With a leg of motors: its bridge's LegState against the truth.
+    pub leg_state: Option<sim::service::LegStateCheck>,
+    /// With a leg of motors: the bridge's counters.
+    pub leg_counters: Option<leg::LegCounters>,
 }
 
 impl LoopRun {
@@ -130,6 +138,8 @@ pub fn run_recorded(
         sim_cfg.gait = g;
     }
     sim_cfg.faults.initial_damage_pct = p.damage_pct;
+    sim_cfg.leg = p.leg.clone();
+    let mut bridge = p.leg.clone().map(|l| leg::LegService::new(l, false));
     let mut node_cfg = p.node.clone();
     // Lock-step simulated time: a refit lands at the step that asked for it, as in a replay.
     node_cfg.refit = node_cfg.refit.reproducible();
@@ -163,14 +173,18 @@ pub fn run_recorded(
         }
     };
     // Parts in turn within a millisecond: the robot (it hears the controller's last
-    // commands, then moves), the node, the controller.
-    let mut bus = LockStep::new(3, 1 << 16);
+    // commands, then moves), the node, the controller; with a leg of motors, its bridge last
+    // (it hears the motors' replies and the controller's command of this millisecond).
+    let mut bus = LockStep::new(4, 1 << 16);
     bus.start(0, &mut sim, &mut sent)?;
     if let Some(n) = node.as_mut() {
         bus.start(1, n, &mut sent)?;
     }
     if let Some(c) = ctrl.as_mut() {
         bus.start(2, c, &mut sent)?;
+    }
+    if let Some(b) = bridge.as_mut() {
+        bus.start(3, b, &mut sent)?;
     }
     let mut t_us = 0u64;
     let limit_us = (p.steps as u64 + 20) * 1_000_000;
@@ -206,10 +220,11 @@ pub fn run_recorded(
             bus.start(2, &mut c, &mut sent)?;
             ctrl = Some(c);
         }
-        let mut parts: [Option<&mut dyn Component>; 3] = [
+        let mut parts: [Option<&mut dyn Component>; 4] = [
             Some(&mut sim),
             node.as_mut().map(|n| n as &mut dyn Component),
             ctrl.as_mut().map(|c| c as &mut dyn Component),
+            bridge.as_mut().map(|b| b as &mut dyn Component),
         ];
         bus.step(t_us, &mut parts, &mut sent)?;
         for row in &sim.records()[reported..] {
@@ -219,6 +234,8 @@ pub fn run_recorded(
     }
     Ok(LoopRun {
         fall_times_us: sim.robot().falls.clone(),
+        leg_state: sim.leg_state_check(),
+        leg_counters: bridge.map(|b| b.counters()),
         rows: sim.into_records(),
     })
 }
@@ -298,6 +315,8 @@ pub fn run_realtime(
                 .iter()
                 .map(|t| (t * 1e6) as u64)
                 .collect(),
+            leg_state: None,
+            leg_counters: None,
         },
         switches,
     ))

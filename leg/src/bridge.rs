@@ -83,6 +83,9 @@ impl LegService {
     /// The bridge for a checked config. With `check`, it never commands a joint: it reads
     /// them (`presrs leg --check`).
     pub fn new(cfg: LegConfig, check: bool) -> Self {
+        for w in cfg.quantisation_warnings() {
+            tracing::warn!("{w}");
+        }
         Self {
             kin: cfg.kinematics.clone(),
             maps: [cfg.map(0), cfg.map(1)],
@@ -221,11 +224,15 @@ impl LegService {
             c.touchdown_angle_rad
         };
         let inv = self.kin.inverse(c.leg_length_m, angle);
-        if inv.clamped {
+        // Only the command's own values count as out of the workspace (a measured angle past
+        // the limit, a fallen robot's, is clamped without a word).
+        let (lo, hi) = self.kin.length_range();
+        let commanded_out = !(lo..=hi).contains(&c.leg_length_m)
+            || (!stance && c.touchdown_angle_rad.abs() > crate::kinematics::MAX_ANGLE_RAD);
+        if inv.clamped && commanded_out {
             self.counters.clamped += 1;
             if !self.clamp_logged {
                 self.clamp_logged = true;
-                let (lo, hi) = self.kin.length_range();
                 tracing::warn!(
                     length_m = c.leg_length_m,
                     angle_rad = c.touchdown_angle_rad,
@@ -412,6 +419,10 @@ impl Component for LegService {
                 .is_some_and(|t| now_us.saturating_sub(t) <= timeout)
         });
         if fresh_joints && let Some((angle, length)) = self.measured() {
+            // Stamped when sent, at `rate_hz`: a regular stream, whose gaps mean lost reports
+            // to the controller. Stamped with the readings' time instead, every stall of a
+            // driver's answers (the simulator's, under emulation) showed as a gap, and the
+            // controller stopped commanding to listen for a takeover: the leg fell.
             self.send(
                 Message::LegState(LegState {
                     leg_angle_rad: angle,

@@ -10,7 +10,7 @@
 //!
 //! [kinematics]
 //! type = "prismatic"         # or "two-link" with thigh_m, shank_m, knee_sign
-//! min_length_m = 0.10
+//! min_length_m = 0.06
 //! max_length_m = 0.20
 //!
 //! [impedance]
@@ -29,7 +29,7 @@
 //! [length]                   # the screw, belt or rack; the knee of a two-link leg
 //! driver = "mit"
 //! id = 2
-//! metres_per_turn = 0.25     # prismatic only: leg length per turn of the joint
+//! metres_per_turn = 0.5     # prismatic only: leg length per turn of the joint
 //! mit_model = "AK80-6-V1.1"
 //! ```
 
@@ -56,6 +56,18 @@ pub enum DriverKind {
     Odrive,
     /// MIT mini-cheetah protocol.
     Mit,
+}
+
+impl std::str::FromStr for DriverKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "moteus" => Ok(Self::Moteus),
+            "odrive" => Ok(Self::Odrive),
+            "mit" => Ok(Self::Mit),
+            _ => Err(format!("{s:?}: one of moteus, odrive, mit")),
+        }
+    }
 }
 
 /// One joint: its driver and how the driver's shaft maps to the joint.
@@ -196,6 +208,42 @@ impl JointMap {
 }
 
 impl LegConfig {
+    /// A prismatic hopper leg on two motors of `kind`, with ids that share a bus with ours
+    /// (the simulator's `--leg KIND` without a file; examples/leg.toml is the MIT one):
+    /// MIT ids 1 and 2, moteus 3 and 4 (its replies on 0x300 and 0x400), ODrive nodes 1 and 2
+    /// (0x020-0x05F).
+    pub fn example(kind: DriverKind) -> Self {
+        let joint = |n: u8| match kind {
+            DriverKind::Mit => format!("driver = \"mit\"\nid = {n}\nmit_model = \"AK80-6-V1.1\"\n"),
+            DriverKind::Moteus => format!(
+                "driver = \"moteus\"\nid = {}\nmoteus_kp = 200.0\nmoteus_kd = 5.0\n",
+                n + 2
+            ),
+            DriverKind::Odrive => format!("driver = \"odrive\"\nid = {n}\n"),
+        };
+        let text = format!(
+            "[kinematics]\ntype = \"prismatic\"\nmin_length_m = 0.06\nmax_length_m = 0.20\n\
+             [hip]\n{}[length]\n{}metres_per_turn = 0.5\nzero_offset = 0.06\n",
+            joint(1),
+            joint(2)
+        );
+        match Self::from_text(&text, "example") {
+            Ok(c) => c,
+            // The three examples are checked by a unit test; this cannot be reached.
+            Err(e) => unreachable!("the {kind:?} example leg is invalid: {e}"),
+        }
+    }
+
+    /// The config as a TOML file.
+    pub fn to_toml(&self) -> Result<String, toml::ser::Error> {
+        toml::to_string(self)
+    }
+
+    /// Every joint's driver is `kind`.
+    pub fn speaks(&self, kind: DriverKind) -> bool {
+        self.hip.driver == Some(kind) && self.length.driver == Some(kind)
+    }
+
     /// Reads and checks a leg config (TOML, or JSON by extension).
     pub fn from_file(path: &Path) -> Result<Self, ConfigFileError> {
         let (text, name) = protocol::config::read_text(path)?;
@@ -283,6 +331,83 @@ impl LegConfig {
             g2 = g2.max(self.kinematics.length_gain(q).powi(2));
         }
         (m.stiffness_to_driver(k * g2), m.stiffness_to_driver(b * g2))
+    }
+
+    /// Gains an MIT motor carries more than 5% off (its 12-bit kp and kd counts), each with
+    /// the key, the value wanted and the value sent. `presrs leg` logs them at start: a leg
+    /// spring or damping a count away changes the hop (examples/leg.toml says by how much).
+    pub fn quantisation_warnings(&self) -> Vec<String> {
+        let imp = &self.impedance;
+        let mut out = Vec::new();
+        for which in 0..2 {
+            let (name, j) = self.joint(which);
+            if j.driver != Some(DriverKind::Mit) {
+                continue;
+            }
+            let Some(r) = self.mit_ranges(j) else {
+                continue;
+            };
+            let m = self.map(which);
+            let g2 = if which == 0 {
+                1.0
+            } else {
+                let (lo, hi) = self.kinematics.length_range();
+                let q = self.kinematics.inverse(0.5 * (lo + hi), 0.0).joints;
+                self.kinematics.length_gain(q).powi(2)
+            };
+            let gains: Vec<(&str, f64, f64)> = if which == 0 {
+                vec![
+                    (
+                        "impedance.hip_stiffness_nm_per_rad",
+                        imp.hip_stiffness_nm_per_rad,
+                        r.kp_max,
+                    ),
+                    (
+                        "impedance.hip_damping_nm_s_per_rad",
+                        imp.hip_damping_nm_s_per_rad,
+                        r.kd_max,
+                    ),
+                ]
+            } else {
+                vec![
+                    (
+                        "impedance.stance_stiffness_n_per_m",
+                        imp.stance_stiffness_n_per_m,
+                        r.kp_max,
+                    ),
+                    (
+                        "impedance.stance_damping_n_s_per_m",
+                        imp.stance_damping_n_s_per_m,
+                        r.kd_max,
+                    ),
+                    (
+                        "impedance.flight_stiffness_n_per_m",
+                        imp.flight_stiffness_n_per_m,
+                        r.kp_max,
+                    ),
+                    (
+                        "impedance.flight_damping_n_s_per_m",
+                        imp.flight_damping_n_s_per_m,
+                        r.kd_max,
+                    ),
+                ]
+            };
+            for (key, v, max) in gains {
+                let want = m.stiffness_to_driver(v * g2);
+                if want <= 0.0 {
+                    continue;
+                }
+                let count = max / 4095.0;
+                let sent = (want / count).round() * count;
+                if (sent - want).abs() > 0.05 * want {
+                    out.push(format!(
+                        "{key} = {v}: {name}'s MIT motor gets {sent:.5} for {want:.5} ({:+.0}%: its count is {count:.5}); a gear or screw with more turns per metre or radian makes the count finer",
+                        (sent / want - 1.0) * 100.0
+                    ));
+                }
+            }
+        }
+        out
     }
 
     /// Every check; the first failure, naming its key.
@@ -691,7 +816,7 @@ mod tests {
 foot = 0
 [kinematics]
 type = "prismatic"
-min_length_m = 0.10
+min_length_m = 0.06
 max_length_m = 0.20
 [hip]
 driver = "mit"
@@ -700,7 +825,7 @@ mit_model = "AK80-6-V1.1"
 [length]
 driver = "mit"
 id = 2
-metres_per_turn = 0.25
+metres_per_turn = 0.5
 mit_model = "AK80-6-V1.1"
 "#;
 
@@ -708,6 +833,33 @@ mit_model = "AK80-6-V1.1"
         match LegConfig::from_text(text, "leg.toml") {
             Ok(_) => panic!("accepted:\n{text}"),
             Err(e) => e.to_string(),
+        }
+    }
+
+    #[test]
+    fn coarse_mit_gains_are_said_and_the_example_has_none() {
+        let c = LegConfig::from_text(include_str!("../../examples/leg.toml"), "leg.toml").unwrap();
+        assert_eq!(c.quantisation_warnings(), Vec::<String>::new());
+        let coarse = include_str!("../../examples/leg.toml")
+            .replace("metres_per_turn = 0.5", "metres_per_turn = 0.25");
+        let c = LegConfig::from_text(&coarse, "leg.toml").unwrap();
+        let w = c.quantisation_warnings();
+        assert!(
+            w.iter()
+                .any(|w| w.starts_with("impedance.stance_damping_n_s_per_m")),
+            "{w:?}"
+        );
+    }
+
+    #[test]
+    fn the_built_in_examples_are_valid() {
+        for k in [DriverKind::Mit, DriverKind::Moteus, DriverKind::Odrive] {
+            let c = LegConfig::example(k);
+            assert!(c.speaks(k));
+            c.validate().unwrap();
+            // Printed (`presrs leg --example`) and read back, the same leg.
+            let back = LegConfig::from_text(&c.to_toml().unwrap(), "example.toml").unwrap();
+            assert_eq!(back, c);
         }
     }
 
@@ -722,12 +874,12 @@ mit_model = "AK80-6-V1.1"
     fn the_example_is_valid_and_maps_joints() {
         let c = LegConfig::from_text(MIT_PRISMATIC, "leg.toml").unwrap();
         let m = c.map(1);
-        // 0.25 m per turn: 1 cm of leg is 0.04 turns.
-        assert!((m.to_driver(0.01) - 0.04 * TAU).abs() < 1e-12);
+        // 0.5 m per turn: 1 cm of leg is 0.02 turns.
+        assert!((m.to_driver(0.01) - 0.02 * TAU).abs() < 1e-12);
         assert!((m.to_joint(m.to_driver(0.137)) - 0.137).abs() < 1e-12);
         let (kp, _) = c.length_gains_needed();
-        // 1000 N/m through 0.25 m/turn: 1000 * (0.25 / 2 pi)^2 N m/rad.
-        assert!((kp - 1000.0 * (0.25 / TAU).powi(2)).abs() < 1e-9);
+        // 1000 N/m through 0.5 m/turn: 1000 * (0.5 / 2 pi)^2 N m/rad.
+        assert!((kp - 1000.0 * (0.5 / TAU).powi(2)).abs() < 1e-9);
     }
 
     #[test]
@@ -739,7 +891,7 @@ mit_model = "AK80-6-V1.1"
                 "type = \"prismatic\"",
                 "type = \"two-link\"\nthigh_m = 0.0\nshank_m = 0.1\nknee_sign = 1.0",
             )
-            .replace("metres_per_turn = 0.25\n", "");
+            .replace("metres_per_turn = 0.5\n", "");
         let e = refused(&two_link);
         assert!(e.contains("kinematics.thigh_m"), "{e}");
         let e = refused(&MIT_PRISMATIC.replace(
@@ -757,7 +909,7 @@ mit_model = "AK80-6-V1.1"
         );
         let e = refused(&MIT_PRISMATIC.replace("AK80-6-V1.1\"\n[length]", "AK99\"\n[length]"));
         assert!(e.contains("hip.mit_model"), "{e}");
-        let e = refused(&MIT_PRISMATIC.replace("metres_per_turn = 0.25\n", ""));
+        let e = refused(&MIT_PRISMATIC.replace("metres_per_turn = 0.5\n", ""));
         assert!(e.contains("length.metres_per_turn"), "{e}");
         let e = refused(&MIT_PRISMATIC.replace(
             "[hip]\ndriver = \"mit\"\nid = 1",

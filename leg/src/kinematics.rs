@@ -86,20 +86,26 @@ impl Kinematics {
             angle.clamp(-MAX_ANGLE_RAD, MAX_ANGLE_RAD)
         };
         let clamped = l != length || a != angle;
-        let joints = match *self {
-            Kinematics::Prismatic { .. } => [a, l],
+        let joints = self.joints_of(l, a);
+        Inverse { joints, clamped }
+    }
+
+    /// The joint coordinates of a leg that is at `length` and `angle`, without the workspace's
+    /// limits (only the geometry's): a simulated encoder reads a leg pressed past its stop.
+    pub fn joints_of(&self, length: f64, angle: f64) -> [f64; 2] {
+        match *self {
+            Kinematics::Prismatic { .. } => [angle, length],
             Kinematics::TwoLink {
                 thigh_m: l1,
                 shank_m: l2,
                 knee_sign,
                 ..
             } => {
-                let c = ((l * l - l1 * l1 - l2 * l2) / (2.0 * l1 * l2)).clamp(-1.0, 1.0);
+                let c = ((length * length - l1 * l1 - l2 * l2) / (2.0 * l1 * l2)).clamp(-1.0, 1.0);
                 let q2 = knee_sign.signum() * c.acos();
-                [a - knee_offset(l1, l2, q2), q2]
+                [angle - knee_offset(l1, l2, q2), q2]
             }
-        };
-        Inverse { joints, clamped }
+        }
     }
 
     /// Leg `(angle rad, length m)` for joint coordinates `[hip, length joint]`.

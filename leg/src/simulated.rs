@@ -251,7 +251,7 @@ impl SimulatedLeg {
 
     /// Sends what the motors owe at `now_us`, for the hopper's true leg `angle` and `length`.
     pub fn emit(&mut self, now_us: u64, angle: f64, length: f64, dt_s: f64, out: &mut Outbox) {
-        let q = self.kin.inverse(length, angle).joints;
+        let q = self.kin.joints_of(length, angle);
         let estimate = now_us >= self.next_estimate_us;
         if estimate {
             self.next_estimate_us = now_us + ODRIVE_ESTIMATE_US;

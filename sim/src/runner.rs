@@ -200,6 +200,12 @@ pub struct SimConfig {
     pub command_timeout_ms: u64,
     /// The CAN identifiers.
     pub ids: IdConfig,
+    /// Leg `foot` of this config speaks to the bus as two motors (its drivers' protocols)
+    /// instead of taking LegCommand and sending LegState: `presrs sim --leg`.
+    pub leg: Option<leg::LegConfig>,
+    /// A leg of motors: its length joint's driver goes silent at this robot time, s (a fault
+    /// drill: the bridge must stop the leg and name the joint).
+    pub leg_silent_at_s: Option<f64>,
 }
 
 impl Default for SimConfig {
@@ -212,19 +218,34 @@ impl Default for SimConfig {
             sensor: crate::DEFAULT_SENSOR,
             command_timeout_ms: 100,
             ids: IdConfig::default(),
+            leg: None,
+            leg_silent_at_s: None,
         }
     }
 }
 
-/// The leg's commands: the controller's when fresh, its own laws' otherwise.
+/// The leg's commands: the controller's when fresh, its own laws' otherwise; or, for a leg of
+/// motors, what the motors were told.
 struct Commands {
     fixed: FixedGait,
     last: Option<(LegCommand, u64)>,
     now_us: u64,
     timeout_us: u64,
+    /// The leg as two motors. Until the bridge first commands them the simulator holds the
+    /// leg with its own laws (a lab holds its robot until the motors are live); from then on
+    /// the motors alone move it, a damped stop included (the hopper then falls).
+    motors: Option<leg::simulated::SimulatedLeg>,
 }
 
 impl Commands {
+    /// The motors' set point, once they have been commanded.
+    fn motor_set_point(&self) -> Option<leg::simulated::LegSetPoint> {
+        self.motors
+            .as_ref()
+            .filter(|m| m.commanded)
+            .map(|m| m.set_point())
+    }
+
     fn external(&self) -> Option<&LegCommand> {
         self.last
             .as_ref()
@@ -235,15 +256,22 @@ impl Commands {
 
 impl LegCommands for Commands {
     fn stance_length(&mut self, t: f64) -> f64 {
+        if let Some(sp) = self.motor_set_point() {
+            return sp.length_m;
+        }
         match self.external() {
             Some(c) if c.phase == Phase::Stance => c.leg_length_m,
             _ => self.fixed.stance_length(t),
         }
     }
     fn flight_length(&self) -> f64 {
-        self.fixed.flight_length()
+        self.motor_set_point()
+            .map_or(self.fixed.flight_length(), |sp| sp.length_m)
     }
     fn touchdown_angle(&self) -> f64 {
+        if let Some(sp) = self.motor_set_point() {
+            return sp.angle_rad;
+        }
         self.external()
             .map_or(self.fixed.touchdown_angle(), |c| c.touchdown_angle_rad)
     }
@@ -261,6 +289,8 @@ struct Leg {
     image_seq: u8,
     /// Pending switch edges (time µs, state), bounce included.
     edges: Vec<(u64, bool)>,
+    /// The switch as last sent.
+    switch: bool,
 }
 
 /// What the simulator knows about a step (ground truth for the demo and tests).
@@ -314,12 +344,18 @@ impl SimRobot {
                         last: None,
                         now_us: 0,
                         timeout_us: cfg.command_timeout_ms * 1000,
+                        motors: cfg
+                            .leg
+                            .as_ref()
+                            .filter(|l| l.foot == i)
+                            .map(|l| leg::simulated::SimulatedLeg::new(l, seed ^ 0x1e9)),
                     },
                     skin,
                     contact: None,
                     stance_terrain: Terrain::WOOD,
                     pixels: vec![0; params.rows * params.cols],
                     contact_seq: 0,
+                    switch: false,
                     image_seq: 0,
                     edges: Vec::new(),
                 }
@@ -358,11 +394,19 @@ impl SimRobot {
             .map(|l| l.cmd.external().map_or(l.cmd.fixed.gait.id, |c| c.gait))
     }
 
-    /// A frame from a controller.
+    /// A frame from a controller (or, to a leg of motors, from its bridge).
     pub fn on_frame(&mut self, frame: &CanFrame) {
+        for l in &mut self.legs {
+            if let Some(m) = l.cmd.motors.as_mut() {
+                m.on_frame(frame);
+            }
+        }
         match protocol::messages::decode(frame, &self.cfg.ids) {
             Ok(Some((foot, Message::LegCommand(c)))) => {
-                if let Some(l) = self.legs.get_mut(foot as usize) {
+                // A leg of motors does not understand LegCommand: its bridge does.
+                if let Some(l) = self.legs.get_mut(foot as usize)
+                    && l.cmd.motors.is_none()
+                {
                     l.cmd.last = Some((c, self.now_us));
                 }
             }
@@ -395,8 +439,18 @@ impl SimRobot {
             let next = (self.now_us + 1000)
                 .min(t_us)
                 .min(self.next_frame_us.max(self.now_us + 1));
+            if let Some(at) = self.cfg.leg_silent_at_s
+                && next as f64 * 1e-6 >= at
+            {
+                for l in &mut self.legs {
+                    if let Some(m) = l.cmd.motors.as_mut() {
+                        m.silence(1, true);
+                    }
+                }
+            }
             for foot in 0..self.legs.len() {
                 self.advance_leg(foot, next, emit);
+                self.motor_replies(foot, next, emit);
             }
             self.now_us = next;
             if self.now_us >= self.next_frame_us {
@@ -419,6 +473,11 @@ impl SimRobot {
                 break;
             }
             let ground = self.cfg.track.segment_at(leg.hopper.x).physics.ground();
+            if let Some(sp) = leg.cmd.motor_set_point() {
+                // The leg's spring is the length joint's impedance.
+                leg.hopper.params.leg_stiffness = sp.stiffness_n_per_m;
+                leg.hopper.params.leg_damping = sp.damping_n_s_per_m;
+            }
             let ev = leg.hopper.advance(dt, ground, &mut leg.cmd);
             let ev_us = (leg.hopper.t * 1e6) as u64;
             match ev {
@@ -444,20 +503,24 @@ impl SimRobot {
                         terrain,
                         speed_m_s: speed,
                     });
-                    send_leg_state(
-                        ids,
-                        foot as u8,
-                        beta,
-                        leg.cmd.fixed.flight_length(),
-                        ev_us,
-                        emit,
-                    );
+                    if leg.cmd.motors.is_none() {
+                        send_leg_state(
+                            ids,
+                            foot as u8,
+                            beta,
+                            leg.cmd.fixed.flight_length(),
+                            ev_us,
+                            emit,
+                        );
+                    }
                 }
                 Some(Event::Liftoff { beta, .. }) => {
                     leg.cmd.fixed.on_liftoff(beta);
                     bounce(&mut leg.edges, ev_us, false, &mut self.rng);
                     let len = leg.hopper.leg_length(&leg.cmd);
-                    send_leg_state(ids, foot as u8, -beta, len, ev_us, emit);
+                    if leg.cmd.motors.is_none() {
+                        send_leg_state(ids, foot as u8, -beta, len, ev_us, emit);
+                    }
                 }
                 Some(Event::Fell { .. }) => {
                     // Pick the hopper up and restart it where it fell, into the gait it runs
@@ -488,6 +551,7 @@ impl SimRobot {
                 break;
             }
             leg.edges.remove(0);
+            leg.switch = state;
             leg.contact_seq = leg.contact_seq.wrapping_add(1);
             let m = Message::FootContact(FootContact {
                 stance: state,
@@ -513,6 +577,17 @@ impl SimRobot {
                 leg.skin.faults.apply(&mut leg.pixels, max, &mut self.rng);
             }
         }
+        // The switch at 100 Hz besides its edges, as a foot sends it (docs/protocol.md): the
+        // foot's clock for a controller whose leg reports on a clock of its own.
+        leg.contact_seq = leg.contact_seq.wrapping_add(1);
+        let m = Message::FootContact(FootContact {
+            stance: leg.switch,
+            seq: leg.contact_seq,
+            timestamp_us: self.now_us as u32,
+        });
+        if let Some(f) = m.to_frame(&self.cfg.ids, foot as u8) {
+            emit(f);
+        }
         leg.image_seq = leg.image_seq.wrapping_add(1);
         let img = ImageRef {
             rows: 44,
@@ -524,9 +599,48 @@ impl SimRobot {
         let _ = self
             .segmenter
             .frames(foot as u8, leg.image_seq, &img, &mut *emit);
-        let angle = leg.hopper.leg_angle(&leg.cmd);
-        let len = leg.hopper.leg_length(&leg.cmd);
-        send_leg_state(&self.cfg.ids, foot as u8, angle, len, self.now_us, emit);
+        if leg.cmd.motors.is_none() {
+            let angle = leg.hopper.leg_angle(&leg.cmd);
+            let len = leg.hopper.leg_length(&leg.cmd);
+            send_leg_state(&self.cfg.ids, foot as u8, angle, len, self.now_us, emit);
+        }
+    }
+
+    /// A leg of motors answers its bridge: replies and cyclic messages due by `t_us`, with
+    /// the hopper's true joints.
+    fn motor_replies(&mut self, foot: usize, t_us: u64, emit: &mut dyn FnMut(CanFrame)) {
+        let leg = &mut self.legs[foot];
+        let (angle, len) = (
+            leg.hopper.leg_angle(&leg.cmd),
+            leg.hopper.leg_length(&leg.cmd),
+        );
+        let dt = t_us.saturating_sub(self.now_us) as f64 * 1e-6;
+        if let Some(m) = leg.cmd.motors.as_mut() {
+            let mut out = protocol::component::Outbox::with_capacity(4);
+            m.emit(t_us, angle, len, dt, &mut out);
+            for f in out.drain() {
+                emit(f);
+            }
+        }
+    }
+
+    /// A leg's true angle (rad) and length (m) now.
+    pub fn leg_truth(&self, foot: u8) -> Option<(f64, f64)> {
+        self.legs
+            .get(foot as usize)
+            .map(|l| (l.hopper.leg_angle(&l.cmd), l.hopper.leg_length(&l.cmd)))
+    }
+
+    /// A leg of motors whose length joint is sprung now (its bridge is running it, not in
+    /// the damped stop); `None` for a leg that is not motors.
+    pub fn motors_driven(&self, foot: u8) -> Option<bool> {
+        let m = self.legs.get(foot as usize)?.cmd.motors.as_ref()?;
+        Some(m.commanded && m.set_point().stiffness_n_per_m > 0.0)
+    }
+
+    /// A leg of motors: the simulated drivers (to silence one or make it fault, in tests).
+    pub fn motors_mut(&mut self, foot: u8) -> Option<&mut leg::simulated::SimulatedLeg> {
+        self.legs.get_mut(foot as usize)?.cmd.motors.as_mut()
     }
 
     /// Ground truth of the step whose touchdown is nearest before `t_us` (foot clock).

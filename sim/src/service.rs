@@ -65,6 +65,48 @@ impl StepRecord {
     }
 }
 
+/// A leg of motors: how the LegState its bridge sends agrees with the simulator's truth,
+/// while the bridge drives the leg. Each is compared with the nearest truth of the 3 ms before
+/// its stamp where that stamp is on the simulator's clock (one process: the lock-step demo),
+/// else (processes on a bus each keep their own clock) of the last 50 ms, so that the delay of
+/// the bridge and the bus (at touchdown and liftoff the massless simulated leg jumps to its new
+/// set point) is not counted as the encoders' error.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct LegStateCheck {
+    /// LegState frames heard.
+    pub frames: u64,
+    /// Of them, compared with the truth just before their own timestamp (the same clock).
+    pub at_timestamp: u64,
+    /// Angle error, rad: median, 95th percentile, largest.
+    pub angle_err_rad: [f64; 3],
+    /// Length error, m: median, 95th percentile, largest.
+    pub length_err_m: [f64; 3],
+    #[serde(skip)]
+    errors: Vec<(f64, f64)>,
+}
+
+impl LegStateCheck {
+    fn add(&mut self, angle_err: f64, length_err: f64, at_timestamp: bool) {
+        self.frames += 1;
+        self.at_timestamp += at_timestamp as u64;
+        self.errors.push((angle_err, length_err));
+    }
+
+    fn summarize(&mut self) {
+        let pct = |mut v: Vec<f64>| {
+            v.sort_by(f64::total_cmp);
+            let at = |q: f64| {
+                v.get(((v.len() as f64 - 1.0) * q).round() as usize)
+                    .copied()
+                    .unwrap_or(0.0)
+            };
+            [at(0.5), at(0.95), at(1.0)]
+        };
+        self.angle_err_rad = pct(self.errors.iter().map(|e| e.0).collect());
+        self.length_err_m = pct(self.errors.iter().map(|e| e.1).collect());
+    }
+}
+
 /// What one run of the simulator saw (`presrs sim --report`'s file).
 #[derive(Debug, serde::Serialize)]
 pub struct SimReport {
@@ -82,6 +124,9 @@ pub struct SimReport {
     pub send_errors: u64,
     /// Every TerrainClass heard.
     pub steps: Vec<StepRecord>,
+    /// A leg of motors (`--leg`): its bridge's LegState against the truth.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub leg_state: Option<LegStateCheck>,
 }
 
 /// How a run goes besides the robot's config.
@@ -94,6 +139,9 @@ pub struct RunOptions {
     /// The simulator's seed.
     pub seed: u64,
 }
+
+/// Milliseconds of a leg of motors' truth kept to judge its bridge's LegState.
+const LEG_HISTORY: usize = 64;
 
 /// The most robot time one pass of the simulator covers, µs: commands are read between passes.
 const MAX_LAG_US: u64 = 2_000;
@@ -111,6 +159,10 @@ pub struct SimService<'a> {
     t_us: u64,
     /// Robot time given up because the machine could not keep up (see `tick`).
     stretched_us: u64,
+    /// The foot whose leg is motors, and its LegState check.
+    motor_leg: Option<(u8, LegStateCheck)>,
+    /// That leg's truth over the last [`LEG_HISTORY`] ms of robot time: (µs, angle, length).
+    leg_history: std::collections::VecDeque<(u64, f64, f64)>,
 }
 
 impl<'a> SimService<'a> {
@@ -124,7 +176,10 @@ impl<'a> SimService<'a> {
         observe: &'a mut dyn FnMut(u64, &SimRobot),
     ) -> Self {
         let ids = cfg.ids.clone();
+        let motor_leg = cfg.leg.as_ref().map(|l| (l.foot, LegStateCheck::default()));
         Self {
+            motor_leg,
+            leg_history: std::collections::VecDeque::with_capacity(LEG_HISTORY),
             robot: SimRobot::new(cfg, seed),
             ids,
             catalog,
@@ -151,6 +206,19 @@ impl<'a> SimService<'a> {
         &self.records
     }
 
+    /// A leg of motors: its bridge's LegState against the truth so far.
+    pub fn leg_state_check(&self) -> Option<LegStateCheck> {
+        self.motor_leg.clone().map(|(_, mut c)| {
+            c.summarize();
+            c
+        })
+    }
+
+    /// The robot, to inject driver faults in tests.
+    pub fn robot_mut(&mut self) -> &mut SimRobot {
+        &mut self.robot
+    }
+
     /// The records, the service done with.
     pub fn into_records(self) -> Vec<StepRecord> {
         self.records
@@ -167,6 +235,10 @@ impl Component for SimService<'_> {
     /// out until the lock-step loop ran on this same component and its speeds moved) and the
     /// node's TerrainClass (to score it).
     fn filters(&self) -> Vec<(u32, u32)> {
+        // A leg of motors hears its drivers' frames and its bridge's LegState: everything.
+        if self.motor_leg.is_some() {
+            return Vec::new();
+        }
         self.ids.filters(&[
             MessageKind::LegCommand,
             MessageKind::GaitStatus,
@@ -176,8 +248,54 @@ impl Component for SimService<'_> {
 
     fn on_frame(&mut self, st: &Stamped, _: u64, _: &mut Outbox) {
         self.robot.on_frame(&st.frame);
-        if let Ok(Some((foot, Message::TerrainClass(tc)))) = messages::decode(&st.frame, &self.ids)
+        let msg = messages::decode(&st.frame, &self.ids);
+        if let (Some((leg, check)), Ok(Some((foot, Message::LegState(ls))))) =
+            (self.motor_leg.as_mut(), &msg)
+            && *foot == *leg
+            && let Some(now) = self.robot.leg_truth(*foot)
+            // While the bridge drives the leg: in the damped stop the hopper falls and is set
+            // back on its feet (a jump of the truth no encoder follows).
+            && self.robot.motors_driven(*foot) == Some(true)
         {
+            // The readings behind a LegState are older than its stamp (the bridge's period,
+            // the bus): it is compared with the nearest truth of the few ms before its stamp
+            // where that stamp is on our clock (one process: the lock-step demo), else (each
+            // process keeps its own clock) of the last 50 ms: a bus of processes under
+            // emulation delayed LegState by more than 20 ms of the simulator's time. Nearest in
+            // units of the bounds, 0.01 rad and 2 mm.
+            let on_our_clock = self
+                .leg_history
+                .iter()
+                .any(|h| h.0 as u32 == ls.timestamp_us);
+            let (end, span) = if on_our_clock {
+                (ls.timestamp_us as u64, 3_000)
+            } else {
+                (self.t_us as u32 as u64, 50_000)
+            };
+            let recent = self
+                .leg_history
+                .iter()
+                .filter(|h| {
+                    let t = h.0 as u32 as u64;
+                    t <= end && end - t <= span
+                })
+                .map(|h| (h.1, h.2))
+                .min_by(|a, b| {
+                    let e = |t: &(f64, f64)| {
+                        (ls.leg_angle_rad - t.0).abs() / 0.01
+                            + (ls.leg_length_m - t.1).abs() / 0.002
+                    };
+                    e(a).total_cmp(&e(b))
+                });
+            let stamped = recent.filter(|_| on_our_clock);
+            let (angle, length) = stamped.or(recent).unwrap_or(now);
+            check.add(
+                (ls.leg_angle_rad - angle).abs(),
+                (ls.leg_length_m - length).abs(),
+                stamped.is_some(),
+            );
+        }
+        if let Ok(Some((foot, Message::TerrainClass(tc)))) = msg {
             self.records.push(StepRecord::of(
                 &self.robot,
                 foot,
@@ -204,6 +322,14 @@ impl Component for SimService<'_> {
         let before = self.t_us;
         self.t_us = target.min(self.t_us + MAX_LAG_US);
         self.robot.advance_to(self.t_us, &mut |f| out.push(f));
+        if let Some((foot, _)) = self.motor_leg
+            && let Some((a, l)) = self.robot.leg_truth(foot)
+        {
+            if self.leg_history.len() == LEG_HISTORY {
+                self.leg_history.pop_front();
+            }
+            self.leg_history.push_back((self.t_us, a, l));
+        }
         if self.t_us / 10_000 != before / 10_000 {
             (self.observe)(self.t_us, &self.robot);
         }
@@ -243,6 +369,7 @@ pub fn run(
         falls: robot.falls.len() as u64,
         fall_times_s: robot.falls.iter().map(|&t| t as f64 * 1e-6).collect(),
         send_errors: stats.send_errors,
+        leg_state: sim.leg_state_check(),
         steps: sim.records,
     }
 }

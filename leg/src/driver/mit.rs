@@ -5,9 +5,10 @@
 //! - Command, on the motor's id, 8 bytes: position 16 bits, velocity 12, kp 12, kd 12,
 //!   torque 12, big-endian bit order, each `uint = (x - min) * (2^bits - 1) / (max - min)`.
 //!   We round to the nearest count where the reference firmware and the Python driver
-//!   truncate: truncation lowers every gain by up to a count, and a count of kp is 0.12 N m/rad
-//!   (500/4095), 7.5% of the example prismatic leg's 1.58 N m/rad spring (computed); rounded,
-//!   0.3%. Decoding is the same either way.
+//!   truncate: truncation lowers every gain by up to a whole count (a count of kp is
+//!   0.12 N m/rad, of kd 0.0012 N m s/rad), rounding by half of one. Decoding is the same
+//!   either way. A count matters: see examples/leg.toml for a damping one count off that cost
+//!   the closed loop accuracy, and [`crate::config::LegConfig::quantisation_warnings`].
 //! - Special frames: `FF FF FF FF FF FF FF FC` enter motor mode, `..FD` exit, `..FE` set zero.
 //! - Reply, on the master's id, 6 bytes: motor id, position 16, velocity 12, torque 12 (some
 //!   firmwares add temperature and an error byte: 8 bytes).
