@@ -30,6 +30,11 @@ pub struct LegArgs {
     pub time_scale: f64,
 }
 
+/// The interface a bus source names.
+fn iface_of(source: &BusSource) -> String {
+    source.label().to_string()
+}
+
 pub fn run(a: LegArgs) -> Result<ExitCode> {
     anyhow::ensure!(
         a.time_scale > 0.0 && a.time_scale.is_finite(),
@@ -44,22 +49,19 @@ pub fn run(a: LegArgs) -> Result<ExitCode> {
         anyhow::bail!("--iface and --config are required (or --example PROTOCOL)");
     };
     let cfg = leg::LegConfig::from_file(&path).context("--config")?;
-    if let Some(m) = &cfg.motor_iface {
-        anyhow::ensure!(
-            m == &iface,
-            "{}: motor_iface = {m:?}: a second bus for the motors is not supported yet; put the \
-             motors on --iface {iface} (the config check refuses ids that collide with ours)",
-            path.display(),
-        );
-    }
     let signals = Signals::install()?;
-    let c = leg::bridge::run(
-        cfg,
-        a.check,
-        &BusSource::Iface(iface),
-        a.time_scale,
-        &signals.stop,
-    );
+    let main = BusSource::Iface(iface);
+    let c = match cfg.motor_iface.clone() {
+        Some(m) if m != iface_of(&main) => leg::bridge::run_two_buses(
+            cfg,
+            a.check,
+            &main,
+            &BusSource::Iface(m),
+            a.time_scale,
+            &signals.stop,
+        ),
+        _ => leg::bridge::run(cfg, a.check, &main, a.time_scale, &signals.stop),
+    };
     tracing::info!(
         commands = c.commands,
         joint_commands = c.joint_commands,

@@ -1503,7 +1503,7 @@ fn leg_bridge_drives_each_protocols_simulated_motors_as_processes() {
     )
     .unwrap();
     let table = controller::ControllerConfig::default().terrain_gaits;
-    let (kill_at, silent_at, sim_s) = (8.0, 9.0, 10.0);
+    let (kill_at, silent_at, sim_s) = (7.5, 8.0, 8.6);
     for proto in ["mit", "moteus", "odrive"] {
         let cfg = dir.join(format!("{proto}.toml"));
         // The simulated drivers answer from the simulator, which under TCG falls behind the
@@ -1512,8 +1512,8 @@ fn leg_bridge_drives_each_protocols_simulated_motors_as_processes() {
         // felled the hopper for the rest of the run (measured: MIT, falls from 3.2 s on). A
         // real driver does not stall; the drill below still finds a silenced one.
         let example = presrs_ok(&["leg", "--example", proto])
-            .replace("reply_timeout_ms = 50", "reply_timeout_ms = 500");
-        assert!(example.contains("reply_timeout_ms = 500"), "{example}");
+            .replace("reply_timeout_ms = 50", "reply_timeout_ms = 300");
+        assert!(example.contains("reply_timeout_ms = 300"), "{example}");
         std::fs::write(&cfg, example).unwrap();
         let cfg_s = cfg.to_str().unwrap();
         // Everything on the bus from here on, with its arrival time.

@@ -19,6 +19,7 @@
 use protocol::component::{Component, Outbox};
 use protocol::ids::MessageKind;
 use protocol::messages::{LegCommand, LegMode, LegState, LegStatus, Message, Phase, decode};
+
 use protocol::{IdConfig, Stamped};
 
 use crate::config::{JointMap, LegConfig};
@@ -410,6 +411,15 @@ impl Component for LegService {
                     d.query(out);
                 }
             }
+            // Motors never commanded are unpowered already: a damping command would power
+            // them (a moteus takes it as position mode). Measured: a driver silent before the
+            // simulator came up was answered with damping, which took the simulated leg over
+            // before the controller did, and the hopper fell 8 times.
+            _ if !self.enabled => {
+                for d in &mut self.drivers {
+                    d.query(out);
+                }
+            }
             _ => self.damp(out),
         }
 
@@ -474,6 +484,165 @@ pub fn run(
     };
     protocol::component::run(&mut leg, source, &opts, stop);
     leg.counters()
+}
+
+/// The bridge with its motors on a bus of their own (`motor_iface`): LegCommand, LegState and
+/// LegStatus on `main`, the drivers on `motors`. One bridge, two runners on one robot clock:
+/// the motor side receives the drivers and ticks (the commands go out on its bus), the main
+/// side hands it LegCommand and sends what it says about the leg. Returns the counters.
+pub fn run_two_buses(
+    cfg: LegConfig,
+    check: bool,
+    main: &protocol::bus::BusSource,
+    motors: &protocol::bus::BusSource,
+    time_scale: f64,
+    stop: &std::sync::atomic::AtomicBool,
+) -> LegCounters {
+    use std::sync::{Arc, Mutex};
+    let ids = cfg.ids.clone();
+    let foot = cfg.foot;
+    let leg = Arc::new(Mutex::new(LegService::new(cfg, check)));
+    // LegState at 500 Hz and LegStatus at 10 Hz: a second of them.
+    let (tx, rx) = std::sync::mpsc::sync_channel(1024);
+    let opts = protocol::component::RunOptions {
+        clock: Some(Arc::new(protocol::clock::ScaledClock::new(time_scale))),
+        ..protocol::component::RunOptions::default()
+    };
+    std::thread::scope(|s| {
+        let mut main_side = MainSide {
+            leg: leg.clone(),
+            rx,
+            ids: ids.clone(),
+            foot,
+        };
+        let opts_main = opts.clone();
+        s.spawn(move || protocol::component::run(&mut main_side, main, &opts_main, stop));
+        let mut motor_side = MotorSide {
+            leg: leg.clone(),
+            tx,
+            ids,
+            scratch: Outbox::with_capacity(16),
+        };
+        protocol::component::run(&mut motor_side, motors, &opts, stop);
+    });
+    // Both runners have ended: the lock is free unless one of them panicked mid-call.
+    leg.lock().map(|l| l.counters()).unwrap_or_default()
+}
+
+/// The bridge's side on the controller's bus.
+struct MainSide {
+    leg: std::sync::Arc<std::sync::Mutex<LegService>>,
+    rx: std::sync::mpsc::Receiver<protocol::CanFrame>,
+    ids: IdConfig,
+    foot: u8,
+}
+
+impl Component for MainSide {
+    fn name(&self) -> &'static str {
+        "leg (main bus)"
+    }
+    fn filters(&self) -> Vec<(u32, u32)> {
+        let width = if self.ids.extended {
+            0x1FFF_FFFF
+        } else {
+            0x7FF
+        };
+        vec![(self.ids.id(MessageKind::LegCommand, self.foot), width)]
+    }
+    fn on_frame(&mut self, st: &Stamped, now_us: u64, out: &mut Outbox) {
+        if let Ok(mut leg) = self.leg.lock() {
+            leg.on_frame(st, now_us, out);
+        }
+    }
+    fn tick(&mut self, _now_us: u64, out: &mut Outbox) {
+        while let Ok(f) = self.rx.try_recv() {
+            out.push(f);
+        }
+    }
+    fn stop(&mut self, now_us: u64, out: &mut Outbox) {
+        // The motor side stops the motors; the bus the controller reads hears it here.
+        while let Ok(f) = self.rx.try_recv() {
+            out.push(f);
+        }
+        if let Ok(leg) = self.leg.lock() {
+            let status = LegStatus {
+                mode: LegMode::Stopped,
+                ..leg.status(now_us)
+            };
+            if let Some(f) = Message::LegStatus(status).to_frame(&self.ids, self.foot) {
+                out.push(f);
+            }
+        }
+    }
+    fn is_own(&self, frame: &protocol::CanFrame) -> bool {
+        matches!(
+            self.ids.lookup(frame.raw_id(), frame.is_extended()),
+            Some((MessageKind::LegState | MessageKind::LegStatus, f)) if f == self.foot
+        )
+    }
+}
+
+/// The bridge's side on the motors' bus.
+struct MotorSide {
+    leg: std::sync::Arc<std::sync::Mutex<LegService>>,
+    tx: std::sync::mpsc::SyncSender<protocol::CanFrame>,
+    ids: IdConfig,
+    scratch: Outbox,
+}
+
+impl MotorSide {
+    /// Motor frames to `out`; ours (LegState, LegStatus) to the main bus (dropped, never
+    /// waited for, when its side is behind: the next one follows in 2 ms).
+    fn split(&mut self, out: &mut Outbox) {
+        for f in self.scratch.drain() {
+            if self.ids.lookup(f.raw_id(), f.is_extended()).is_some() {
+                let _ = self.tx.try_send(f);
+            } else {
+                out.push(f);
+            }
+        }
+    }
+}
+
+impl Component for MotorSide {
+    fn name(&self) -> &'static str {
+        "leg"
+    }
+    fn filters(&self) -> Vec<(u32, u32)> {
+        match self.leg.lock() {
+            Ok(leg) => leg
+                .drivers
+                .iter()
+                .flat_map(|d| d.bus_ids())
+                .map(|b| (b.id, if b.extended { 0x1FFF_FFFF } else { 0x7FF }))
+                .collect(),
+            Err(_) => Vec::new(),
+        }
+    }
+    fn start(&mut self, now_us: u64, out: &mut Outbox) {
+        if let Ok(mut leg) = self.leg.lock() {
+            leg.start(now_us, &mut self.scratch);
+        }
+        self.split(out);
+    }
+    fn on_frame(&mut self, st: &Stamped, now_us: u64, out: &mut Outbox) {
+        if let Ok(mut leg) = self.leg.lock() {
+            leg.on_frame(st, now_us, &mut self.scratch);
+        }
+        self.split(out);
+    }
+    fn tick(&mut self, now_us: u64, out: &mut Outbox) {
+        if let Ok(mut leg) = self.leg.lock() {
+            leg.tick(now_us, &mut self.scratch);
+        }
+        self.split(out);
+    }
+    fn stop(&mut self, now_us: u64, out: &mut Outbox) {
+        if let Ok(mut leg) = self.leg.lock() {
+            leg.stop(now_us, &mut self.scratch);
+        }
+        self.split(out);
+    }
 }
 
 #[cfg(test)]
@@ -689,6 +858,31 @@ mod tests {
     }
 
     #[test]
+    fn drivers_silent_before_any_command_are_named_but_never_powered() {
+        for driver in ["mit", "moteus", "odrive"] {
+            let cfg = config(driver, "prismatic");
+            let mut leg = LegService::new(cfg.clone(), false);
+            let mut motors = SimulatedLeg::new(&cfg, 4);
+            let mut out = Outbox::default();
+            leg.start(0, &mut out);
+            // The motors hear the bridge but their answers never reach it.
+            for i in 0..120u64 {
+                leg.tick(i * 1000, &mut out);
+                for f in out.drain() {
+                    motors.on_frame(&f);
+                }
+            }
+            assert_eq!(leg.mode(), LegMode::DriverSilent, "{driver}");
+            assert_eq!(
+                motors.applied(),
+                [None, None],
+                "{driver}: powered while silent"
+            );
+            assert!(!motors.commanded, "{driver}");
+        }
+    }
+
+    #[test]
     fn check_mode_never_moves_a_joint() {
         let cfg = config("mit", "two-link");
         let mut leg = LegService::new(cfg.clone(), true);
@@ -699,5 +893,135 @@ mod tests {
         let (a, l) = leg.measured().unwrap();
         assert!((a - 0.1).abs() < 0.01 && (l - 0.15).abs() < 0.002);
         assert!(heard.iter().any(|(_, m)| matches!(m, Message::LegState(_))));
+    }
+}
+
+#[cfg(test)]
+mod two_bus_tests {
+    use super::*;
+    use crate::simulated::SimulatedLeg;
+    use protocol::bus::{BusSource, CanBus, InProcBus};
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::time::{Duration, Instant};
+
+    #[test]
+    fn on_two_buses_commands_and_leg_state_stay_on_one_and_the_motors_on_the_other() {
+        let text = crate::config::LegConfig::example(crate::DriverKind::Mit)
+            .to_toml()
+            .unwrap()
+            .replace("foot = 0", "foot = 0\nmotor_iface = \"motors\"");
+        let cfg = LegConfig::from_text(&text, "leg.toml").unwrap();
+        let (main, motors) = (InProcBus::new(), InProcBus::new());
+        let stop = AtomicBool::new(false);
+        let ids = IdConfig::default();
+        let truth = (0.2, 0.15);
+        std::thread::scope(|s| {
+            let (c, m, mo) = (cfg.clone(), main.clone(), motors.clone());
+            let stop = &stop;
+            s.spawn(move || {
+                run_two_buses(
+                    c,
+                    false,
+                    &BusSource::InProc(m),
+                    &BusSource::InProc(mo),
+                    1.0,
+                    stop,
+                )
+            });
+            // The motors: answer on their bus until stopped; say what they were told.
+            let mut ep = motors.endpoint();
+            let c2 = cfg.clone();
+            let ids2 = ids.clone();
+            let motor_side = s.spawn(move || {
+                let ids = ids2;
+                let mut sim = SimulatedLeg::new(&c2, 1);
+                let (t0, mut ours_heard) = (Instant::now(), 0);
+                let mut last = 0;
+                // The set point while driven (at the end the leg is in the damped stop).
+                let mut driven = None;
+                while !stop.load(Ordering::Relaxed) {
+                    if let Ok(Some(st)) = ep.recv(Duration::from_millis(1)) {
+                        if ids
+                            .lookup(st.frame.raw_id(), st.frame.is_extended())
+                            .is_some()
+                        {
+                            ours_heard += 1;
+                        }
+                        sim.on_frame(&st.frame);
+                        let sp = sim.set_point();
+                        if sp.stiffness_n_per_m > 0.0 {
+                            driven = Some(sp);
+                        }
+                    }
+                    let now = t0.elapsed().as_micros() as u64;
+                    if now >= last + 1000 {
+                        let mut out = Outbox::default();
+                        sim.emit(now, truth.0, truth.1, (now - last) as f64 * 1e-6, &mut out);
+                        last = now;
+                        for f in out.drain() {
+                            let _ = ep.send(&f);
+                        }
+                    }
+                }
+                (sim.commanded, driven, ours_heard)
+            });
+            // The controller's side: LegCommand every 2 ms for 0.3 s, then silence.
+            let mut ep = main.endpoint();
+            let mut heard = Vec::new();
+            let t0 = Instant::now();
+            let mut seq = 0u8;
+            while t0.elapsed() < Duration::from_millis(600) {
+                if t0.elapsed() < Duration::from_millis(300) {
+                    seq = seq.wrapping_add(1);
+                    let f = Message::LegCommand(LegCommand {
+                        leg_length_m: truth.1,
+                        touchdown_angle_rad: truth.0,
+                        gait: 2,
+                        phase: Phase::Flight,
+                        seq,
+                    })
+                    .to_frame(&ids, 0)
+                    .unwrap();
+                    let _ = ep.send(&f);
+                }
+                let until = Instant::now() + Duration::from_millis(2);
+                while let Ok(Some(st)) = ep.recv(until.saturating_duration_since(Instant::now())) {
+                    heard.push(st.frame);
+                }
+            }
+            stop.store(true, Ordering::Relaxed);
+            let (commanded, sp, ours_on_motor_bus) = motor_side.join().unwrap();
+            assert!(commanded, "the motors were never commanded");
+            let sp = sp.expect("the motors were never sprung");
+            assert!((sp.length_m - truth.1).abs() < 1e-3, "{sp:?}");
+            assert_eq!(
+                ours_on_motor_bus, 0,
+                "LegState/LegStatus/LegCommand on the motor bus"
+            );
+            let msgs: Vec<Message> = heard
+                .iter()
+                .filter_map(|f| decode(f, &ids).ok().flatten().map(|(_, m)| m))
+                .collect();
+            assert_eq!(msgs.len(), heard.len(), "motor frames on the main bus");
+            let states: Vec<&LegState> = msgs
+                .iter()
+                .filter_map(|m| match m {
+                    Message::LegState(s) => Some(s),
+                    _ => None,
+                })
+                .collect();
+            assert!(states.len() > 50, "{} LegState", states.len());
+            let last = states[states.len() - 1];
+            assert!((last.leg_length_m - truth.1).abs() < 0.002, "{last:?}");
+            let modes: Vec<LegMode> = msgs
+                .iter()
+                .filter_map(|m| match m {
+                    Message::LegStatus(s) => Some(s.mode),
+                    _ => None,
+                })
+                .collect();
+            assert!(modes.contains(&LegMode::Running), "{modes:?}");
+            assert!(modes.contains(&LegMode::CommandTimeout), "{modes:?}");
+        });
     }
 }

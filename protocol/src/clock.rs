@@ -71,6 +71,30 @@ impl Clock for WallClock {
     }
 }
 
+/// The robot's clock as one runner keeps it, to share between runners: wall time since its
+/// creation times `scale` (a simulator slower than real time), in µs.
+#[derive(Clone, Debug)]
+pub struct ScaledClock {
+    start: Instant,
+    scale: f64,
+}
+
+impl ScaledClock {
+    /// A clock reading 0 now and running at `scale` of the wall clock.
+    pub fn new(scale: f64) -> Self {
+        Self {
+            start: Instant::now(),
+            scale,
+        }
+    }
+}
+
+impl Clock for ScaledClock {
+    fn now_us(&self) -> u64 {
+        (self.start.elapsed().as_secs_f64() * self.scale * 1e6) as u64
+    }
+}
+
 /// A clock that only moves when told to: for tests and simulation faster than real time.
 #[derive(Clone, Debug, Default)]
 pub struct ManualClock(Arc<AtomicU64>);
