@@ -30,11 +30,6 @@ pub struct LegArgs {
     pub time_scale: f64,
 }
 
-/// The interface a bus source names.
-fn iface_of(source: &BusSource) -> String {
-    source.label().to_string()
-}
-
 pub fn run(a: LegArgs) -> Result<ExitCode> {
     anyhow::ensure!(
         a.time_scale > 0.0 && a.time_scale.is_finite(),
@@ -52,7 +47,7 @@ pub fn run(a: LegArgs) -> Result<ExitCode> {
     let signals = Signals::install()?;
     let main = BusSource::Iface(iface);
     let c = match cfg.motor_iface.clone() {
-        Some(m) if m != iface_of(&main) => leg::bridge::run_two_buses(
+        Some(m) if m != main.label() => leg::bridge::run_two_buses(
             cfg,
             a.check,
             &main,

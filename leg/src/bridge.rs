@@ -302,11 +302,7 @@ impl Component for LegService {
             0x7FF
         };
         let mut f = vec![(self.ids.id(MessageKind::LegCommand, self.cfg.foot), width)];
-        for d in &self.drivers {
-            for b in d.bus_ids() {
-                f.push((b.id, if b.extended { 0x1FFF_FFFF } else { 0x7FF }));
-            }
-        }
+        f.extend(self.drivers.iter().flat_map(Driver::filters));
         f
     }
 
@@ -396,10 +392,8 @@ impl Component for LegService {
             (LegMode::Running, (0, 0))
         } else if self.last_cmd.is_none() || (self.mode == LegMode::Waiting && !self.enabled) {
             (LegMode::Waiting, (0, 0))
-        } else if self.mode.is_stopped() && self.mode != LegMode::Waiting {
-            // Stopped for a fault now cleared: stays stopped (as a timeout) until fresh commands.
-            (LegMode::CommandTimeout, (0, 0))
         } else {
+            // A stale command, or a fault now cleared: stopped until fresh commands come.
             (LegMode::CommandTimeout, (0, 0))
         };
         self.set_mode(mode.0, mode.1, now_us);
@@ -610,12 +604,7 @@ impl Component for MotorSide {
     }
     fn filters(&self) -> Vec<(u32, u32)> {
         match self.leg.lock() {
-            Ok(leg) => leg
-                .drivers
-                .iter()
-                .flat_map(|d| d.bus_ids())
-                .map(|b| (b.id, if b.extended { 0x1FFF_FFFF } else { 0x7FF }))
-                .collect(),
+            Ok(leg) => leg.drivers.iter().flat_map(Driver::filters).collect(),
             Err(_) => Vec::new(),
         }
     }

@@ -292,18 +292,23 @@ impl LegConfig {
                 self.command_timeout_ms as f64 * 1e-3,
             )),
             DriverKind::Odrive => Driver::Odrive(Odrive::new(id)),
-            DriverKind::Mit => Driver::Mit(Mit::new(
-                id,
-                j.mit_master_id,
-                self.mit_ranges(j).unwrap_or(Ranges {
-                    p_max: 12.5,
-                    v_max: 50.0,
-                    kp_max: 500.0,
-                    kd_max: 5.0,
-                    t_max: 18.0,
-                }),
-            )),
+            DriverKind::Mit => {
+                Driver::Mit(Mit::new(id, j.mit_master_id, self.mit_ranges_of(which)))
+            }
         }
+    }
+
+    /// An MIT joint's ranges (`which`: 0 hip, 1 length joint); the config must be valid (the
+    /// check refuses an MIT joint without them: the fallback is never used then).
+    pub fn mit_ranges_of(&self, which: usize) -> Ranges {
+        let (_, j) = self.joint(which);
+        self.mit_ranges(j).unwrap_or(Ranges {
+            p_max: 12.5,
+            v_max: 50.0,
+            kp_max: 500.0,
+            kd_max: 5.0,
+            t_max: 18.0,
+        })
     }
 
     fn mit_ranges(&self, j: &JointConfig) -> Option<Ranges> {

@@ -89,22 +89,11 @@ impl SimulatedLeg {
                     j.moteus_kd.unwrap_or(0.0),
                 )),
                 DriverKind::Odrive => Server::Odrive(odrive::Server::new(id)),
-                DriverKind::Mit => {
-                    let crate::driver::Driver::Mit(_) = cfg.driver(which) else {
-                        unreachable!("an MIT joint's driver is MIT")
-                    };
-                    let r = j
-                        .mit_ranges
-                        .or_else(|| j.mit_model.as_deref().and_then(mit::Ranges::of_model))
-                        .unwrap_or(mit::Ranges {
-                            p_max: 12.5,
-                            v_max: 50.0,
-                            kp_max: 500.0,
-                            kd_max: 5.0,
-                            t_max: 18.0,
-                        });
-                    Server::Mit(mit::Server::new(id, j.mit_master_id, r))
-                }
+                DriverKind::Mit => Server::Mit(mit::Server::new(
+                    id,
+                    j.mit_master_id,
+                    cfg.mit_ranges_of(which),
+                )),
             };
             Motor {
                 server,

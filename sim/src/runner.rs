@@ -319,6 +319,8 @@ pub struct SimRobot {
     /// Falls so far (each leg is set back on its feet where it fell): robot time, µs.
     pub falls: Vec<u64>,
     last_td: Vec<Option<(f64, f64)>>,
+    /// A leg of motors' replies of one step, kept so that a step allocates nothing.
+    motor_out: protocol::component::Outbox,
 }
 
 const FRAME_US: u64 = FRAME_PERIOD_US;
@@ -371,6 +373,7 @@ impl SimRobot {
             steps: Vec::new(),
             falls: Vec::new(),
             last_td: vec![None; n],
+            motor_out: protocol::component::Outbox::with_capacity(8),
             cfg,
         }
     }
@@ -616,9 +619,8 @@ impl SimRobot {
         );
         let dt = t_us.saturating_sub(self.now_us) as f64 * 1e-6;
         if let Some(m) = leg.cmd.motors.as_mut() {
-            let mut out = protocol::component::Outbox::with_capacity(4);
-            m.emit(t_us, angle, len, dt, &mut out);
-            for f in out.drain() {
+            m.emit(t_us, angle, len, dt, &mut self.motor_out);
+            for f in self.motor_out.drain() {
                 emit(f);
             }
         }

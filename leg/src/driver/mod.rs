@@ -179,6 +179,13 @@ impl Driver {
         }
     }
 
+    /// Kernel filters `(id, mask)` passing every identifier of [`Driver::bus_ids`].
+    pub fn filters(&self) -> impl Iterator<Item = (u32, u32)> {
+        self.bus_ids()
+            .into_iter()
+            .map(|b| (b.id, if b.extended { 0x1FFF_FFFF } else { 0x7FF }))
+    }
+
     /// Every identifier the driver sends or answers on.
     pub fn bus_ids(&self) -> Vec<BusId> {
         match self {
