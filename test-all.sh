@@ -5,7 +5,10 @@
 set -euo pipefail
 cd "$(dirname "$0")"
 t0=$SECONDS
-part() { echo "== $1 (at $((SECONDS - t0)) s)"; }
+# The free disk with each part: a CI machine ran out mid-build once (target/ grew to 12 GB).
+part() { echo "== $1 (at $((SECONDS - t0)) s; $(df -h --output=avail . | tail -1 | tr -d ' ') free)"; }
+# One clean build per run: incremental caches only cost disk and time here.
+export CARGO_INCREMENTAL=0
 part "install dependencies"; scripts/install-deps.sh
 part "cargo fmt --check"; cargo fmt --all --check
 part "cargo clippy"; cargo clippy --workspace --all-targets --features vcan,interop -- -D warnings
