@@ -19,14 +19,10 @@ use std::process::{Command, ExitCode, Stdio};
 use std::time::Duration;
 
 use anyhow::{Context, Result};
-use lab::load::{
-    self, FRAME_US, Feet, NodeProcess, SIDE, Tally, WARMUP_US, memory_mb, task_cpu_ns,
-};
-use lab::score::percentile;
+use lab::load::{self, Feet, NodeProcess, SIDE, Tally, WARMUP_US, memory_mb, task_cpu_ns};
 use node::NodeConfig;
 use protocol::bus::{BusSource, CanBus, InProcBus};
 use protocol::ids::{IdConfig, MessageKind};
-use protocol::tactile::Variant;
 
 #[derive(clap::Args)]
 pub struct BenchNodeArgs {
@@ -188,72 +184,24 @@ fn report(
     a: &BenchNodeArgs,
     bus: &str,
     memory_scope: &str,
-    t: &Tally,
-    (rss, hwm): (Option<f64>, Option<f64>),
+    tally: &Tally,
+    memory_mb: (Option<f64>, Option<f64>),
     extra: serde_json::Value,
 ) -> Result<ExitCode> {
-    let mut lat = t.latencies_us.clone();
-    lat.sort_by(f64::total_cmp);
-    let cpu_pct = t.cpu_ns.map(|ns| ns as f64 * 1e-9 / a.seconds * 100.0);
-    let frames_per_image = Variant::Fd.frames_per_image(SIDE, SIDE, 8);
-    let j = serde_json::json!({
-        "bus": bus,
-        "label": a.label,
-        "feet": a.feet,
-        "seconds": a.seconds,
-        "tactile_hz_per_foot": 1e6 / FRAME_US as f64,
-        "can_frames_per_s": a.feet as f64 * (1e6 / FRAME_US as f64) * frames_per_image as f64,
-        "steps": t.steps,
-        "load_send_errors": t.send_errors,
-        "terrain_class": t.decisions,
-        "classified": t.classified,
-        "accuracy": if t.classified > 0 { t.correct as f64 / t.classified as f64 } else { 0.0 },
-        "latency_us": {
-            "what": "last segment of the sampled frame sent -> TerrainClass received",
-            "n": lat.len(),
-            "median": percentile(&lat, 0.5),
-            "p99": percentile(&lat, 0.99),
-            "max": lat.last(),
-        },
-        "node_cpu_pct_of_one_core": cpu_pct,
-        "rss_mb": rss,
-        "peak_rss_mb": hwm,
-        "memory_scope": memory_scope,
-        "extra": extra,
-    });
+    let r = load::BenchReport {
+        bus,
+        label: a.label.as_deref(),
+        feet: a.feet,
+        seconds: a.seconds,
+        memory_scope,
+        tally,
+        memory_mb,
+        extra,
+    };
     if a.json {
-        println!("{j}");
+        println!("{}", r.to_json());
     } else {
-        let f = |v: Option<f64>| v.map_or("n/a".to_string(), |v| format!("{v:.1}"));
-        println!(
-            "bus {bus}{}: {} feet at 100 Hz for {} s ({:.0} CAN FD frames/s)",
-            a.label
-                .as_deref()
-                .map(|l| format!(" ({l})"))
-                .unwrap_or_default(),
-            a.feet,
-            a.seconds,
-            j["can_frames_per_s"].as_f64().unwrap_or(0.0)
-        );
-        println!(
-            "steps {}, TerrainClass {}, classified {}, correct {:.1}%",
-            t.steps,
-            t.decisions,
-            t.classified,
-            j["accuracy"].as_f64().unwrap_or(0.0) * 100.0
-        );
-        println!(
-            "latency (sampled frame's last segment -> TerrainClass): median {} us, p99 {} us, max {} us",
-            f(percentile(&lat, 0.5)),
-            f(percentile(&lat, 0.99)),
-            f(lat.last().copied())
-        );
-        println!(
-            "node CPU {}% of one core; memory ({memory_scope}) {} MB, peak {} MB",
-            f(cpu_pct),
-            f(rss),
-            f(hwm)
-        );
+        print!("{r}");
     }
     Ok(ExitCode::SUCCESS)
 }

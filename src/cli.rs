@@ -5,7 +5,6 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use lab::score::percentile;
 use node::NodeConfig;
 use node::classifier::dataset::{load_dataset, read_image, read_images, write_pgm};
 use node::classifier::train::TrainOptions;
@@ -69,8 +68,6 @@ pub fn load_track(
     }
 }
 
-/// `--config FILE` of the node (defaults without one), its `terrains` key overridden by
-/// `--terrains` when given.
 /// `--leg PROTOCOL [--leg-config FILE]`: the file's leg, whose drivers must speak PROTOCOL, or
 /// the built-in prismatic leg on that protocol's motors.
 pub fn leg_config(
@@ -94,6 +91,8 @@ pub fn leg_config(
     Ok(Some(c))
 }
 
+/// `--config FILE` of the node (defaults without one), its `terrains` key overridden by
+/// `--terrains` when given.
 pub fn load_node_config(path: Option<&Path>, terrains: &TerrainsArg) -> Result<NodeConfig> {
     let mut cfg = match path {
         Some(p) => NodeConfig::load(p).context("--config")?,
@@ -216,59 +215,11 @@ pub fn train(a: &TrainArgs) -> Result<ExitCode> {
     };
     let t0 = Instant::now();
     let trained = set.train_calibrated(&opts, cal.as_ref().map(|(s, n)| (s, n.as_slice())))?;
-    let (model, split) = (&trained.model, &trained.split);
-    let classes = &model.classes;
-    if trained.unused_calibration > 0 {
-        println!(
-            "calibration run: {} images not used (at most {} per terrain, the first ones)",
-            trained.unused_calibration,
-            node::classifier::train::MAX_CALIBRATION_PER_CLASS
-        );
-    }
     let took = t0.elapsed();
-    model.save(out)?;
-    match &model.novelty {
-        Some(nv) => {
-            let c = &nv.calibration;
-            println!(
-                "unknown terrain: calibrated on {} ({} images{}) to --unknown-rate {}: the check \
-                 calls {:.1}% of them unknown ({:.1}% were taken for another terrain){}",
-                c.source.describe(),
-                c.images,
-                if c.runs.is_empty() {
-                    String::new()
-                } else {
-                    format!(" of {}", c.runs.join(", "))
-                },
-                c.rate,
-                100.0 * c.called_unknown,
-                100.0 * c.misclassified,
-                if c.margin > 1.0 {
-                    format!(
-                        " before the margin (x{}); with one run only, calibrate on a second one \
-                         (--calibrate DIR) for thresholds that fit the robot's next run",
-                        c.margin
-                    )
-                } else {
-                    String::new()
-                }
-            );
-        }
-        None if a.unknown_rate > 0.0 => println!(
-            "unknown terrain: no calibration image showed contact; the density rule decides"
-        ),
-        None => println!("unknown terrain: rejection off (--unknown-rate 0)"),
-    }
-    println!(
-        "trained on {} + {} images ({} classes), h = {}, kernel width {:.4}, {:.1} ms; {} images left for testing; wrote {}",
-        split.train.len(),
-        split.validation.len(),
-        classes.len(),
-        model.h,
-        model.kernel_width,
-        took.as_secs_f64() * 1e3,
-        split.test.len(),
-        out.display()
+    trained.model.save(out)?;
+    print!(
+        "{}",
+        trained.report(a.unknown_rate, took, &out.display().to_string())
     );
     Ok(ExitCode::SUCCESS)
 }
@@ -319,88 +270,10 @@ pub fn eval(
         kernels,
     };
     let ev = lab::score::evaluate(model, &ds, &spec)?;
-    let unknown_rate = ev.unknown_rate();
-    let lab::score::Evaluation {
-        confusion: counts,
-        skipped,
-        classify_us: times,
-        novel,
-    } = ev;
-    let novel_json: serde_json::Map<String, serde_json::Value> = novel
-        .iter()
-        .map(|(t, (n, u))| {
-            let share = *u as f64 / (*n).max(1) as f64;
-            (
-                t.clone(),
-                serde_json::json!({"images": n, "called_unknown": u, "unknown_share": share}),
-            )
-        })
-        .collect();
-    let k = names.len();
-    let n_tested = counts.total();
-    let correct: usize = (0..k).map(|i| counts.counts[i][i]).sum();
-    let acc = counts.accuracy();
-    let per_class: Vec<f64> = (0..k).map(|i| counts.recall(i)).collect();
-    // `[actual][detected]` over the classes, and each class's unknown column apart.
-    let confusion: Vec<&[usize]> = counts.counts.iter().map(|r| &r[..k]).collect();
-    let unknown: Vec<usize> = counts.counts.iter().map(|r| r[k]).collect();
-    let med = percentile(&times, 0.5).unwrap_or(0.0);
-    let p99 = percentile(&times, 0.99).unwrap_or(0.0);
     if json {
-        let per: serde_json::Map<String, serde_json::Value> = names
-            .iter()
-            .zip(&per_class)
-            .map(|(n, a)| (n.clone(), (*a).into()))
-            .collect();
-        let v = serde_json::json!({
-            "overall_accuracy": acc, "per_class": per, "classes": names, "confusion": confusion,
-            "unknown": unknown, "unknown_rate": unknown_rate, "novel_terrains": novel_json,
-            "n_tested": n_tested, "n_skipped": skipped,
-            "damage_pct": damage, "repair": repair,
-            "classify_us_median": med, "classify_us_p99": p99,
-            "kernels": kernels.describe(),
-        });
-        println!("{v}");
+        println!("{}", ev.to_json(&names, &spec));
     } else {
-        println!(
-            "left out {skipped} images the model was trained or validated on; tested {n_tested}"
-        );
-        print!("{:>16}", "detected \\ actual");
-        for n in &names {
-            print!(" {n:>12}");
-        }
-        println!();
-        // One row per detected class, and "unknown" when any image was; shares of each actual
-        // class (a column).
-        let has_unknown = unknown.iter().any(|u| *u > 0);
-        for det in 0..k + usize::from(has_unknown) {
-            print!("{:>16}", names.get(det).map_or("unknown", String::as_str));
-            for row in &counts.counts {
-                let n: usize = row.iter().sum();
-                let p = if n > 0 {
-                    100.0 * row[det] as f64 / n as f64
-                } else {
-                    0.0
-                };
-                print!(" {p:>11.1}%");
-            }
-            println!();
-        }
-        println!(
-            "overall accuracy {:.1}% ({correct}/{n_tested}); classify median {med:.1} us, p99 {p99:.1} us ({} kernels)",
-            acc * 100.0,
-            kernels.describe()
-        );
-        println!(
-            "known terrains called unknown: {:.1}%",
-            100.0 * unknown_rate
-        );
-        for (t, (n, u)) in &novel {
-            println!(
-                "{t} (not in the model): {u}/{n} called unknown ({:.1}%)",
-                100.0 * *u as f64 / (*n).max(1) as f64
-            );
-        }
+        print!("{}", ev.table(&names, &spec));
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -64,6 +64,11 @@ pub struct DemoArgs {
     /// serves them live, with the loop paced to real time so there is something to watch.
     #[command(flatten)]
     pub live: crate::cli::LiveArgs,
+    /// Every frame of the demo's bus (motor frames included) as a candump log (`candump -L`
+    /// format, interface can0, as `presrs sim --log` writes): `canplayer vcan0=can0 -I FILE`
+    /// replays it, `presrs mcap` and python-can read it.
+    #[arg(long, value_name = "FILE", conflicts_with = "realtime")]
+    pub candump: Option<PathBuf>,
 }
 
 pub fn run(a: DemoArgs) -> Result<ExitCode> {
@@ -109,7 +114,8 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
         leg: crate::cli::leg_config(a.leg, a.leg_config.as_deref())?,
     };
     let show = !a.json;
-    let recording = a.live.mcap.is_some() || a.live.foxglove.is_some();
+    let live_recording = a.live.mcap.is_some() || a.live.foxglove.is_some();
+    let recording = live_recording || a.candump.is_some();
     anyhow::ensure!(
         !(recording && a.realtime),
         "--mcap and --foxglove record the lock-step demo (paced to real time with --foxglove); drop --realtime"
@@ -132,16 +138,23 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
         }
         (run.falls(), run.rows)
     } else {
-        let live = if recording {
+        let live = if live_recording {
             a.live.start(&lp.node.ids, &catalog)
         } else {
             None
         };
+        let mut log = match &a.candump {
+            Some(p) => Some(std::io::BufWriter::new(
+                std::fs::File::create(p)
+                    .with_context(|| format!("--candump {}: cannot create the log", p.display()))?,
+            )),
+            None => None,
+        };
         // Ctrl-C ends a recorded run properly (the file's summary written); without a
         // recording it ends the process as always.
-        let signals = match live {
-            Some(_) => Some(crate::runtime::Signals::install()?),
-            None => None,
+        let signals = match live.is_some() || log.is_some() {
+            true => Some(crate::runtime::Signals::install()?),
+            false => None,
         };
         let tap = live.as_ref().map(|l| l.tap());
         let mut truth = |t_us: u64, robot: &sim::runner::SimRobot| {
@@ -149,15 +162,22 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
                 tap.offer_truth(t_us, 0, t);
             }
         };
-        let rec = tap.as_ref().zip(signals.as_ref()).map(|(tap, signals)| {
-            lab::closed_loop::LoopRecording {
-                tap: tap.as_ref(),
-                epoch_us: crate::runtime::epoch_us(),
+        let rec = signals
+            .as_ref()
+            .map(|signals| lab::closed_loop::LoopRecording {
+                tap: tap.as_ref().map(|t| t.as_ref() as &dyn protocol::bus::Tap),
+                log: log.as_mut().map(|w| w as &mut dyn std::io::Write),
+                // Alone, a log is stamped as `presrs sim --log` stamps its own (simulated
+                // time from LOG_EPOCH_US); beside an MCAP file, on the wall clock as it is.
+                epoch_us: if live_recording {
+                    crate::runtime::epoch_us()
+                } else {
+                    sim::runner::LOG_EPOCH_US
+                },
                 truth: &mut truth,
                 pace: a.live.foxglove.is_some().then_some(1.0),
                 stop: &signals.stop,
-            }
-        });
+            });
         let run = lab::closed_loop::run_recorded(
             &track,
             model,
@@ -172,7 +192,17 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
         if let Some(r) = live {
             r.finish_logged();
         }
-        let run = run?;
+        let run = match (run, &a.candump) {
+            (Err(e @ lab::LabError::Log(_)), Some(p)) => {
+                return Err(e).with_context(|| format!("--candump {}", p.display()));
+            }
+            (r, _) => r?,
+        };
+        if let (Some(w), Some(p)) = (log.as_mut(), &a.candump) {
+            use std::io::Write;
+            w.flush()
+                .with_context(|| format!("--candump {}: writing the log", p.display()))?;
+        }
         let falls = run.falls();
         leg_report = run.leg_state.zip(run.leg_counters);
         (falls, run.rows)
@@ -200,85 +230,26 @@ fn summarize(
     a: &DemoArgs,
     leg: Option<(sim::service::LegStateCheck, leg::LegCounters)>,
 ) -> Result<ExitCode> {
-    let sum = Summary::of(rows, &cfg.terrain_gaits).with_unknown(rows, known, cfg.safe_gait);
-    let (n, correct, accuracy, switches) = (sum.steps, sum.correct, sum.accuracy, sum.switches);
-    let delays = &sum.steps_to_switch;
     let csv =
         std::fs::File::create(&a.csv).with_context(|| format!("creating {}", a.csv.display()))?;
     lab::score::write_steps(std::io::BufWriter::new(csv), rows)
         .with_context(|| format!("writing {}", a.csv.display()))?;
-    let max_delay = sum.max_steps_to_switch();
+    let report = lab::score::DemoReport {
+        summary: Summary::of(rows, &cfg.terrain_gaits).with_unknown(rows, known, cfg.safe_gait),
+        falls,
+        realtime: a.realtime,
+        track_m: track.length(),
+        safe_gait: cfg.safe_gait,
+        csv: a.csv.display().to_string(),
+        leg: leg.map(|(state, counters)| {
+            let protocol = format!("{:?}", a.leg.unwrap_or(leg::DriverKind::Mit)).to_lowercase();
+            (protocol, state, counters)
+        }),
+    };
     if a.json {
-        let table: Vec<serde_json::Value> = sum
-            .speeds
-            .iter()
-            .map(|((t, g), (v, k))| serde_json::json!({"terrain": t, "gait": g, "mean_speed_m_s": v, "steps": k}))
-            .collect();
-        let j = serde_json::json!({
-            "steps": n,
-            "accuracy": accuracy,
-            "switches": switches,
-            "steps_to_switch": delays,
-            "steps_to_switch_max": max_delay,
-            "falls": falls,
-            "realtime": a.realtime,
-            "speed_per_terrain_and_gait": table,
-            "track_m": track.length(),
-            "unknown_terrains": sum.unknown_terrains.iter().map(|(t, u)| serde_json::json!({
-                "terrain": t, "steps": u.steps, "called_unknown": u.called_unknown,
-                "steps_to_safe_gait": u.steps_to_safe_gait,
-            })).collect::<Vec<_>>(),
-            "csv": a.csv.display().to_string(),
-            "leg": leg.map(|(state, counters)| serde_json::json!({
-                "protocol": a.leg.map(|k| format!("{k:?}").to_lowercase()),
-                "leg_state": state,
-                "bridge": counters,
-            })),
-        });
-        println!("{j}");
+        println!("{}", report.to_json());
     } else {
-        println!(
-            "\nsummary: {n} steps, per-step accuracy {:.1}% ({correct}/{n}), {switches} gait switches",
-            accuracy * 100.0
-        );
-        println!("steps from a terrain change to its gait: {delays:?} (max {max_delay})");
-        println!("falls: {falls}");
-        if let Some((st, c)) = leg {
-            println!(
-                "leg through {:?} motors: {} LegState from the encoders ({} at their own timestamp); error against the truth, median / 95th percentile / largest: angle {:.4} / {:.4} / {:.4} rad, length {:.2} / {:.2} / {:.2} mm; {} LegCommands, {} clamped, {} malformed replies",
-                a.leg.unwrap_or(leg::DriverKind::Mit),
-                st.frames,
-                st.at_timestamp,
-                st.angle_err_rad[0],
-                st.angle_err_rad[1],
-                st.angle_err_rad[2],
-                st.length_err_m[0] * 1e3,
-                st.length_err_m[1] * 1e3,
-                st.length_err_m[2] * 1e3,
-                c.commands,
-                c.clamped,
-                c.malformed_replies
-            );
-        }
-        for (t, u) in &sum.unknown_terrains {
-            let to_safe: Vec<String> = u
-                .steps_to_safe_gait
-                .iter()
-                .map(|d| d.map_or("never".into(), |d| d.to_string()))
-                .collect();
-            println!(
-                "terrain the model does not know: {t}: {}/{} steps called unknown; safe gait G{} reached after [{}] steps on each entry",
-                u.called_unknown,
-                u.steps,
-                cfg.safe_gait,
-                to_safe.join(", ")
-            );
-        }
-        println!("mean speed (m/s) per terrain and gait:");
-        for ((t, g), (v, k)) in &sum.speeds {
-            println!("  {t:<8} G{g}: {v:.2} ({k} steps)");
-        }
-        println!("step log: {}", a.csv.display());
+        print!("{report}");
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -107,54 +107,17 @@ pub fn run(a: ExperimentArgs) -> Result<ExitCode> {
     if let Some(t) = &a.terrains.terrains {
         let _ = write!(command, " --terrains {}", t.display());
     }
-    let source = match &ctx.user {
-        None => "# Reproducing the paper on simulated data\n\n\
-                 Every number and figure below comes from the simulator in `sim/` (hopper, \
-                 terrains, skin), **not** from the PreSRS hardware: read them as a check that \
-                 the method and this code behave as the paper describes, not as new \
-                 measurements of the sensor."
-            .to_string(),
-        Some(u) => {
-            let _ = write!(command, " --data {}", u.dir.display());
-            if let Some(c) = a.crop {
-                let _ = write!(
-                    command,
-                    " --crop {},{},{},{}",
-                    c.top, c.bottom, c.left, c.right
-                );
-            }
-            format!(
-                "# The paper's experiments on {}\n\n\
-                 Table 1, Figure 5, Figure 16 and Table 6 come from the dataset `{}` ({} images, \
-                 {} classes). The other sections need several datasets (sandpaper, one per \
-                 gait, a closed loop) and come from the simulator in `sim/`; Table 6 uses the \
-                 simulated hopper's step length and period.",
-                u.dir.display(),
-                u.dir.display(),
-                u.set.images.len(),
-                u.set.classes.len()
-            )
+    if let Some(u) = &ctx.user {
+        let _ = write!(command, " --data {}", u.dir.display());
+        if let Some(c) = a.crop {
+            let _ = write!(
+                command,
+                " --crop {},{},{},{}",
+                c.top, c.bottom, c.left, c.right
+            );
         }
-    };
-    let mut source = source;
-    if !a.extra_source.is_empty() {
-        let _ = write!(
-            source,
-            " One exception: the unknown-terrain section also runs on {}, data this project did \
-             not make (a SpeedPP2D folder holds the `jiku-data` package's real plantar-pressure \
-             maps, written by `python3 scripts/speedpp2d.py --out DIR`).",
-            a.extra_source
-                .iter()
-                .map(|d| format!("`{}`", d.display()))
-                .collect::<Vec<_>>()
-                .join(", ")
-        );
     }
-    let head = format!(
-        "{source} The paper's numbers are given beside ours. Regenerate with `{command}` \
-         (this run: {:.0} s).\n\n",
-        t0.elapsed().as_secs_f64()
-    );
+    let head = ctx.provenance(&command, t0.elapsed().as_secs_f64());
     let path = a.out.join(name);
     std::fs::write(&path, head + &md).with_context(|| format!("writing {}", path.display()))?;
     eprintln!(

@@ -174,3 +174,30 @@ fn demo_through_each_motor_protocol_matches_the_direct_leg() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `--candump FILE` where no file can be made: the demo refuses before it runs, naming the
+/// option and the path.
+#[test]
+fn demo_candump_where_no_file_can_be_made_names_it() {
+    let dir = std::env::temp_dir().join(format!("presrs-demo-candump-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let model = common::small_model(&dir);
+    let bad = dir.join("no-such-dir").join("run.log");
+    let out = Command::new(env!("CARGO_BIN_EXE_presrs"))
+        .args(["demo", "--steps", "5", "--model"])
+        .arg(&model)
+        .arg("--csv")
+        .arg(dir.join("steps.csv"))
+        .arg("--candump")
+        .arg(&bad)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(
+        err.contains("--candump") && err.contains(&bad.display().to_string()),
+        "{err}"
+    );
+    assert!(!err.contains("panicked"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

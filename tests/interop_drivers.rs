@@ -5,6 +5,8 @@
 //! their encoders make. Run with `--features interop` (the README's test command does).
 #![cfg(feature = "interop")]
 
+mod common;
+
 use std::f64::consts::TAU;
 
 use leg::driver::{JointCommand, Reply, mit, moteus, odrive};
@@ -29,6 +31,24 @@ fn frame(id: u64, data: &[u8], fd: bool) -> CanFrame {
     } else {
         CanFrame::classic(id, data).unwrap()
     }
+}
+
+/// `tests/interop/drivers_check.py ARGS`'s JSON; its failure fails the test (never a skip).
+fn drivers_check(args: &[&std::ffi::OsStr]) -> Value {
+    let o = std::process::Command::new("python3")
+        .arg(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/tests/interop/drivers_check.py"
+        ))
+        .args(args)
+        .output()
+        .expect("python3");
+    assert!(
+        o.status.success(),
+        "drivers_check.py {args:?} failed (pip install -r tests/requirements.txt): {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    serde_json::from_slice(&o.stdout).unwrap()
 }
 
 fn close(a: f64, b: f64, tol: f64, what: &str) {
@@ -143,20 +163,7 @@ fn the_drivers_python_packages_read_our_frames_and_we_read_theirs() {
     std::fs::create_dir_all(&dir).unwrap();
     let input = dir.join("vectors.json");
     std::fs::write(&input, vectors.to_string()).unwrap();
-    let o = std::process::Command::new("python3")
-        .arg(concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/tests/interop/drivers_check.py"
-        ))
-        .arg(&input)
-        .output()
-        .expect("python3");
-    assert!(
-        o.status.success(),
-        "drivers_check.py failed (pip install -r tests/requirements.txt): {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    let res: Value = serde_json::from_slice(&o.stdout).unwrap();
+    let res = drivers_check(&[input.as_os_str()]);
 
     // moteus: mjbots' parser reads our commands.
     let got = res["moteus"]["commands"].as_array().unwrap();
@@ -438,4 +445,341 @@ fn pad_fd(mut d: Vec<u8>) -> Vec<u8> {
         d.push(0x50);
     }
     d
+}
+
+/// One motor frame as a decoder read it: the joint's id, what it is, and its values (rad,
+/// rad/s, N m/rad, N m s/rad, N m; the driver's own codes as numbers).
+#[derive(Debug)]
+struct Row {
+    joint: u64,
+    kind: String,
+    v: std::collections::BTreeMap<&'static str, f64>,
+}
+
+/// Our decoders on one frame of the log: the motor's side for commands (the simulator's
+/// servers), the bridge's for replies.
+fn our_row(cfg: &leg::LegConfig, f: &CanFrame) -> Option<Row> {
+    use std::collections::BTreeMap;
+    for which in 0..2 {
+        let j = if which == 0 { &cfg.hip } else { &cfg.length };
+        let id = j.id.unwrap() as u64;
+        let driver = cfg.driver(which);
+        let mut v = BTreeMap::new();
+        let command = |v: &mut BTreeMap<_, _>, c: &JointCommand| {
+            v.insert("velocity", c.velocity_rad_s);
+            v.insert("torque", c.torque_nm);
+            v.insert("kp", c.kp);
+            v.insert("kd", c.kd);
+            // Without stiffness the position is moot (the damped stop's moteus command sends
+            // NaN: none), so it is compared only where it acts.
+            if c.kp != 0.0 {
+                v.insert("position", c.position_rad);
+            }
+        };
+        let kind = match cfg.hip.driver.unwrap() {
+            leg::DriverKind::Moteus => {
+                let s = moteus::Server::new(id as u8, j.moteus_kp.unwrap(), j.moteus_kd.unwrap());
+                match s.on_frame(f) {
+                    Some(Ok((moteus::Order::Position(c), _))) => {
+                        v.insert("mode", 10.0);
+                        command(&mut v, &c);
+                        "command"
+                    }
+                    Some(Ok((moteus::Order::Stop, _))) => {
+                        v.insert("mode", 0.0);
+                        "command"
+                    }
+                    Some(Ok((moteus::Order::Query, _))) => "command",
+                    Some(Err(e)) => panic!("our moteus server: {e}: {f:?}"),
+                    None => "",
+                }
+            }
+            leg::DriverKind::Odrive => match odrive::Server::new(id as u8).on_frame(f) {
+                Some(Ok(odrive::Order::InputPos(p, vel, t))) => {
+                    v.extend([("position", p), ("velocity", vel), ("torque", t)]);
+                    "Set_Input_Pos"
+                }
+                Some(Ok(odrive::Order::PosGain(g))) => {
+                    v.insert("Pos_Gain", g);
+                    "Set_Pos_Gain"
+                }
+                Some(Ok(odrive::Order::VelGain(g))) => {
+                    v.insert("Vel_Gain", g);
+                    "Set_Vel_Gains"
+                }
+                Some(Ok(odrive::Order::State(s))) => {
+                    v.insert("Axis_Requested_State", s as f64);
+                    "Set_Axis_State"
+                }
+                Some(Ok(odrive::Order::ControllerMode(c, i))) => {
+                    v.extend([("Control_Mode", c as f64), ("Input_Mode", i as f64)]);
+                    "Set_Controller_Mode"
+                }
+                Some(Err(e)) => panic!("our ODrive server: {e}: {f:?}"),
+                None => "",
+            },
+            leg::DriverKind::Mit => {
+                let s = mit::Server::new(id as u8, j.mit_master_id, cfg.mit_ranges_of(which));
+                match s.on_frame(f) {
+                    Some(Ok(mit::Order::Command(c))) => {
+                        command(&mut v, &c);
+                        // MIT always carries a position (0 with no stiffness).
+                        v.insert("position", c.position_rad);
+                        "command"
+                    }
+                    Some(Ok(mit::Order::Enter)) => "enter",
+                    Some(Ok(mit::Order::Exit)) => "exit",
+                    Some(Ok(mit::Order::Zero)) => "zero",
+                    Some(Err(e)) => panic!("our MIT server: {e}: {f:?}"),
+                    None => "",
+                }
+            }
+        };
+        if !kind.is_empty() {
+            return Some(Row {
+                joint: id,
+                kind: kind.into(),
+                v,
+            });
+        }
+        match driver.decode(f) {
+            Some(Ok(Reply::Reading {
+                position_rad,
+                velocity_rad_s,
+                torque_nm,
+                fault,
+            })) => {
+                let odrive = matches!(driver, leg::driver::Driver::Odrive(_));
+                v.extend([("position", position_rad), ("velocity", velocity_rad_s)]);
+                if !odrive {
+                    v.insert("torque", torque_nm);
+                }
+                if let Some(code) = fault {
+                    v.insert("fault", code as f64);
+                }
+                let kind = if odrive {
+                    "Get_Encoder_Estimates"
+                } else {
+                    "reply"
+                };
+                return Some(Row {
+                    joint: id,
+                    kind: kind.into(),
+                    v,
+                });
+            }
+            Some(Ok(Reply::Status { fault })) => {
+                v.insert("Axis_Error", fault as f64);
+                return Some(Row {
+                    joint: id,
+                    kind: "Heartbeat".into(),
+                    v,
+                });
+            }
+            Some(Err(e)) => panic!("our {} decoder: {e}: {f:?}", driver.name()),
+            None => {}
+        }
+    }
+    None
+}
+
+/// The vendor's row, in the same units as ours (ODrive's turns to rad).
+fn their_row(r: &Value) -> Row {
+    let mut v = std::collections::BTreeMap::new();
+    let kind = r["kind"].as_str().unwrap().to_string();
+    let turns = kind == "Set_Input_Pos" || kind == "Get_Encoder_Estimates";
+    for (k, key) in [
+        ("position", "position"),
+        ("velocity", "velocity"),
+        ("torque", "torque"),
+        ("kp", "kp"),
+        ("kd", "kd"),
+        ("mode", "mode"),
+        ("fault", "fault"),
+        ("Input_Pos", "position"),
+        ("Vel_FF", "velocity"),
+        ("Torque_FF", "torque"),
+        ("Pos_Estimate", "position"),
+        ("Vel_Estimate", "velocity"),
+        ("Pos_Gain", "Pos_Gain"),
+        ("Vel_Gain", "Vel_Gain"),
+        ("Axis_Requested_State", "Axis_Requested_State"),
+        ("Control_Mode", "Control_Mode"),
+        ("Input_Mode", "Input_Mode"),
+        ("Axis_Error", "Axis_Error"),
+    ] {
+        if let Some(x) = r[k].as_f64() {
+            let scale = if turns && (key == "position" || key == "velocity") {
+                TAU
+            } else {
+                1.0
+            };
+            v.insert(key, x * scale);
+        }
+    }
+    Row {
+        joint: r["joint"].as_u64().unwrap(),
+        kind,
+        v,
+    }
+}
+
+/// Issue 27 §3 on a bus: the closed loop through each protocol's motors (`presrs demo --leg P
+/// --candump LOG`); python-can reads the log and the protocol's own package decodes every motor
+/// frame in it (mjbots' `moteus`; cantools with the CANSimple DBC shipped in `odrive-can`;
+/// `mini-cheetah-motor-driver-socketcan`'s unpacking and model ranges). They read what our
+/// decoders read, frame by frame, and what they read is the leg the config describes: each
+/// joint commanded at rate_hz, the length joint's stiffness the config's leg spring, the hip's
+/// its flight stiffness, no fault, and the length joint moving as the hopper hops.
+#[test]
+fn the_drivers_packages_decode_every_motor_frame_of_a_closed_loop_run() {
+    let dir = std::env::temp_dir().join(format!("presrs-drivers-log-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let model = common::small_model(&dir);
+    for (kind, proto) in [
+        (leg::DriverKind::Moteus, "moteus"),
+        (leg::DriverKind::Odrive, "odrive"),
+        (leg::DriverKind::Mit, "mit"),
+    ] {
+        let log = dir.join(format!("{proto}.log"));
+        let out = common::output_ok(
+            std::process::Command::new(env!("CARGO_BIN_EXE_presrs"))
+                .args(["demo", "--steps", "12", "--json", "--leg", proto, "--model"])
+                .arg(&model)
+                .arg("--csv")
+                .arg(dir.join("steps.csv"))
+                .arg("--candump")
+                .arg(&log),
+        );
+        let summary: Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(summary["falls"], 0, "{proto}: {summary}");
+
+        let cfg = leg::LegConfig::example(kind);
+        let (hip, len) = (cfg.hip.id.unwrap() as u64, cfg.length.id.unwrap() as u64);
+        let mut joints = serde_json::Map::new();
+        for j in [&cfg.hip, &cfg.length] {
+            joints.insert(
+                j.id.unwrap().to_string(),
+                json!([j.moteus_kp.unwrap_or(0.0), j.moteus_kd.unwrap_or(0.0)]),
+            );
+        }
+        let spec = json!({
+            "protocol": proto, "log": log, "joints": joints, "source": cfg.hip.moteus_source,
+            "master": cfg.hip.mit_master_id, "model": cfg.hip.mit_model,
+        });
+        let spec_path = dir.join(format!("{proto}-spec.json"));
+        std::fs::write(&spec_path, spec.to_string()).unwrap();
+        let res = drivers_check(&["log".as_ref(), spec_path.as_os_str()]);
+        let theirs: Vec<Row> = res["rows"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(their_row)
+            .collect();
+
+        // Frame by frame: the same frames are motor frames, and read to the same values.
+        let records = protocol::candump::read_log_file(&log).unwrap();
+        assert_eq!(res["frames"].as_u64().unwrap() as usize, records.len());
+        let ours: Vec<Row> = records
+            .iter()
+            .filter_map(|r| our_row(&cfg, &r.stamped.frame))
+            .collect();
+        assert_eq!(ours.len(), theirs.len(), "{proto}: motor frames");
+        for (i, (a, b)) in ours.iter().zip(&theirs).enumerate() {
+            assert_eq!(
+                (a.joint, &a.kind),
+                (b.joint, &b.kind),
+                "{proto} frame {i}: {a:?} vs {b:?}"
+            );
+            for (k, x) in &a.v {
+                let y = b.v.get(k).unwrap_or_else(|| {
+                    panic!("{proto} frame {i}: {k} missing from theirs: {a:?} vs {b:?}")
+                });
+                // f32 registers and fields (moteus, ODrive), one count's rounding of the
+                // vendors' own conversions (MIT).
+                let tol = 1e-4 * x.abs().max(1.0);
+                assert!(
+                    (x - y).abs() <= tol,
+                    "{proto} frame {i} {k}: ours {x}, theirs {y}"
+                );
+            }
+        }
+
+        // What their decoders read is the leg of the config.
+        let t = |kind: &str, joint: u64| -> Vec<&Row> {
+            theirs
+                .iter()
+                .filter(|r| r.kind == kind && r.joint == joint)
+                .collect()
+        };
+        let command_kind = if proto == "odrive" {
+            "Set_Input_Pos"
+        } else {
+            "command"
+        };
+        let times: Vec<f64> = res["rows"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|r| r["kind"] == command_kind && r["joint"] == len)
+            .map(|r| r["t"].as_f64().unwrap())
+            .collect();
+        let rate = (times.len() - 1) as f64 / (times[times.len() - 1] - times[0]);
+        let want_kp = |which: usize, k: f64| cfg.map(which).stiffness_to_driver(k);
+        let (leg_kp, hip_kp) = (
+            want_kp(1, cfg.impedance.stance_stiffness_n_per_m),
+            want_kp(0, cfg.impedance.hip_stiffness_nm_per_rad),
+        );
+        let kps = |joint: u64| -> Vec<f64> {
+            if proto == "odrive" {
+                // Stiffness = pos_gain (turn/s per turn) x vel_gain (N m per turn/s), per
+                // turn: over 2 pi per rad.
+                let pg = t("Set_Pos_Gain", joint);
+                let vg = t("Set_Vel_Gains", joint);
+                pg.iter()
+                    .zip(&vg)
+                    .map(|(p, v)| p.v["Pos_Gain"] * v.v["Vel_Gain"] / TAU)
+                    .collect()
+            } else {
+                t(command_kind, joint)
+                    .iter()
+                    .filter_map(|r| r.v.get("kp").copied())
+                    .collect()
+            }
+        };
+        let near = |v: &[f64], want: f64| v.iter().any(|k| (k - want).abs() <= 0.05 * want);
+        let replies = if proto == "odrive" {
+            "Get_Encoder_Estimates"
+        } else {
+            "reply"
+        };
+        let lengths: Vec<f64> = t(replies, len).iter().map(|r| r.v["position"]).collect();
+        let span = lengths.iter().cloned().fold(f64::MIN, f64::max)
+            - lengths.iter().cloned().fold(f64::MAX, f64::min);
+        let faults = theirs
+            .iter()
+            .filter(|r| {
+                r.v.get("fault").is_some_and(|&f| f != 0.0)
+                    || r.v.get("Axis_Error").is_some_and(|&f| f != 0.0)
+            })
+            .count();
+        eprintln!(
+            "{proto}: {} frames, {} motor frames decoded by the package, {} commands to the length joint at {rate:.1} Hz, its stiffness {:?} N m/rad (config {leg_kp:.3}), hip's {:?} (config {hip_kp:.3}), length joint's encoder span {span:.3} rad, {faults} faults",
+            records.len(),
+            theirs.len(),
+            times.len(),
+            kps(len).iter().fold(f64::MIN, |a, &b| a.max(b)),
+            kps(hip).iter().fold(f64::MIN, |a, &b| a.max(b)),
+        );
+        assert!(
+            (rate - cfg.rate_hz).abs() <= 0.02 * cfg.rate_hz,
+            "{proto}: {rate} Hz"
+        );
+        assert!(near(&kps(len), leg_kp), "{proto}: {:?}", kps(len));
+        assert!(near(&kps(hip), hip_kp), "{proto}: {:?}", kps(hip));
+        // Compressing the spring by 1 cm turns the length joint by 0.126 rad at 0.5 m/turn.
+        assert!(span > 0.1, "{proto}: length joint span {span} rad");
+        assert_eq!(faults, 0, "{proto}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -96,8 +96,14 @@ fn during(window: Option<(u64, u64)>, t_us: u64) -> bool {
 
 /// A recording of a [`run`]: every frame on the bus and the simulator's truth.
 pub struct LoopRecording<'a> {
-    /// Gets every frame any of the three sends, stamped `epoch_us` + simulated time.
-    pub tap: &'a dyn protocol::bus::Tap,
+    /// Gets every frame any part sends, stamped `epoch_us` + simulated time (a live
+    /// recorder's tap: MCAP, Foxglove).
+    pub tap: Option<&'a dyn protocol::bus::Tap>,
+    /// Every frame any part sends, as a candump log (interface [`LOG_IFACE`]), written as it
+    /// is sent. Synchronous, unlike the tap: the lock-step loop has no real time to keep, so
+    /// the log is whole (a tap drops frames when its writer falls behind). A write error ends
+    /// the run with [`LabError::Log`].
+    pub log: Option<&'a mut dyn std::io::Write>,
     /// Added to simulated time (from 0) in the stamps: the wall clock at the start, so that
     /// tools show the run at the time it was made.
     pub epoch_us: u64,
@@ -109,6 +115,10 @@ pub struct LoopRecording<'a> {
     /// Ends the run early when set (SIGINT on a paced run).
     pub stop: &'a std::sync::atomic::AtomicBool,
 }
+
+/// The interface name in a [`LoopRecording::log`], as in `presrs sim --log`'s: the robot's
+/// bus (`canplayer vcan0=can0 -I FILE` replays it onto vcan0).
+pub const LOG_IFACE: &str = "can0";
 
 /// Runs the loop on `track` with `model` until `p.steps` steps are decided; `on_step` sees each
 /// row as it comes (to print a live log).
@@ -153,10 +163,19 @@ pub fn run_recorded(
             .transpose()
     };
     let mut ctrl = new_controller()?;
-    let (tap, epoch_us, pace, stop, mut truth) = match rec {
-        Some(r) => (Some(r.tap), r.epoch_us, r.pace, Some(r.stop), Some(r.truth)),
-        None => (None, 0, None, None, None),
+    let (tap, mut log, epoch_us, pace, stop, mut truth) = match rec {
+        Some(r) => (
+            r.tap,
+            r.log,
+            r.epoch_us,
+            r.pace,
+            Some(r.stop),
+            Some(r.truth),
+        ),
+        None => (None, None, 0, None, None, None),
     };
+    // Set by `sent` (which the bus holds), read between milliseconds.
+    let log_error = std::cell::Cell::new(None);
     // The robot's truth every 10 ms of simulated time, for a recording.
     let mut observe = |t_us: u64, robot: &SimRobot| {
         if let Some(f) = truth.as_mut() {
@@ -165,11 +184,18 @@ pub fn run_recorded(
     };
     let mut sim = SimService::new(sim_cfg, p.seed, None, &catalog, &mut observe);
     let mut sent = |t_us: u64, frame: &protocol::CanFrame| {
+        let st = protocol::Stamped {
+            t_us: epoch_us + t_us,
+            frame: *frame,
+        };
         if let Some(tap) = tap {
-            tap.offer(&protocol::Stamped {
-                t_us: epoch_us + t_us,
-                frame: *frame,
-            });
+            tap.offer(&st);
+        }
+        if let Some(w) = log.as_mut()
+            && let Err(e) = protocol::candump::write_record(w, LOG_IFACE, &st)
+        {
+            let first = log_error.take();
+            log_error.set(first.or(Some(e)));
         }
     };
     // Parts in turn within a millisecond: the robot (it hears the controller's last
@@ -227,6 +253,9 @@ pub fn run_recorded(
             bridge.as_mut().map(|b| b as &mut dyn Component),
         ];
         bus.step(t_us, &mut parts, &mut sent)?;
+        if let Some(e) = log_error.take() {
+            return Err(LabError::Log(e));
+        }
         for row in &sim.records()[reported..] {
             on_step(row);
         }

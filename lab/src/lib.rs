@@ -79,6 +79,9 @@ pub enum LabError {
     /// A thread could not be started.
     #[error("starting a thread: {0}")]
     Thread(std::io::Error),
+    /// Writing a run's candump log ([`closed_loop::LoopRecording::log`]).
+    #[error("writing the candump log: {0}")]
+    Log(std::io::Error),
     /// A thread of the loop panicked.
     #[error("the {0} thread panicked")]
     Panicked(&'static str),

@@ -183,6 +183,51 @@ pub struct Report {
 }
 
 impl Report {
+    /// The document's opening: where its data came from (the simulator, the lab's `--data`,
+    /// the `extra` sources for the open-set section), and `command`, which regenerates it
+    /// (this run took `secs`).
+    pub fn provenance(&self, command: &str, secs: f64) -> String {
+        use std::fmt::Write as _;
+        let mut source = match &self.user {
+            None => "# Reproducing the paper on simulated data\n\n\
+                     Every number and figure below comes from the simulator in `sim/` (hopper, \
+                     terrains, skin), **not** from the PreSRS hardware: read them as a check \
+                     that the method and this code behave as the paper describes, not as new \
+                     measurements of the sensor."
+                .to_string(),
+            Some(u) => format!(
+                "# The paper's experiments on {}\n\n\
+                 Table 1, Figure 5, Figure 16 and Table 6 come from the dataset `{}` ({} images, \
+                 {} classes). The other sections need several datasets (sandpaper, one per \
+                 gait, a closed loop) and come from the simulator in `sim/`; Table 6 uses the \
+                 simulated hopper's step length and period.",
+                u.dir.display(),
+                u.dir.display(),
+                u.set.images.len(),
+                u.set.classes.len()
+            ),
+        };
+        if !self.extra.is_empty() {
+            let _ = write!(
+                source,
+                " One exception: the unknown-terrain section also runs on {}, data this project \
+                 did not make (a SpeedPP2D folder holds the `jiku-data` package's real \
+                 plantar-pressure maps, written by `python3 scripts/speedpp2d.py --out DIR`).",
+                self.extra
+                    .iter()
+                    .map(|d| format!("`{}`", d.dir.display()))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+        }
+        format!(
+            "{source} The paper's numbers are given beside ours. Regenerate with `{command}` \
+             (this run: {secs:.0} s).\n\n"
+        )
+    }
+}
+
+impl Report {
     /// A report drawing into `figures` (created), with the bundled font registered.
     pub fn new(
         figures: PathBuf,

@@ -94,6 +94,118 @@ pub struct Summary {
     pub unknown_terrains: BTreeMap<String, UnknownTerrain>,
 }
 
+/// What `presrs demo` reports of one closed-loop run: its [`Summary`] with the falls, the
+/// track, and the leg through motors when there was one.
+#[derive(Clone, Debug)]
+pub struct DemoReport {
+    /// The steps scored.
+    pub summary: Summary,
+    /// Falls in the run.
+    pub falls: u64,
+    /// The simulator, node and controller ran on the wall clock (`--realtime`).
+    pub realtime: bool,
+    /// The track's length, m.
+    pub track_m: f64,
+    /// The controller's safe gait (for unknown terrain).
+    pub safe_gait: u8,
+    /// The step log written.
+    pub csv: String,
+    /// The leg through motors (`--leg`): its protocol, the bridge's LegState against the truth
+    /// and the bridge's counters.
+    pub leg: Option<(String, sim::service::LegStateCheck, leg::LegCounters)>,
+}
+
+impl DemoReport {
+    /// `presrs demo --json`'s object.
+    pub fn to_json(&self) -> serde_json::Value {
+        let sum = &self.summary;
+        let table: Vec<serde_json::Value> = sum
+            .speeds
+            .iter()
+            .map(|((t, g), (v, k))| serde_json::json!({"terrain": t, "gait": g, "mean_speed_m_s": v, "steps": k}))
+            .collect();
+        serde_json::json!({
+            "steps": sum.steps,
+            "accuracy": sum.accuracy,
+            "switches": sum.switches,
+            "steps_to_switch": sum.steps_to_switch,
+            "steps_to_switch_max": sum.max_steps_to_switch(),
+            "falls": self.falls,
+            "realtime": self.realtime,
+            "speed_per_terrain_and_gait": table,
+            "track_m": self.track_m,
+            "unknown_terrains": sum.unknown_terrains.iter().map(|(t, u)| serde_json::json!({
+                "terrain": t, "steps": u.steps, "called_unknown": u.called_unknown,
+                "steps_to_safe_gait": u.steps_to_safe_gait,
+            })).collect::<Vec<_>>(),
+            "csv": self.csv,
+            "leg": self.leg.as_ref().map(|(protocol, state, counters)| serde_json::json!({
+                "protocol": protocol,
+                "leg_state": state,
+                "bridge": counters,
+            })),
+        })
+    }
+}
+
+impl std::fmt::Display for DemoReport {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let sum = &self.summary;
+        let n = sum.steps;
+        writeln!(
+            f,
+            "\nsummary: {n} steps, per-step accuracy {:.1}% ({}/{n}), {} gait switches",
+            sum.accuracy * 100.0,
+            sum.correct,
+            sum.switches
+        )?;
+        writeln!(
+            f,
+            "steps from a terrain change to its gait: {:?} (max {})",
+            sum.steps_to_switch,
+            sum.max_steps_to_switch()
+        )?;
+        writeln!(f, "falls: {}", self.falls)?;
+        if let Some((protocol, st, c)) = &self.leg {
+            writeln!(
+                f,
+                "leg through {protocol} motors: {} LegState from the encoders ({} at their own timestamp); error against the truth, median / 95th percentile / largest: angle {:.4} / {:.4} / {:.4} rad, length {:.2} / {:.2} / {:.2} mm; {} LegCommands, {} clamped, {} malformed replies",
+                st.frames,
+                st.at_timestamp,
+                st.angle_err_rad[0],
+                st.angle_err_rad[1],
+                st.angle_err_rad[2],
+                st.length_err_m[0] * 1e3,
+                st.length_err_m[1] * 1e3,
+                st.length_err_m[2] * 1e3,
+                c.commands,
+                c.clamped,
+                c.malformed_replies
+            )?;
+        }
+        for (t, u) in &sum.unknown_terrains {
+            let to_safe: Vec<String> = u
+                .steps_to_safe_gait
+                .iter()
+                .map(|d| d.map_or("never".into(), |d| d.to_string()))
+                .collect();
+            writeln!(
+                f,
+                "terrain the model does not know: {t}: {}/{} steps called unknown; safe gait G{} reached after [{}] steps on each entry",
+                u.called_unknown,
+                u.steps,
+                self.safe_gait,
+                to_safe.join(", ")
+            )?;
+        }
+        writeln!(f, "mean speed (m/s) per terrain and gait:")?;
+        for ((t, g), (v, k)) in &sum.speeds {
+            writeln!(f, "  {t:<8} G{g}: {v:.2} ({k} steps)")?;
+        }
+        writeln!(f, "step log: {}", self.csv)
+    }
+}
+
 /// How the loop met a terrain its model does not know.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct UnknownTerrain {
@@ -315,6 +427,104 @@ impl Evaluation {
         let k = self.confusion.counts.len();
         let unknown: usize = self.confusion.counts.iter().map(|r| r[k]).sum();
         unknown as f64 / self.confusion.total().max(1) as f64
+    }
+}
+
+impl Evaluation {
+    /// `presrs eval --json`'s object: accuracy overall and per class (`names`: the model's
+    /// classes), the confusion (`[actual][detected]`, the unknown column apart), open-set
+    /// shares, timing, and what was asked (`spec`).
+    pub fn to_json(&self, names: &[String], spec: &EvalSpec) -> serde_json::Value {
+        let counts = &self.confusion;
+        let k = names.len();
+        let per: serde_json::Map<String, serde_json::Value> = names
+            .iter()
+            .enumerate()
+            .map(|(i, n)| (n.clone(), counts.recall(i).into()))
+            .collect();
+        let confusion: Vec<&[usize]> = counts.counts.iter().map(|r| &r[..k]).collect();
+        let unknown: Vec<usize> = counts.counts.iter().map(|r| r[k]).collect();
+        let novel: serde_json::Map<String, serde_json::Value> = self
+            .novel
+            .iter()
+            .map(|(t, (n, u))| {
+                let share = *u as f64 / (*n).max(1) as f64;
+                (
+                    t.clone(),
+                    serde_json::json!({"images": n, "called_unknown": u, "unknown_share": share}),
+                )
+            })
+            .collect();
+        serde_json::json!({
+            "overall_accuracy": counts.accuracy(), "per_class": per, "classes": names,
+            "confusion": confusion, "unknown": unknown, "unknown_rate": self.unknown_rate(),
+            "novel_terrains": novel, "n_tested": counts.total(), "n_skipped": self.skipped,
+            "damage_pct": spec.damage_pct, "repair": spec.repair,
+            "classify_us_median": percentile(&self.classify_us, 0.5).unwrap_or(0.0),
+            "classify_us_p99": percentile(&self.classify_us, 0.99).unwrap_or(0.0),
+            "kernels": spec.kernels.describe(),
+        })
+    }
+
+    /// `presrs eval`'s table: one row per detected class (and "unknown" when any image was),
+    /// each actual class's shares in a column; then accuracy, timing and the open-set shares.
+    pub fn table(&self, names: &[String], spec: &EvalSpec) -> String {
+        use std::fmt::Write;
+        let counts = &self.confusion;
+        let k = names.len();
+        let n_tested = counts.total();
+        let correct: usize = (0..k).map(|i| counts.counts[i][i]).sum();
+        let mut o = String::new();
+        // Writing to a String cannot fail.
+        let _ = writeln!(
+            o,
+            "left out {} images the model was trained or validated on; tested {n_tested}",
+            self.skipped
+        );
+        let _ = write!(o, "{:>16}", "detected \\ actual");
+        for n in names {
+            let _ = write!(o, " {n:>12}");
+        }
+        let _ = writeln!(o);
+        let has_unknown = counts.counts.iter().any(|r| r[k] > 0);
+        for det in 0..k + usize::from(has_unknown) {
+            let _ = write!(
+                o,
+                "{:>16}",
+                names.get(det).map_or("unknown", String::as_str)
+            );
+            for row in &counts.counts {
+                let n: usize = row.iter().sum();
+                let p = if n > 0 {
+                    100.0 * row[det] as f64 / n as f64
+                } else {
+                    0.0
+                };
+                let _ = write!(o, " {p:>11.1}%");
+            }
+            let _ = writeln!(o);
+        }
+        let _ = writeln!(
+            o,
+            "overall accuracy {:.1}% ({correct}/{n_tested}); classify median {:.1} us, p99 {:.1} us ({} kernels)",
+            counts.accuracy() * 100.0,
+            percentile(&self.classify_us, 0.5).unwrap_or(0.0),
+            percentile(&self.classify_us, 0.99).unwrap_or(0.0),
+            spec.kernels.describe()
+        );
+        let _ = writeln!(
+            o,
+            "known terrains called unknown: {:.1}%",
+            100.0 * self.unknown_rate()
+        );
+        for (t, (n, u)) in &self.novel {
+            let _ = writeln!(
+                o,
+                "{t} (not in the model): {u}/{n} called unknown ({:.1}%)",
+                100.0 * *u as f64 / (*n).max(1) as f64
+            );
+        }
+        o
     }
 }
 

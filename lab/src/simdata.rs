@@ -48,6 +48,73 @@ pub struct Trained {
     pub unused_calibration: usize,
 }
 
+impl Trained {
+    /// `presrs train`'s account: unused calibration images, how the unknown-terrain check was
+    /// calibrated (or why there is none: `unknown_rate` as asked), and what was trained, in
+    /// `took`, written to `out`.
+    pub fn report(&self, unknown_rate: f64, took: std::time::Duration, out: &str) -> String {
+        use std::fmt::Write;
+        let (model, split) = (&self.model, &self.split);
+        let mut o = String::new();
+        // Writing to a String cannot fail.
+        if self.unused_calibration > 0 {
+            let _ = writeln!(
+                o,
+                "calibration run: {} images not used (at most {} per terrain, the first ones)",
+                self.unused_calibration,
+                node::classifier::train::MAX_CALIBRATION_PER_CLASS
+            );
+        }
+        let _ = match &model.novelty {
+            Some(nv) => {
+                let c = &nv.calibration;
+                writeln!(
+                    o,
+                    "unknown terrain: calibrated on {} ({} images{}) to --unknown-rate {}: the \
+                     check calls {:.1}% of them unknown ({:.1}% were taken for another terrain){}",
+                    c.source.describe(),
+                    c.images,
+                    if c.runs.is_empty() {
+                        String::new()
+                    } else {
+                        format!(" of {}", c.runs.join(", "))
+                    },
+                    c.rate,
+                    100.0 * c.called_unknown,
+                    100.0 * c.misclassified,
+                    if c.margin > 1.0 {
+                        format!(
+                            " before the margin (x{}); with one run only, calibrate on a second \
+                             one (--calibrate DIR) for thresholds that fit the robot's next run",
+                            c.margin
+                        )
+                    } else {
+                        String::new()
+                    }
+                )
+            }
+            None if unknown_rate > 0.0 => writeln!(
+                o,
+                "unknown terrain: no calibration image showed contact; the density rule decides"
+            ),
+            None => writeln!(o, "unknown terrain: rejection off (--unknown-rate 0)"),
+        };
+        let _ = writeln!(
+            o,
+            "trained on {} + {} images ({} classes), h = {}, kernel width {:.4}, {:.1} ms; {} \
+             images left for testing; wrote {out}",
+            split.train.len(),
+            split.validation.len(),
+            model.classes.len(),
+            model.h,
+            model.kernel_width,
+            took.as_secs_f64() * 1e3,
+            split.test.len(),
+        );
+        o
+    }
+}
+
 /// Why [`TrainingSet::train_calibrated`] failed: training or the calibration, as they say it.
 #[derive(Debug, thiserror::Error)]
 pub enum TrainCalibratedError {

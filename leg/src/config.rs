@@ -94,19 +94,25 @@ pub struct JointConfig {
     /// MIT: explicit ranges instead of a model.
     pub mit_ranges: Option<Ranges>,
     /// MIT: the id replies come on.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "is_zero")]
     pub mit_master_id: u8,
     /// moteus: its configured `servo.pid_position.kp`, N m/rev (the scales' 1.0).
     pub moteus_kp: Option<f64>,
     /// moteus: its configured `servo.pid_position.kd`, N m s/rev.
     pub moteus_kd: Option<f64>,
     /// moteus: the source id the bridge sends from (replies come back to it).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "is_zero")]
     pub moteus_source: u8,
 }
 
 fn one() -> f64 {
     1.0
+}
+
+/// A written config leaves out the other protocols' keys at their default (`presrs leg
+/// --example moteus` said `mit_master_id = 0`, which a moteus leg has no use for).
+fn is_zero(x: &u8) -> bool {
+    *x == 0
 }
 
 /// The leg's spring and the hip's hold.
@@ -863,8 +869,17 @@ mit_model = "AK80-6-V1.1"
             assert!(c.speaks(k));
             c.validate().unwrap();
             // Printed (`presrs leg --example`) and read back, the same leg.
-            let back = LegConfig::from_text(&c.to_toml().unwrap(), "example.toml").unwrap();
+            let text = c.to_toml().unwrap();
+            let back = LegConfig::from_text(&text, "example.toml").unwrap();
             assert_eq!(back, c);
+            // Only the keys of the leg's own protocol.
+            for other in ["mit_", "moteus_"] {
+                let own = matches!(
+                    (k, other),
+                    (DriverKind::Mit, "mit_") | (DriverKind::Moteus, "moteus_")
+                );
+                assert_eq!(text.contains(other), own, "{k:?}: {text}");
+            }
         }
     }
 
