@@ -8,7 +8,7 @@ use std::time::Duration;
 use anyhow::{Context, Result, bail};
 use node::capture::{Capture, CaptureService, CaptureSet, Labelling, parse_labels};
 use protocol::bus::{BusSource, CanBus};
-use protocol::component::{self, Component, RunOptions};
+use protocol::component::{self, RunOptions};
 
 use crate::runtime::Signals;
 
@@ -72,13 +72,7 @@ pub fn run(a: CaptureArgs) -> Result<ExitCode> {
             log.file_name()
                 .map_or("log".into(), |n| n.to_string_lossy().to_string())
         });
-        let records = protocol::candump::read_log_file(log)?;
-        for r in &records {
-            service.feed(&r.stamped);
-            if service.done() {
-                break;
-            }
-        }
+        service.replay(&protocol::candump::read_log_file(log)?);
     } else if let Some(iface) = &a.iface {
         let signals = Signals::install()?;
         let start = std::time::SystemTime::now()
@@ -101,52 +95,14 @@ pub fn run(a: CaptureArgs) -> Result<ExitCode> {
     } else {
         bail!("give --replay FILE.log or --iface IFACE");
     }
-    let CaptureService {
-        capture,
-        set,
-        source,
-        failed,
-        ..
-    } = service;
-    let per_terrain = &set.written_per_terrain;
-    let c = capture.counts();
-    let pc = capture.pipeline().counters;
     if a.json {
-        println!(
-            "{}",
-            serde_json::json!({
-                "source": source, "out": a.out, "frames": pc.frames, "images": pc.images,
-                "steps": c.steps, "written": set.written, "duplicates": set.duplicates,
-                "no_image": c.no_image, "blank": c.blank, "unlabelled": c.unlabelled,
-                "spans_labels": c.spans_labels, "per_terrain": per_terrain,
-                "set_total": set.len(), "error": failed.as_ref().map(|e| e.to_string()),
-            })
-        );
+        println!("{}", service.report_json(&a.out));
     } else {
-        let terrains: Vec<String> = per_terrain
-            .iter()
-            .map(|(t, n)| format!("{t} {n}"))
-            .collect();
-        eprintln!(
-            "capture of {source}: {} steps, {} written ({}), {} already in the set; skipped: {} without an image in the stance, {} blank, {} outside every label, {} spanning two labels; {} holds {} steps",
-            c.steps,
-            set.written,
-            if terrains.is_empty() {
-                "none".into()
-            } else {
-                terrains.join(", ")
-            },
-            set.duplicates,
-            c.no_image,
-            c.blank,
-            c.unlabelled,
-            c.spans_labels,
-            a.out.display(),
-            set.len()
-        );
+        eprintln!("{}", service.report_line(&a.out));
     }
+    let (failed, written) = (service.failed, service.set.written);
     if let Some(e) = failed {
-        return Err(e).context(format!("capture stopped after {} images", set.written));
+        return Err(e).context(format!("capture stopped after {written} images"));
     }
     Ok(ExitCode::SUCCESS)
 }

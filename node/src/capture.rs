@@ -436,6 +436,63 @@ impl CaptureService {
     }
 }
 
+impl CaptureService {
+    /// Feeds a log's records until the capture is done (a `--replay`).
+    pub fn replay(&mut self, records: &[protocol::candump::LogRecord]) {
+        for r in records {
+            self.feed(&r.stamped);
+            if self.failed.is_some() {
+                break;
+            }
+        }
+    }
+
+    /// `presrs capture --json`'s object: what was read, written and skipped, and why it
+    /// stopped if it did; `out` names the set's folder.
+    pub fn report_json(&self, out: &Path) -> serde_json::Value {
+        let (c, pc, set) = (
+            self.capture.counts(),
+            self.capture.pipeline().counters,
+            &self.set,
+        );
+        serde_json::json!({
+            "source": self.source, "out": out, "frames": pc.frames, "images": pc.images,
+            "steps": c.steps, "written": set.written, "duplicates": set.duplicates,
+            "no_image": c.no_image, "blank": c.blank, "unlabelled": c.unlabelled,
+            "spans_labels": c.spans_labels, "per_terrain": set.written_per_terrain,
+            "set_total": set.len(), "error": self.failed.as_ref().map(|e| e.to_string()),
+        })
+    }
+
+    /// The same as one line for a person.
+    pub fn report_line(&self, out: &Path) -> String {
+        let (c, set) = (self.capture.counts(), &self.set);
+        let terrains: Vec<String> = set
+            .written_per_terrain
+            .iter()
+            .map(|(t, n)| format!("{t} {n}"))
+            .collect();
+        format!(
+            "capture of {}: {} steps, {} written ({}), {} already in the set; skipped: {} without an image in the stance, {} blank, {} outside every label, {} spanning two labels; {} holds {} steps",
+            self.source,
+            c.steps,
+            set.written,
+            if terrains.is_empty() {
+                "none".into()
+            } else {
+                terrains.join(", ")
+            },
+            set.duplicates,
+            c.no_image,
+            c.blank,
+            c.unlabelled,
+            c.spans_labels,
+            out.display(),
+            set.len()
+        )
+    }
+}
+
 fn keep(set: &mut CaptureSet, source: &str, failed: &mut Option<CaptureError>, c: &CapturedStep) {
     if failed.is_none()
         && let Err(e) = set.add(c, source)
