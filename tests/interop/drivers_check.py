@@ -137,10 +137,11 @@ def log_moteus(msg, spec):
             # moteus position mode: kp_scale times the configured servo.pid_position.kp
             # (N m per revolution of error), so N m/rad is scale * kp / 2 pi.
             kp_full, kd_full = spec["joints"][dest]
-            pos = cmd.get(reg.COMMAND_POSITION)
+            # Revolutions to rad; NaN (moteus: "no value") stays none.
+            rad = lambda x: None if num(x) is None else x * 2 * math.pi
             row.update({
-                "position": None if pos is None or math.isnan(pos) else pos * 2 * math.pi,
-                "velocity": num(cmd.get(reg.COMMAND_VELOCITY, 0.0)) * 2 * math.pi,
+                "position": rad(cmd.get(reg.COMMAND_POSITION)),
+                "velocity": rad(cmd.get(reg.COMMAND_VELOCITY, 0.0)),
                 "torque": num(cmd.get(reg.COMMAND_FEEDFORWARD_TORQUE, 0.0)),
                 "kp": cmd.get(reg.COMMAND_KP_SCALE, 1.0) * kp_full / (2 * math.pi),
                 "kd": cmd.get(reg.COMMAND_KD_SCALE, 1.0) * kd_full / (2 * math.pi),

@@ -23,23 +23,46 @@ async def main(url, topics, timeout):
                 return 1
             await asyncio.sleep(0.2)
     subs, got, schemas, next_id = {}, {}, {}, 1
+    # channel id per wanted topic, from the server's advertisements
+    channels = {}
+    # foxglove's server can answer a subscribe sent right after a channel's advertisement
+    # with "unknown channel" (seen once in CI, 2026-11-24: /gait, advertised, then refused
+    # 0.2 s later, nothing ever sent; the SDK has known races between a channel's
+    # registration and subscriptions to it, foxglove/foxglove-sdk#533). A client asks again for
+    # what it still has no data on, as the Foxglove app does when a panel is reopened.
+    retry_every, last_try = 2.0, time.monotonic()
     async with ws:
         while len(got) < len(topics):
             left = deadline - time.monotonic()
             if left <= 0:
                 break
+            if time.monotonic() - last_try >= retry_every:
+                last_try = time.monotonic()
+                again = []
+                for topic, ch_id in channels.items():
+                    if topic not in got:
+                        subs[next_id] = topic
+                        again.append({"id": next_id, "channelId": ch_id})
+                        next_id += 1
+                if again:
+                    await ws.send(json.dumps({"op": "subscribe", "subscriptions": again}))
             try:
-                msg = await asyncio.wait_for(ws.recv(), left)
+                msg = await asyncio.wait_for(ws.recv(), min(left, retry_every))
             except asyncio.TimeoutError:
-                break
+                continue
             if isinstance(msg, str):
                 m = json.loads(msg)
                 if m.get("op") == "advertise":
                     new = []
                     for ch in m["channels"]:
-                        if ch["topic"] in topics and ch["topic"] not in subs.values():
+                        if ch["topic"] not in topics:
+                            continue
+                        first = ch["topic"] not in channels
+                        # A topic advertised again (a new channel id) is retried on the new id.
+                        channels[ch["topic"]] = ch["id"]
+                        schemas[ch["topic"]] = (ch["schemaName"], ch["encoding"], ch.get("schema", ""))
+                        if first:
                             subs[next_id] = ch["topic"]
-                            schemas[ch["topic"]] = (ch["schemaName"], ch["encoding"], ch.get("schema", ""))
                             new.append({"id": next_id, "channelId": ch["id"]})
                             next_id += 1
                     if new:
