@@ -152,9 +152,10 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
         };
         // Ctrl-C ends a recorded run properly (the file's summary written); without a
         // recording it ends the process as always.
-        let signals = match live.is_some() || log.is_some() {
-            true => Some(crate::runtime::Signals::install()?),
-            false => None,
+        let signals = if live.is_some() || log.is_some() {
+            Some(crate::runtime::Signals::install()?)
+        } else {
+            None
         };
         let tap = live.as_ref().map(|l| l.tap());
         let mut truth = |t_us: u64, robot: &sim::runner::SimRobot| {
@@ -241,10 +242,9 @@ fn summarize(
         track_m: track.length(),
         safe_gait: cfg.safe_gait,
         csv: a.csv.display().to_string(),
-        leg: leg.map(|(state, counters)| {
-            let protocol = format!("{:?}", a.leg.unwrap_or(leg::DriverKind::Mit)).to_lowercase();
-            (protocol, state, counters)
-        }),
+        leg: leg
+            .zip(a.leg)
+            .map(|((state, counters), kind)| (kind.name().to_string(), state, counters)),
     };
     if a.json {
         println!("{}", report.to_json());

@@ -636,11 +636,8 @@ fn the_drivers_packages_decode_every_motor_frame_of_a_closed_loop_run() {
     let dir = std::env::temp_dir().join(format!("presrs-drivers-log-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let model = common::small_model(&dir);
-    for (kind, proto) in [
-        (leg::DriverKind::Moteus, "moteus"),
-        (leg::DriverKind::Odrive, "odrive"),
-        (leg::DriverKind::Mit, "mit"),
-    ] {
+    for kind in leg::DriverKind::ALL {
+        let proto = kind.name();
         let log = dir.join(format!("{proto}.log"));
         let out = common::output_ok(
             std::process::Command::new(env!("CARGO_BIN_EXE_presrs"))

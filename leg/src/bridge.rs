@@ -296,12 +296,7 @@ impl Component for LegService {
     }
 
     fn filters(&self) -> Vec<(u32, u32)> {
-        let width = if self.ids.extended {
-            0x1FFF_FFFF
-        } else {
-            0x7FF
-        };
-        let mut f = vec![(self.ids.id(MessageKind::LegCommand, self.cfg.foot), width)];
+        let mut f = vec![self.ids.foot_filter(MessageKind::LegCommand, self.cfg.foot)];
         f.extend(self.drivers.iter().flat_map(Driver::filters));
         f
     }
@@ -536,12 +531,7 @@ impl Component for MainSide {
         "leg (main bus)"
     }
     fn filters(&self) -> Vec<(u32, u32)> {
-        let width = if self.ids.extended {
-            0x1FFF_FFFF
-        } else {
-            0x7FF
-        };
-        vec![(self.ids.id(MessageKind::LegCommand, self.foot), width)]
+        vec![self.ids.foot_filter(MessageKind::LegCommand, self.foot)]
     }
     fn on_frame(&mut self, st: &Stamped, now_us: u64, out: &mut Outbox) {
         if let Ok(mut leg) = self.leg.lock() {

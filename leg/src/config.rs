@@ -58,15 +58,27 @@ pub enum DriverKind {
     Mit,
 }
 
+impl DriverKind {
+    /// Every protocol.
+    pub const ALL: [DriverKind; 3] = [DriverKind::Moteus, DriverKind::Odrive, DriverKind::Mit];
+
+    /// Its name in configs and on the command line ("moteus", "odrive", "mit").
+    pub fn name(self) -> &'static str {
+        match self {
+            DriverKind::Moteus => "moteus",
+            DriverKind::Odrive => "odrive",
+            DriverKind::Mit => "mit",
+        }
+    }
+}
+
 impl std::str::FromStr for DriverKind {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "moteus" => Ok(Self::Moteus),
-            "odrive" => Ok(Self::Odrive),
-            "mit" => Ok(Self::Mit),
-            _ => Err(format!("{s:?}: one of moteus, odrive, mit")),
-        }
+        Self::ALL
+            .into_iter()
+            .find(|k| k.name() == s)
+            .ok_or_else(|| format!("{s:?}: one of moteus, odrive, mit"))
     }
 }
 

@@ -226,7 +226,7 @@ impl IdConfig {
 
     /// Checks that every range fits the identifier width and that no two ranges overlap.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        let max = if self.extended { 0x1FFF_FFFF } else { 0x7FF };
+        let max = self.id_mask();
         for kind in MessageKind::ALL {
             let last = self.base(kind) + Self::span(kind) - 1;
             if last > max {
@@ -253,10 +253,20 @@ impl IdConfig {
         Ok(())
     }
 
+    /// Every bit of an identifier of this map's width (29 or 11 bits).
+    pub fn id_mask(&self) -> u32 {
+        if self.extended { 0x1FFF_FFFF } else { 0x7FF }
+    }
+
+    /// The receive filter `(id, mask)` that passes exactly `kind` of foot `foot`.
+    pub fn foot_filter(&self, kind: MessageKind, foot: u8) -> (u32, u32) {
+        (self.id(kind, foot), self.id_mask())
+    }
+
     /// The receive filter `(id, mask)` list that passes exactly the given messages.
     #[cfg(feature = "std")]
     pub fn filters(&self, kinds: &[MessageKind]) -> Vec<(u32, u32)> {
-        let width = if self.extended { 0x1FFF_FFFF } else { 0x7FF };
+        let width = self.id_mask();
         let mut out = Vec::new();
         for &kind in kinds {
             let base = self.base(kind);

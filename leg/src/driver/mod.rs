@@ -107,13 +107,18 @@ pub enum Driver {
 }
 
 impl Driver {
+    /// The protocol.
+    pub fn kind(&self) -> crate::DriverKind {
+        match self {
+            Driver::Moteus(_) => crate::DriverKind::Moteus,
+            Driver::Odrive(_) => crate::DriverKind::Odrive,
+            Driver::Mit(_) => crate::DriverKind::Mit,
+        }
+    }
+
     /// The protocol's name.
     pub fn name(&self) -> &'static str {
-        match self {
-            Driver::Moteus(_) => "moteus",
-            Driver::Odrive(_) => "odrive",
-            Driver::Mit(_) => "mit",
-        }
+        self.kind().name()
     }
 
     /// Frames that make the driver follow commands (ODrive closed loop, MIT motor mode); sent
