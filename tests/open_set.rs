@@ -85,13 +85,22 @@ fn a_left_out_static_terrain_is_unknown_on_a_fresh_sensor_and_the_known_ones_are
 }
 
 #[test]
-fn a_left_out_grit_is_unknown_on_a_fresh_sensor() {
+fn a_left_out_coarse_grit_is_unknown_and_the_finest_two_pass_for_each_other() {
     let rows = leave_one_class_out(&sim_source(Kind::Sandpaper, STATIC_CROP, false, 60)).unwrap();
-    let m = means(&rows);
-    // Measured: AUROC 0.979-0.997, left out 98-100%, fresh known 2.3-5.8%.
-    assert!(m.auroc >= 0.95, "{rows:?}");
-    assert!(m.unknown_held_out >= 0.9, "{rows:?}");
-    assert!(m.unknown_known <= 0.07, "{rows:?}");
+    let row = |name: &str| rows.iter().find(|r| r.held_out == name).unwrap();
+    // Measured (experiment open-set, seeds 1-3): AUROC 0.993-1.000, left out 90-100% unknown.
+    for t in ["aluminum", "sandpaper_100", "sandpaper_60"] {
+        assert!(row(t).auroc >= 0.95, "{t}: {rows:?}");
+        assert!(row(t).unknown_held_out >= 0.85, "{t}: {rows:?}");
+    }
+    // Since the simulated sandpaper lies on a cloth backing (issue 29), 220 and 150 grit differ
+    // only in texture at one or two sensels: even the plain nearest neighbour ranks a left-out
+    // one barely above known images (AUROC 0.56-0.68 measured), the ceiling of a distance here.
+    for t in ["sandpaper_220", "sandpaper_150"] {
+        assert!(row(t).nn_auroc < 0.75, "{t}: {rows:?}");
+    }
+    // Measured: fresh known 4.2-5.8% unknown.
+    assert!(means(&rows).unknown_known <= 0.08, "{rows:?}");
 }
 
 #[test]

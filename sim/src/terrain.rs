@@ -3,7 +3,9 @@
 //!
 //! Every sample is a fresh random patch (stones, needles and particles placed anew), so no two
 //! samples are alike. The physical reasoning per surface is in the comments of
-//! [`Physics::surface`]; how the skin turns a surface into pressure is in `skin.rs`.
+//! [`Physics::surface`]; how the skin turns a surface into pressure is in `skin.rs`. The
+//! sandpapers are grains ([`Physics::grit_diameter_mm`]) on a cloth backing whose relief
+//! ([`BACKING_RELIEF_MM`]) is what makes the paper's resolution experiment come out as it does.
 
 use std::f64::consts::PI;
 
@@ -211,7 +213,12 @@ impl Physics {
             | Physics::Sandpaper60 => {
                 let d = self.grit_diameter_mm().unwrap_or(0.1);
                 asperity = Some(grit(rows, cols, cell_mm, d, rng));
-                (plate(rows, cols, cell_mm, 0.0, rng), 1e5)
+                let mut f = plate(rows, cols, cell_mm, 0.0, rng);
+                let relief = backing(rows, cols, cell_mm, rng);
+                for (a, b) in f.v.iter_mut().zip(&relief.v) {
+                    *a += b;
+                }
+                (f, 1e5)
             }
             Physics::Wood => {
                 // Planed pine: grain ridges about 2-4 mm apart (earlywood/latewood), a few
@@ -458,6 +465,39 @@ fn segment(f: &mut Field, cy: f64, cx: f64, a: f64, len: f64, rad: f64, base: f6
             }
         }
     }
+}
+
+/// Relief of a sandpaper's cloth backing at the felt's scale, mm (one sigma).
+///
+/// The paper's sandpaper is "aluminum oxide particles adhered to a fabric backing". A woven
+/// cloth laid on the platform's table is not flat at the scale of a few sensels: its yarns
+/// (about 0.2-0.5 mm thick) cross over each other, the make coat only partly levels them, and
+/// a sheet cut from a roll keeps the cockle of its weave and its cure. Its thickness tolerance,
+/// tens of microns, is this relief. Features under about 2 mm are lost in the felt's spread
+/// (a sinusoid of 2 mm period keeps 4 % through the 0.8 mm blur), so what the sensor sees is
+/// the relief over several millimetres: 50 um over about 2 mm ([`BACKING_CORR_MM`]).
+///
+/// It is the same cloth under every grit, so it adds the same mm-scale pressure pattern to
+/// every grit's image: a 50 um crest presses the felt 1.5 kPa more (30 kPa/mm), 40 % of the
+/// 3.9 kPa of a 10 N press. Under a fine grit the skin follows it; under 60 grit the
+/// tallest grains, whose spread in height (about 40 um) the stiff silicone reads 33 times
+/// harder than the felt, carry the load and mask it. What is left to tell two grits apart is
+/// then the grains' texture at one to two sensels, which a 40x40 image resolves and a 10x10
+/// one (5.08 mm pitch) aliases into the backing's pattern: the paper's section 5.
+///
+/// Measured with the paper's protocol (`presrs experiment resolution`, 5 seeds per setting):
+/// without the backing, sandpaper 98.4 % at 40x40 and 90.4 % at 10x10 (seeds 1-3); with
+/// 50-100 um over 1.5-3.5 mm, 88-94 % and 56-71 %; with 30 um, a 10x10 loss of only 16-21
+/// points. The value is an estimate of the cloth's relief, not a measurement of the paper's
+/// sheet; the range above is how much the result hangs on it (docs/results.md).
+pub const BACKING_RELIEF_MM: f64 = 0.05;
+/// Correlation length of the backing's relief (the Gaussian smoothing of white noise), mm.
+pub const BACKING_CORR_MM: f64 = 2.0;
+
+/// The cloth backing's relief ([`BACKING_RELIEF_MM`]): a smooth random field, fresh per press
+/// (the die lands on another part of the sheet).
+fn backing(rows: usize, cols: usize, cell_mm: f64, rng: &mut impl Rng) -> Field {
+    Field::random_smooth(rows, cols, cell_mm, BACKING_RELIEF_MM, BACKING_CORR_MM, rng)
 }
 
 /// Sandpaper: aluminum-oxide particles of diameter `d` mm bonded in resin, about 0.45/d^2
