@@ -75,7 +75,7 @@ pub fn run(a: BenchNodeArgs) -> Result<ExitCode> {
     match &a.iface {
         None => {
             let bus = InProcBus::new();
-            let live = crate::cli::LiveArgs {
+            let live = record::LiveOptions {
                 mcap: a.mcap.clone(),
                 foxglove: None,
             };

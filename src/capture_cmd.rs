@@ -43,11 +43,12 @@ pub struct CaptureArgs {
     pub json: bool,
     /// Overrides the config's `terrains` key.
     #[command(flatten)]
-    pub terrains: crate::cli::TerrainsArg,
+    pub terrains: protocol::TerrainsArg,
 }
 
 pub fn run(a: CaptureArgs) -> Result<ExitCode> {
-    let cfg = crate::cli::load_node_config(a.config.as_deref(), &a.terrains)?;
+    let cfg =
+        node::NodeConfig::load_or_default(a.config.as_deref(), &a.terrains).context("--config")?;
     let catalog = cfg.catalog()?;
     let labelling = match (&a.label, &a.labels) {
         (Some(name), _) => Labelling::All(

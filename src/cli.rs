@@ -5,104 +5,9 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use node::NodeConfig;
 use node::classifier::dataset::{load_dataset, read_image, read_images, write_pgm};
 use node::classifier::train::TrainOptions;
 use node::classifier::{Classifier, Crop, Kernels, Model, repair as repair_mod};
-use protocol::TerrainCatalog;
-use sim::runner::Track;
-
-/// `--terrains FILE`: the lab's own terrains beside the paper's twelve (`protocol::terrain`).
-#[derive(clap::Args, Clone, Debug, Default)]
-pub struct TerrainsArg {
-    /// A terrains file adding your own terrains to the paper's twelve: entries
-    /// `[[terrain]]` with `id = 20` and `name = "asphalt"` (ids 0-254, names [a-z0-9_]+).
-    #[arg(long, value_name = "FILE")]
-    pub terrains: Option<PathBuf>,
-}
-
-impl TerrainsArg {
-    /// The catalog: the paper's terrains plus the file's.
-    pub fn catalog(&self) -> Result<TerrainCatalog> {
-        Ok(TerrainCatalog::load(self.terrains.as_deref())?)
-    }
-}
-
-/// `--mcap FILE` and `--foxglove [ADDR]`: record while running.
-#[derive(clap::Args, Clone, Debug, Default)]
-pub struct LiveArgs {
-    /// Record every frame seen and sent to this MCAP file, off the hot path (frames are
-    /// dropped and counted, never waited for, when the disk is slower than the bus).
-    #[arg(long, value_name = "FILE")]
-    pub mcap: Option<PathBuf>,
-    /// Serve the same channels live to the Foxglove app (Open connection -> Foxglove
-    /// WebSocket, ws://HOST:PORT).
-    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "127.0.0.1:8765")]
-    pub foxglove: Option<String>,
-}
-
-impl LiveArgs {
-    /// The recorder these options ask for ([`record::LiveOptions::start`]).
-    pub fn start(
-        &self,
-        ids: &protocol::IdConfig,
-        catalog: &TerrainCatalog,
-    ) -> Option<record::LiveRecorder> {
-        record::LiveOptions {
-            mcap: self.mcap.clone(),
-            foxglove: self.foxglove.clone(),
-        }
-        .start(ids, catalog)
-    }
-}
-
-/// The `--track` file (its terrains named in `catalog`), or the default track (wood, grass,
-/// clay, carpet quarters).
-pub fn load_track(
-    path: Option<&std::path::Path>,
-    catalog: &protocol::TerrainCatalog,
-) -> Result<Track> {
-    match path {
-        Some(p) => Track::load(p, catalog).context("--track"),
-        None => Ok(Track::default()),
-    }
-}
-
-/// `--leg PROTOCOL [--leg-config FILE]`: the file's leg, whose drivers must speak PROTOCOL, or
-/// the built-in prismatic leg on that protocol's motors.
-pub fn leg_config(
-    kind: Option<leg::DriverKind>,
-    path: Option<&Path>,
-) -> Result<Option<leg::LegConfig>> {
-    let Some(kind) = kind else {
-        return Ok(None);
-    };
-    let Some(p) = path else {
-        return Ok(Some(leg::LegConfig::example(kind)));
-    };
-    let c = leg::LegConfig::from_file(p).context("--leg-config")?;
-    anyhow::ensure!(
-        c.speaks(kind),
-        "--leg-config {}: its joints' drivers are {:?} and {:?}, not --leg {kind:?} on both",
-        p.display(),
-        c.hip.driver,
-        c.length.driver
-    );
-    Ok(Some(c))
-}
-
-/// `--config FILE` of the node (defaults without one), its `terrains` key overridden by
-/// `--terrains` when given.
-pub fn load_node_config(path: Option<&Path>, terrains: &TerrainsArg) -> Result<NodeConfig> {
-    let mut cfg = match path {
-        Some(p) => NodeConfig::load(p).context("--config")?,
-        None => NodeConfig::default(),
-    };
-    if terrains.terrains.is_some() {
-        cfg.terrains = terrains.terrains.clone();
-    }
-    Ok(cfg)
-}
 
 /// The model given, or the cached simulator model (trained on first run), saying which.
 pub(crate) fn load_or_train(model: Option<&Path>) -> Result<Model> {
@@ -168,7 +73,7 @@ pub struct TrainArgs {
     #[arg(long, value_name = "DIR")]
     pub calibrate: Option<PathBuf>,
     #[command(flatten)]
-    pub terrains: TerrainsArg,
+    pub terrains: protocol::TerrainsArg,
 }
 
 pub fn train(a: &TrainArgs) -> Result<ExitCode> {
@@ -249,7 +154,7 @@ pub fn eval(
     model_path: &Path,
     data: &Path,
     o: &EvalOptions,
-    terrains: &TerrainsArg,
+    terrains: &protocol::TerrainsArg,
 ) -> Result<ExitCode> {
     let &EvalOptions {
         damage,
@@ -282,7 +187,7 @@ pub fn classify(
     model_path: &Path,
     files: &[PathBuf],
     json: bool,
-    terrains: &TerrainsArg,
+    terrains: &protocol::TerrainsArg,
 ) -> Result<ExitCode> {
     let model = Model::load(model_path)?;
     model.check_catalog(&terrains.catalog()?)?;
@@ -293,12 +198,7 @@ pub fn classify(
             let d = c
                 .classify_image(img, false)
                 .with_context(|| f.display().to_string())?;
-            // An image without contact says so: it is no terrain, whatever it lies nearest.
-            let name = match d.class {
-                _ if !d.contact => "unknown (no contact)",
-                Some(k) => names[k].as_str(),
-                None => "unknown",
-            };
+            let name = d.label(&names);
             let frame = if i > 0 {
                 format!("#{i}")
             } else {
@@ -353,39 +253,6 @@ pub fn repair(file: &Path, out: &Path) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// The simulated hopper and its sensor, as `dataset` and `sim` both take them.
-#[derive(clap::Args, Clone, Debug)]
-pub struct FootArgs {
-    /// Hopper gait (the dynamic set's; the one `sim` holds without a controller): G1, G2 or G3.
-    #[arg(long, default_value = "G2")]
-    pub gait: String,
-    /// Sensor damage from the start, percent of sensels on dead rows and columns (eq. 6).
-    #[arg(long, default_value_t = 0.0)]
-    pub damage: f64,
-    /// Serial number of the simulated sensor (`sim`'s foot i wears serial + i): its gain pattern
-    /// and faults. `dataset` and `sim` share the default, so a model trained on one fits the other.
-    #[arg(long, default_value_t = sim::DEFAULT_SENSOR)]
-    pub sensor: u64,
-}
-
-impl FootArgs {
-    /// The gait, and the damage checked.
-    pub fn checked(&self) -> Result<(controller::Gait, f64)> {
-        let gait = controller::Gait::by_name(&self.gait)
-            .with_context(|| format!("--gait {}: expected G1, G2 or G3", self.gait))?;
-        Ok((gait, check_damage(self.damage)?))
-    }
-}
-
-/// `--damage PCT`, a percentage in 0..=100.
-pub fn check_damage(pct: f64) -> Result<f64> {
-    anyhow::ensure!(
-        (0.0..=100.0).contains(&pct),
-        "--damage {pct}: expected a percentage in 0..=100"
-    );
-    Ok(pct)
-}
-
 /// `presrs dataset`.
 #[derive(clap::Args)]
 pub struct DatasetArgs {
@@ -398,13 +265,13 @@ pub struct DatasetArgs {
     #[arg(long)]
     pub n: Option<usize>,
     #[command(flatten)]
-    pub foot: FootArgs,
+    pub foot: sim::FootOptions,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     // Checked like every command's; the simulator generates the paper's terrains, which every
     // catalog holds.
     #[command(flatten)]
-    pub terrains: TerrainsArg,
+    pub terrains: protocol::TerrainsArg,
 }
 
 pub fn dataset(a: &DatasetArgs) -> Result<ExitCode> {

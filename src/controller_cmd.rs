@@ -27,7 +27,7 @@ pub struct ControllerArgs {
     pub time_scale: f64,
     /// Overrides the config's `terrains` key.
     #[command(flatten)]
-    pub terrains: crate::cli::TerrainsArg,
+    pub terrains: protocol::TerrainsArg,
 }
 
 pub fn load_config(path: Option<&std::path::Path>) -> Result<ControllerConfig> {

@@ -50,7 +50,7 @@ pub struct DemoArgs {
     pub check_load: bool,
     /// For the track's terrain names and the node's and controller's catalogs.
     #[command(flatten)]
-    pub terrains: crate::cli::TerrainsArg,
+    pub terrains: protocol::TerrainsArg,
     /// The leg through motors: the simulated leg answers as two motors of this protocol
     /// (moteus, odrive, mit) and a leg bridge (`presrs leg`) stands between the controller and
     /// them.
@@ -63,7 +63,7 @@ pub struct DemoArgs {
     /// `--mcap FILE` records every frame on the bus and the simulator's truth; `--foxglove`
     /// serves them live, with the loop paced to real time so there is something to watch.
     #[command(flatten)]
-    pub live: crate::cli::LiveArgs,
+    pub live: record::LiveOptions,
     /// Every frame of the demo's bus (motor frames included) as a candump log (`candump -L`
     /// format, interface can0, as `presrs sim --log` writes): `canplayer vcan0=can0 -I FILE`
     /// replays it, `presrs mcap` and python-can read it.
@@ -72,9 +72,10 @@ pub struct DemoArgs {
 }
 
 pub fn run(a: DemoArgs) -> Result<ExitCode> {
-    crate::cli::check_damage(a.damage)?;
+    sim::check_damage(a.damage)?;
     let catalog = a.terrains.catalog()?;
-    let track = crate::cli::load_track(a.track.as_deref(), &catalog)?;
+    let track =
+        sim::runner::Track::load_or_default(a.track.as_deref(), &catalog).context("--track")?;
     let mut model = crate::cli::load_or_train(a.model.as_deref())?;
     if a.check_load {
         anyhow::ensure!(
@@ -84,7 +85,8 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
     }
     let known: Vec<String> = model.classes.iter().map(|c| c.name.clone()).collect();
     let mut ctrl_cfg = ControllerConfig::default();
-    let node_cfg = crate::cli::load_node_config(a.node_config.as_deref(), &a.terrains)?;
+    let node_cfg = node::NodeConfig::load_or_default(a.node_config.as_deref(), &a.terrains)
+        .context("--node-config")?;
     if a.terrains.terrains.is_some() {
         ctrl_cfg.terrains = a.terrains.terrains.clone();
     }
@@ -111,7 +113,11 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
         controller_restart: None,
         node_restart: None,
         link_down: None,
-        leg: crate::cli::leg_config(a.leg, a.leg_config.as_deref())?,
+        leg: a
+            .leg
+            .map(|k| leg::LegConfig::for_driver(k, a.leg_config.as_deref()))
+            .transpose()
+            .context("--leg-config")?,
     };
     let show = !a.json;
     let live_recording = a.live.mcap.is_some() || a.live.foxglove.is_some();

@@ -47,7 +47,7 @@ pub struct ExperimentArgs {
     pub extra_source: Vec<PathBuf>,
     /// With `--data` or `--extra-source`: the catalog its class folders are named in.
     #[command(flatten)]
-    pub terrains: crate::cli::TerrainsArg,
+    pub terrains: protocol::TerrainsArg,
 }
 
 pub fn run(a: ExperimentArgs) -> Result<ExitCode> {

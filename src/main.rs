@@ -40,7 +40,7 @@ enum Cmd {
         #[arg(long)]
         out: Option<PathBuf>,
         #[command(flatten)]
-        terrains: cli::TerrainsArg,
+        terrains: protocol::TerrainsArg,
     },
     /// The terrain node: foot switch and tactile frames in, one TerrainClass per step out
     /// (on a CAN interface, or `--replay` of a candump log).
@@ -76,7 +76,7 @@ enum Cmd {
         #[command(flatten)]
         opts: cli::EvalOptions,
         #[command(flatten)]
-        terrains: cli::TerrainsArg,
+        terrains: protocol::TerrainsArg,
     },
     /// Classify image files: one line per image (file, terrain, confidence), or with --json one
     /// object per image (file, terrain, confidence, novelty, threshold).
@@ -90,7 +90,7 @@ enum Cmd {
         #[arg(long)]
         json: bool,
         #[command(flatten)]
-        terrains: cli::TerrainsArg,
+        terrains: protocol::TerrainsArg,
     },
     /// Print an image's feature vector (eqs. 1-3).
     Features {

@@ -28,11 +28,12 @@ pub struct McapArgs {
     #[arg(long)]
     pub json: bool,
     #[command(flatten)]
-    pub terrains: crate::cli::TerrainsArg,
+    pub terrains: protocol::TerrainsArg,
 }
 
 pub fn run(a: McapArgs) -> Result<ExitCode> {
-    let mut cfg = crate::cli::load_node_config(a.config.as_deref(), &a.terrains)?;
+    let mut cfg =
+        node::NodeConfig::load_or_default(a.config.as_deref(), &a.terrains).context("--config")?;
     let catalog = cfg.catalog().context("--config terrains")?;
     let ids = cfg.ids.clone();
     let mut node = match &a.model {

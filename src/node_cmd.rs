@@ -34,13 +34,14 @@ pub struct NodeArgs {
     pub json: bool,
     /// Overrides the config's `terrains` key.
     #[command(flatten)]
-    pub terrains: crate::cli::TerrainsArg,
+    pub terrains: protocol::TerrainsArg,
     #[command(flatten)]
-    pub live: crate::cli::LiveArgs,
+    pub live: record::LiveOptions,
 }
 
 pub fn run(a: NodeArgs) -> Result<ExitCode> {
-    let mut cfg = crate::cli::load_node_config(a.config.as_deref(), &a.terrains)?;
+    let mut cfg =
+        node::NodeConfig::load_or_default(a.config.as_deref(), &a.terrains).context("--config")?;
     // The error names the file already.
     let model = Model::load(&a.model).context("--model")?;
     match (&a.replay, &a.iface) {

@@ -45,7 +45,7 @@ pub struct SimArgs {
     #[arg(long, default_value_t = 1.0)]
     pub speed: f64,
     #[command(flatten)]
-    pub foot: crate::cli::FootArgs,
+    pub foot: sim::FootOptions,
     /// Stop after this much simulated time, s (default: run until SIGINT/SIGTERM).
     #[arg(long)]
     pub duration: Option<f64>,
@@ -56,7 +56,7 @@ pub struct SimArgs {
     pub seed: u64,
     /// Track terrains and reported names come from this catalog.
     #[command(flatten)]
-    pub terrains: crate::cli::TerrainsArg,
+    pub terrains: protocol::TerrainsArg,
     /// The leg as two motors of this protocol (moteus, odrive, mit): the simulator takes their
     /// commands from a leg bridge (`presrs leg`) instead of LegCommand and answers as the
     /// drivers do; LegState is then the bridge's.
@@ -73,13 +73,14 @@ pub struct SimArgs {
     /// the simulator's truth per leg (`/sim/legN`: speed, position, true terrain) as MCAP;
     /// `--foxglove`: the same live.
     #[command(flatten)]
-    pub live: crate::cli::LiveArgs,
+    pub live: record::LiveOptions,
 }
 
 pub fn run(a: SimArgs) -> Result<ExitCode> {
     let signals = Signals::install()?;
     let catalog = a.terrains.catalog()?;
-    let track = crate::cli::load_track(a.track.as_deref(), &catalog)?;
+    let track =
+        sim::runner::Track::load_or_default(a.track.as_deref(), &catalog).context("--track")?;
     anyhow::ensure!(
         a.speed > 0.0 && a.speed.is_finite(),
         "--speed {}: expected a positive factor (1 = real time)",
@@ -96,7 +97,11 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
             ..Default::default()
         },
         sensor: a.foot.sensor,
-        leg: crate::cli::leg_config(a.leg, a.leg_config.as_deref())?,
+        leg: a
+            .leg
+            .map(|k| leg::LegConfig::for_driver(k, a.leg_config.as_deref()))
+            .transpose()
+            .context("--leg-config")?,
         leg_silent_at_s: a.leg_silent_at,
         ..Default::default()
     };

@@ -268,6 +268,32 @@ impl LegConfig {
         Self::from_text(&text, &name)
     }
 
+    /// The leg a process runs on `kind`'s motors: the file's (whose drivers must both speak
+    /// `kind`), or the built-in prismatic leg on that protocol's motors ([`Self::example`]).
+    pub fn for_driver(kind: DriverKind, path: Option<&Path>) -> Result<Self, ConfigFileError> {
+        let Some(p) = path else {
+            return Ok(Self::example(kind));
+        };
+        let c = Self::from_file(p)?;
+        if !c.speaks(kind) {
+            let name = |d: Option<DriverKind>| d.map_or("none", DriverKind::name);
+            return Err(ConfigFileError::Invalid {
+                path: p.display().to_string(),
+                source: Invalid::new(
+                    "driver",
+                    format!(
+                        "driver: the joints' drivers are {} (hip) and {} (length), not {} on \
+                         both as asked; give the leg's protocol or another file",
+                        name(c.hip.driver),
+                        name(c.length.driver),
+                        kind.name()
+                    ),
+                ),
+            });
+        }
+        Ok(c)
+    }
+
     /// Parses and checks a config's text; `name` names it in errors.
     pub fn from_text(text: &str, name: &str) -> Result<Self, ConfigFileError> {
         let c: Self = protocol::config::parse(text, name)?;
@@ -834,6 +860,24 @@ impl LegConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_leg_file_for_another_protocol_is_refused_naming_its_drivers() {
+        let path = std::env::temp_dir().join(format!("presrs-leg-{}.toml", std::process::id()));
+        std::fs::write(&path, MIT_PRISMATIC).unwrap();
+        assert!(LegConfig::for_driver(DriverKind::Mit, Some(&path)).is_ok());
+        let e = LegConfig::for_driver(DriverKind::Moteus, Some(&path)).unwrap_err();
+        std::fs::remove_file(&path).ok();
+        let msg = e.to_string();
+        assert!(
+            msg.contains("mit (hip) and mit (length), not moteus"),
+            "{msg}"
+        );
+        assert!(msg.contains(&path.display().to_string()), "{msg}");
+        // Without a file: the protocol's example leg.
+        let c = LegConfig::for_driver(DriverKind::Odrive, None).unwrap();
+        assert!(c.speaks(DriverKind::Odrive));
+    }
 
     pub(crate) const MIT_PRISMATIC: &str = r#"
 foot = 0

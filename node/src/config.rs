@@ -117,6 +117,22 @@ impl NodeConfig {
         Self::from_toml(&text, &name)
     }
 
+    /// A process's node config: the file at `path` (the defaults without one), its `terrains`
+    /// key overridden by `terrains` (the process's `--terrains`) when given.
+    pub fn load_or_default(
+        path: Option<&std::path::Path>,
+        terrains: &protocol::TerrainsArg,
+    ) -> Result<Self, ConfigFileError> {
+        let mut cfg = match path {
+            Some(p) => Self::load(p)?,
+            None => Self::default(),
+        };
+        if terrains.terrains.is_some() {
+            cfg.terrains.clone_from(&terrains.terrains);
+        }
+        Ok(cfg)
+    }
+
     /// The catalog the `terrains` key names (the paper's twelve without it).
     pub fn catalog(&self) -> Result<TerrainCatalog, CatalogError> {
         TerrainCatalog::load(self.terrains.as_deref())

@@ -69,4 +69,4 @@ pub use frame::{CanFrame, Stamped};
 pub use ids::{IdConfig, MessageKind};
 pub use messages::Message;
 #[cfg(feature = "std")]
-pub use terrain::{Terrain, TerrainCatalog};
+pub use terrain::{Terrain, TerrainCatalog, TerrainsArg};

@@ -197,6 +197,24 @@ struct Entry {
     name: String,
 }
 
+/// `--terrains FILE`: a lab's own terrains beside the paper's twelve, as a process's option
+/// (with the `clap` feature: `#[command(flatten)]`).
+#[derive(Clone, Debug, Default)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
+pub struct TerrainsArg {
+    /// A terrains file adding your own terrains to the paper's twelve: entries
+    /// `[[terrain]]` with `id = 20` and `name = "asphalt"` (ids 0-254, names [a-z0-9_]+).
+    #[cfg_attr(feature = "clap", arg(long, value_name = "FILE"))]
+    pub terrains: Option<std::path::PathBuf>,
+}
+
+impl TerrainsArg {
+    /// The catalog: the paper's terrains plus the file's.
+    pub fn catalog(&self) -> Result<TerrainCatalog, CatalogError> {
+        TerrainCatalog::load(self.terrains.as_deref())
+    }
+}
+
 impl TerrainCatalog {
     /// The paper's twelve terrains (ids 0-11).
     pub fn paper() -> Self {

@@ -372,13 +372,21 @@ mod tests {
     }
 }
 
-/// What to record live, as a process's `--mcap FILE` and `--foxglove ADDR` options give it.
+/// What to record live, as a process's `--mcap FILE` and `--foxglove [ADDR]` options give it
+/// (with the `clap` feature, those options themselves: `#[command(flatten)]`).
 #[derive(Clone, Debug, Default)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
 pub struct LiveOptions {
-    /// An MCAP file to write.
+    /// Record every frame seen and sent to this MCAP file, off the hot path (frames are
+    /// dropped and counted, never waited for, when the disk is slower than the bus).
+    #[cfg_attr(feature = "clap", arg(long, value_name = "FILE"))]
     pub mcap: Option<std::path::PathBuf>,
-    /// An address to serve the Foxglove view on (`127.0.0.1:8765`; port 0 picks one and the
-    /// log names it).
+    /// Serve the same channels live to the Foxglove app (Open connection -> Foxglove
+    /// WebSocket, ws://HOST:PORT; port 0 picks one and the log names it).
+    #[cfg_attr(
+        feature = "clap",
+        arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "127.0.0.1:8765")
+    )]
     pub foxglove: Option<String>,
 }
 

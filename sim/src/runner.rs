@@ -111,6 +111,15 @@ impl Track {
         Self::from_toml(&text, &name, catalog)
     }
 
+    /// The track of the file at `path` (a process's `--track`), or the default track (wood,
+    /// grass, clay, carpet quarters) without one.
+    pub fn load_or_default(
+        path: Option<&std::path::Path>,
+        catalog: &TerrainCatalog,
+    ) -> Result<Self, ConfigFileError> {
+        path.map_or_else(|| Ok(Self::default()), |p| Self::load(p, catalog))
+    }
+
     /// Parses a TOML track file (`path` names it in errors) and checks it: every terrain a name
     /// in `catalog` that the simulator can simulate, every length positive.
     pub fn from_toml(

@@ -46,6 +46,17 @@ impl Decision {
         novelty: f64::INFINITY,
         threshold: f64::INFINITY,
     };
+
+    /// What to call this decision among the model's class `names`: the class, `unknown`, or
+    /// `unknown (no contact)` for an image without contact, which is no terrain whatever it
+    /// lies nearest.
+    pub fn label<'a>(&self, names: &'a [String]) -> &'a str {
+        match self.class {
+            _ if !self.contact => "unknown (no contact)",
+            Some(k) => names.get(k).map_or("unknown", String::as_str),
+            None => "unknown",
+        }
+    }
 }
 
 pub use super::model::{DepthMismatch, ImageMismatch, SizeMismatch};
@@ -504,5 +515,24 @@ impl Classifier {
             self.repair_work();
         }
         Ok(self.decide())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_decision_without_contact_is_no_terrain_whatever_it_lies_nearest() {
+        let names = vec!["wood".to_string(), "carpet".to_string()];
+        let mut d = Decision::NO_CONTACT;
+        d.class = Some(1);
+        assert_eq!(d.label(&names), "unknown (no contact)");
+        d.contact = true;
+        assert_eq!(d.label(&names), "carpet");
+        d.class = None;
+        assert_eq!(d.label(&names), "unknown");
+        d.class = Some(7);
+        assert_eq!(d.label(&names), "unknown");
     }
 }
