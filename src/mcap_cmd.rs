@@ -6,8 +6,8 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::{Context, Result};
+use node::NodeService;
 use node::classifier::Model;
-use node::{NodeService, Output};
 use record::{McapFile, Recorder, Sink};
 
 #[derive(clap::Args)]
@@ -48,23 +48,7 @@ pub fn run(a: McapArgs) -> Result<ExitCode> {
     let records = protocol::candump::read_log_file(&a.log)?;
     let mut out = McapFile::create(&a.out).context("--out")?;
     let mut rec = Recorder::new(ids, catalog);
-    let mut decided = Vec::new();
-    for r in &records {
-        let st = &r.stamped;
-        rec.frame(st, &mut out).context("--out")?;
-        if let Some(node) = node.as_mut() {
-            // The node on the log's clock, one record at a time, as `presrs node --replay`.
-            node.replay(std::iter::once(st), &mut |t, o| {
-                if let Output::Class { foot, class } = o {
-                    decided.push((t, foot, class));
-                }
-            });
-            for (t, foot, class) in decided.drain(..) {
-                rec.model_decision(t, foot, &class, &mut out)
-                    .context("--out")?;
-            }
-        }
-    }
+    lab::replay::log_to_recording(&records, node.as_mut(), &mut rec, &mut out).context("--out")?;
     out.finish().context("--out")?;
     let s = rec.stats();
     if a.json {

@@ -13,7 +13,9 @@
 //! [`open_set`] (unknown ground: leave one class out per source of images, judged on a fresh
 //! run),
 //! [`model`] (the simulator model the demo caches), [`load`] (the load `presrs bench-node`
-//! plays: feet at 100 Hz on a known schedule, and `/proc` CPU and memory readers) and, with the
+//! plays: feet at 100 Hz on a known schedule, the node under it in this process or as a
+//! process, and `/proc` CPU and memory readers), [`replay`] (a candump log to a recording, with
+//! a model's decisions beside the node's) and, with the
 //! default `report` feature, [`report`] (the paper's experiments as Markdown and PNG figures,
 //! on the simulator or on a lab's own dataset) and [`view`] (a recording's pressure image,
 //! terrain, gait and speed in one PNG, the panels of `docs/foxglove-layout.json`).
@@ -40,6 +42,7 @@ pub mod closed_loop;
 pub mod load;
 pub mod model;
 pub mod open_set;
+pub mod replay;
 #[cfg(feature = "report")]
 pub mod report;
 pub mod score;
