@@ -13,7 +13,7 @@ use rand::seq::SliceRandom;
 use sim::dataset::{Kind, Options, Sample, generate};
 
 use crate::LabError;
-use crate::score::confusion;
+use crate::score::{Confusion, confusion};
 use crate::simdata::TrainingSet;
 
 /// Stances in a row before the history repair calls a line dead (the node's default).
@@ -269,14 +269,14 @@ pub fn cadence(gait: &controller::Gait, horizon_s: f64) -> Option<(f64, f64)> {
 /// Section 5's resolution experiment on one set, with the paper's protocol: the paper's count
 /// of presses per terrain ([`Kind::default_count`]: 50 per sandpaper, 100 per static
 /// terrain), 13 training and 7 validation images per terrain, the rest tested; rejection off.
-/// Per seed in `seeds` (a fresh dataset and split each): the accuracy at full resolution and
+/// Per seed in `seeds` (a fresh dataset and split each): the confusion at full resolution and
 /// at every `downsample`-th sensel (the paper's 10x10 is 4 of a 40x40 crop).
 pub fn resolution(
     kind: Kind,
     crop: Crop,
     downsample: usize,
     seeds: &[u64],
-) -> Result<Vec<(f64, f64)>, LabError> {
+) -> Result<Vec<(Confusion, Confusion)>, LabError> {
     let gait = controller::Gait::g2();
     let mut out = Vec::with_capacity(seeds.len());
     for &seed in seeds {
@@ -285,12 +285,11 @@ pub fn resolution(
             .first()
             .map_or(50, |&p| kind.default_count(p, gait.id));
         let set = dataset(kind, n, gait.clone(), seed);
-        let mut acc = [0.0; 2];
-        for (a, ds) in acc.iter_mut().zip([1, downsample]) {
+        let run = |ds: usize| -> Result<Confusion, LabError> {
             let (m, test) = train_on(&set, crop, ds, seed, false)?;
-            *a = confusion(&m, &set, &test, |_| {}, false).accuracy();
-        }
-        out.push((acc[0], acc[1]));
+            Ok(confusion(&m, &set, &test, |_| {}, false))
+        };
+        out.push((run(1)?, run(downsample)?));
     }
     Ok(out)
 }
@@ -321,8 +320,13 @@ mod tests {
         let mean = |runs: &[(f64, f64)], f: fn(&(f64, f64)) -> f64| {
             runs.iter().map(f).sum::<f64>() / runs.len() as f64
         };
-        let grit = resolution(Kind::Sandpaper, crop, 4, &seeds).unwrap();
-        let stat = resolution(Kind::Static, crop, 4, &seeds).unwrap();
+        let acc = |runs: Vec<(Confusion, Confusion)>| -> Vec<(f64, f64)> {
+            runs.iter()
+                .map(|(f, l)| (f.accuracy(), l.accuracy()))
+                .collect()
+        };
+        let grit = acc(resolution(Kind::Sandpaper, crop, 4, &seeds).unwrap());
+        let stat = acc(resolution(Kind::Static, crop, 4, &seeds).unwrap());
         let (full, low) = (mean(&grit, |r| r.0), mean(&grit, |r| r.1));
         let loss_static = mean(&stat, |r| r.0 - r.1);
         // Measured (seeds 11-15): sandpaper 95.3% -> 64.9%, static 99.9% -> 98.5%.
