@@ -97,6 +97,14 @@ impl Field {
         }
     }
 
+    /// Adds `other` (a field on the same grid) cell by cell: one surface laid on another.
+    pub fn add(&mut self, other: &Field) {
+        debug_assert_eq!((self.rows, self.cols), (other.rows, other.cols));
+        for (a, b) in self.v.iter_mut().zip(&other.v) {
+            *a += b;
+        }
+    }
+
     /// Smooth Gaussian random field with standard deviation `sd` and correlation length
     /// `corr_mm` (white noise, blurred, rescaled).
     pub fn random_smooth(

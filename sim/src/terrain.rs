@@ -200,9 +200,7 @@ impl Physics {
                 // of 0.1-0.5 mm, on a bed far softer than the skin.
                 let mut f = Field::random_smooth(rows, cols, cell_mm, 0.12, 3.0, rng);
                 let grains = Field::random_smooth(rows, cols, cell_mm, 0.05, 0.2, rng);
-                for (a, b) in f.v.iter_mut().zip(&grains.v) {
-                    *a += b;
-                }
+                f.add(&grains);
                 (f, 12.0)
             }
             Physics::PineNeedles => (strands(&NEEDLES, rows, cols, cell_mm, w, h, rng), 60.0),
@@ -214,10 +212,7 @@ impl Physics {
                 let d = self.grit_diameter_mm().unwrap_or(0.1);
                 asperity = Some(grit(rows, cols, cell_mm, d, rng));
                 let mut f = plate(rows, cols, cell_mm, 0.0, rng);
-                let relief = backing(rows, cols, cell_mm, rng);
-                for (a, b) in f.v.iter_mut().zip(&relief.v) {
-                    *a += b;
-                }
+                f.add(&backing(rows, cols, cell_mm, rng));
                 (f, 1e5)
             }
             Physics::Wood => {
@@ -273,9 +268,7 @@ impl Physics {
                 // embedded pebbles, and drying cracks.
                 let mut f = Field::random_smooth(rows, cols, cell_mm, 0.25, 5.0, rng);
                 let clods = Field::random_smooth(rows, cols, cell_mm, 0.10, 1.0, rng);
-                for (a, b) in f.v.iter_mut().zip(&clods.v) {
-                    *a += b;
-                }
+                f.add(&clods);
                 for _ in 0..rng.random_range(1..4) {
                     let (cy, cx, rad) = (
                         rng.random_range(0.0..h),
@@ -485,13 +478,14 @@ fn segment(f: &mut Field, cy: f64, cx: f64, a: f64, len: f64, rad: f64, base: f6
 /// then the grains' texture at one to two sensels, which a 40x40 image resolves and a 10x10
 /// one (5.08 mm pitch) aliases into the backing's pattern: the paper's section 5.
 ///
-/// Measured with the paper's protocol (`presrs experiment resolution`, 5 seeds per setting):
-/// without the backing, sandpaper 98.4 % at 40x40 and 90.4 % at 10x10 (seeds 1-3); with
-/// 50-100 um over 1.5-3.5 mm, 88-94 % and 56-71 %; with 30 um, a 10x10 loss of only 16-21
-/// points. At 10x10 the loss is the middle grits': aluminum and 60 grit keep 100 % and 90 %,
-/// 220, 150 and 100 grit fall from 81-99 % to 41-48 % (seeds 1-5). The value is an estimate
-/// of the cloth's relief, not a measurement of the paper's
-/// sheet; the range above is how much the result hangs on it (docs/results.md).
+/// Measured with the paper's protocol (`lab::study::resolution`, what `presrs experiment
+/// resolution` prints): without the backing, sandpaper 98.4 % at 40x40 and 90.4 % at 10x10
+/// (seeds 1-3); with this value, 94.3 % and 64.4 % (seeds 1-5). At 10x10 the loss is the
+/// middle grits': aluminum and 60 grit keep 100 % and 90 %, 220, 150 and 100 grit fall from
+/// 81-99 % to 41-48 %. The value is an estimate of the cloth's relief, not a measurement of
+/// the paper's sheet. How much the result hangs on it (these two constants changed by hand, 5
+/// seeds each): 50-100 um over 1.5-3.5 mm gave 88-94 % and 56-71 %; 30 um, a 10x10 loss of
+/// only 16-21 points.
 pub const BACKING_RELIEF_MM: f64 = 0.05;
 /// Correlation length of the backing's relief (the Gaussian smoothing of white noise), mm.
 pub const BACKING_CORR_MM: f64 = 2.0;

@@ -26,9 +26,14 @@ fn same_seed_same_output_other_seed_other_output() {
     assert!(a.windows(2).all(|w| w[0].pixels != w[1].pixels));
 }
 
+/// Population standard deviation.
+fn sd(v: &[f64]) -> f64 {
+    let m = v.iter().sum::<f64>() / v.len() as f64;
+    (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / v.len() as f64).sqrt()
+}
+
 fn in_image_sd(p: &[u16]) -> f64 {
-    let m = p.iter().map(|&v| v as f64).sum::<f64>() / p.len() as f64;
-    (p.iter().map(|&v| (v as f64 - m).powi(2)).sum::<f64>() / p.len() as f64).sqrt()
+    sd(&p.iter().map(|&v| v as f64).collect::<Vec<_>>())
 }
 
 /// Mean over `t`'s presses of `f` on the 36x36 inside the die (rows/cols 4..40).
@@ -50,11 +55,11 @@ fn per_terrain(s: &[presrs_sim::dataset::Sample], t: Terrain, f: fn(&[u16]) -> f
 /// Spread of the difference between a sensel and its right neighbour: the texture at one
 /// sensel, with the mm-scale pattern (the backing's) mostly cancelled.
 fn neighbour_sd(p: &[u16]) -> f64 {
-    let d: Vec<u16> = (0..36)
+    let d: Vec<f64> = (0..36)
         .flat_map(|r| (0..35).map(move |c| (r, c)))
-        .map(|(r, c)| (p[r * 36 + c] as i32 - p[r * 36 + c + 1] as i32 + 512) as u16)
+        .map(|(r, c)| p[r * 36 + c] as f64 - p[r * 36 + c + 1] as f64)
         .collect();
-    in_image_sd(&d)
+    sd(&d)
 }
 
 #[test]
