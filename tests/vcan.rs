@@ -867,8 +867,15 @@ fn accuracy(r: &serde_json::Value) -> (usize, usize) {
 /// The flood rides on the G2 run rather than on a run of its own (it was a fourth 20 s run,
 /// compared step by step with a quiet G2 run: about 60 s of the VM's time, with the CI over
 /// its budget). What it must not do is the same: lose or invent a stance (one TerrainClass per
-/// touchdown), or cost accuracy: flooded, G2 is held to 90% (the old test's bound was the quiet
-/// run's accuracy less 10 points; the quiet G2 run itself scored 58-60 of 61 in the VM).
+/// touchdown), or cost accuracy: flooded, G2 is held to 90%.
+///
+/// Each run is a sample, judged as one: a gait fails when its run shows the accuracy below the
+/// bound at 1% significance. `>= 95%` of 59 steps failed a CI run (2026-11-24) with nothing
+/// wrong: at the ~97% measured, 3 wrong steps of 59 come about one run in three. The 95% per
+/// gait itself is asserted where a sample can show it, on 400 steps a gait of the same model in
+/// the lock-step loop (lab/tests/gaits.rs: 96.5%, 95.5%, 97.8% for G1, G2, G3), so the quiet
+/// G1 and G3 runs here are 12 s (about 35-41 steps; of 35, 29 right or fewer fails; at 96.5% a false
+/// failure about once in 800 runs) and the flooded G2 run stays 20 s (61 steps: 48 or fewer).
 #[test]
 fn node_classifies_every_gait_with_a_g2_model_survives_damage_and_ignores_a_flood() {
     let _time = Timed(
@@ -876,7 +883,6 @@ fn node_classifies_every_gait_with_a_g2_model_survives_damage_and_ignores_a_floo
         Instant::now(),
     );
     let iface = fd_iface();
-    let sim_s = 20.0;
     let mut per_gait = Vec::new();
     for gait in ["G1", "G2", "G3"] {
         // The flood: other traffic as fast as cangen sends it, and short (undecodable) frames
@@ -902,6 +908,7 @@ fn node_classifies_every_gait_with_a_g2_model_survives_damage_and_ignores_a_floo
             Vec::new()
         };
         let flooded = !flood.is_empty();
+        let sim_s = if flooded { 20.0 } else { 12.0 };
         let r = sim_run(&iface, gait, 0.0, 5, sim_s);
         drop(flood);
         let (c, n) = accuracy(&r);
@@ -911,14 +918,18 @@ fn node_classifies_every_gait_with_a_g2_model_survives_damage_and_ignores_a_floo
             if flooded { " under a cangen flood" } else { "" },
             100.0 * c as f64 / n.max(1) as f64,
         );
-        assert!(n >= 50, "{gait}: {n} TerrainClass in {sim_s} s");
+        // G1 (the slowest) steps every 0.33 s.
+        assert!(
+            n as f64 >= 2.5 * sim_s,
+            "{gait}: {n} TerrainClass in {sim_s} s"
+        );
         // The first touchdown may come before the node is listening, the last after the
         // simulator stopped reading.
         assert!(
             n + 2 >= touchdowns && n <= touchdowns,
             "{gait}: {n} steps classified of {touchdowns} touchdowns"
         );
-        per_gait.push((gait, c as f64 / n as f64, if flooded { 0.9 } else { 0.95 }));
+        per_gait.push((gait, c, n, if flooded { 0.9 } else { 0.95 }));
     }
     // Long enough that the first stances, before the node has learned the dead lines (5
     // stances) and refitted its model to them, do not decide the figure alone.
@@ -957,8 +968,12 @@ fn node_classifies_every_gait_with_a_g2_model_survives_damage_and_ignores_a_floo
     // the learning stances included. The node's model comes from the sensor the simulated foot
     // wears (`presrs dataset` and `presrs sim` default to the same sensor serial), as a robot's
     // model comes from its own foot.
-    for (gait, acc, bound) in per_gait {
-        assert!(acc >= bound, "{gait}: accuracy {acc}, below {bound}");
+    for (gait, c, n, bound) in per_gait {
+        let p_low = binomial_cdf(c, n, bound);
+        assert!(
+            p_low >= 0.01,
+            "{gait}: {c}/{n} right: P(at most {c} right | {bound}) = {p_low:.4}"
+        );
     }
     // 50% damage is judged once the node has learned the dead lines (the learning stances
     // before it are few but each is likely wrong). Each VM run is another trajectory of the
