@@ -10,7 +10,7 @@ use node::capture::{Capture, CaptureService, CaptureSet, Labelling, parse_labels
 use protocol::bus::{BusSource, CanBus};
 use protocol::component::{self, RunOptions};
 
-use crate::runtime::Signals;
+use protocol::component::Signals;
 
 #[derive(clap::Args)]
 pub struct CaptureArgs {

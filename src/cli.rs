@@ -7,7 +7,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use node::classifier::dataset::{load_dataset, read_image, read_images, write_pgm};
 use node::classifier::train::TrainOptions;
-use node::classifier::{Classifier, Crop, Kernels, Model, repair as repair_mod};
+use node::classifier::{Classifier, Crop, Model, repair as repair_mod};
 
 /// The model given, or the cached simulator model (trained on first run), saying which.
 pub(crate) fn load_or_train(model: Option<&Path>) -> Result<Model> {
@@ -32,40 +32,17 @@ pub(crate) fn load_or_train(model: Option<&Path>) -> Result<Model> {
 /// `presrs train`.
 #[derive(clap::Args)]
 pub struct TrainArgs {
-    #[arg(long)]
+    /// The images: DIR/<terrain>/<images> (PGM, CSV, TekScan ASCII), as `capture` writes them.
+    #[arg(long, value_name = "DIR")]
     pub data: PathBuf,
-    #[arg(long)]
+    /// The model file to write (JSON).
+    #[arg(long, value_name = "FILE")]
     pub out: PathBuf,
-    #[arg(long, default_value_t = 20)]
-    pub per_class: usize,
-    #[arg(long, default_value_t = 13)]
-    pub train: usize,
-    /// Rows/columns removed: top,bottom,left,right (the paper: 2,2,2,2 static; 0,3,6,0 foot).
-    #[arg(long, default_value = "0,0,0,0")]
-    pub crop: node::classifier::Crop,
-    /// Keep every k-th row and column (1 = full resolution, at most 8).
-    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=8))]
-    pub downsample: u8,
-    #[arg(long)]
-    pub normalize_load: bool,
-    /// PCA dimensions (default: 52, or as many as the samples support).
-    #[arg(long)]
-    pub dims: Option<usize>,
-    #[arg(long, default_value_t = 1)]
-    pub seed: u64,
+    #[command(flatten)]
+    pub opts: TrainOptions,
     /// Skip unreadable files (counted) instead of stopping.
     #[arg(long)]
     pub skip_bad: bool,
-    /// Share of known-terrain images the model may call unknown: the rejection threshold is
-    /// calibrated on held-out training images to this rate (0..=0.5; 0: reject almost nothing).
-    #[arg(long, default_value_t = node::classifier::train::DEFAULT_UNKNOWN_RATE, value_parser = parse_rate)]
-    pub unknown_rate: f64,
-    /// Also call unknown an image whose load lies outside its class's training range: catches
-    /// ground that looks like a known terrain but yields differently (on the simulator: sand
-    /// that reads as clay), at the price of false unknowns in gait transitions the training
-    /// images do not show.
-    #[arg(long)]
-    pub check_load: bool,
     /// Calibrate the unknown-terrain rejection on this dataset (DIR/<terrain>/<images>: another
     /// run of terrains the model knows, e.g. a second `presrs capture`). Without it, a --data
     /// folder whose manifest names two or more runs of a terrain calibrates on its last run;
@@ -77,18 +54,7 @@ pub struct TrainArgs {
 }
 
 pub fn train(a: &TrainArgs) -> Result<ExitCode> {
-    let (data, out) = (&a.data, &a.out);
-    let opts = TrainOptions {
-        per_class: a.per_class,
-        train: a.train,
-        crop: a.crop,
-        downsample: a.downsample as usize,
-        normalize_load: a.normalize_load,
-        h: a.dims,
-        seed: a.seed,
-        unknown_rate: a.unknown_rate,
-        check_load: a.check_load,
-    };
+    let (data, out, opts) = (&a.data, &a.out, &a.opts);
     let catalog = a.terrains.catalog()?;
     let ds = load_dataset(data, a.skip_bad)?;
     if !ds.bad.is_empty() {
@@ -103,7 +69,7 @@ pub fn train(a: &TrainArgs) -> Result<ExitCode> {
         bail!("{}: no images found", data.display());
     }
     let cal = match &a.calibrate {
-        Some(dir) if a.unknown_rate > 0.0 => {
+        Some(dir) if opts.unknown_rate > 0.0 => {
             let ds = load_dataset(dir, a.skip_bad).with_context(|| {
                 format!("reading the calibration run --calibrate {}", dir.display())
             })?;
@@ -119,66 +85,33 @@ pub fn train(a: &TrainArgs) -> Result<ExitCode> {
         None => None,
     };
     let t0 = Instant::now();
-    let trained = set.train_calibrated(&opts, cal.as_ref().map(|(s, n)| (s, n.as_slice())))?;
+    let trained = set.train_calibrated(opts, cal.as_ref().map(|(s, n)| (s, n.as_slice())))?;
     let took = t0.elapsed();
     trained.model.save(out)?;
     print!(
         "{}",
-        trained.report(a.unknown_rate, took, &out.display().to_string())
+        trained.report(opts.unknown_rate, took, &out.display().to_string())
     );
     Ok(ExitCode::SUCCESS)
-}
-
-/// How `presrs eval` tests a model.
-#[derive(clap::Args)]
-pub struct EvalOptions {
-    /// Simulated sensor damage, percent (paper eq. 6).
-    #[arg(long)]
-    pub damage: Option<f64>,
-    /// Apply the paper's repair filter before classifying.
-    #[arg(long)]
-    pub repair: bool,
-    #[arg(long, default_value_t = 1)]
-    pub seed: u64,
-    #[arg(long)]
-    pub json: bool,
-    #[arg(long)]
-    pub skip_bad: bool,
-    /// `native` (the fastest this CPU has: AVX2/FMA/F16C on x86-64) or `portable` (the
-    /// target's baseline SIMD only, as on an ARM computer): to compare their speed.
-    #[arg(long, default_value = "native")]
-    pub kernels: Kernels,
 }
 
 pub fn eval(
     model_path: &Path,
     data: &Path,
-    o: &EvalOptions,
+    spec: &lab::score::EvalSpec,
+    json: bool,
+    skip_bad: bool,
     terrains: &protocol::TerrainsArg,
 ) -> Result<ExitCode> {
-    let &EvalOptions {
-        damage,
-        repair,
-        seed,
-        json,
-        skip_bad,
-        kernels,
-    } = o;
     let model = Model::load(model_path)?;
     model.check_catalog(&terrains.catalog()?)?;
     let ds = load_dataset(data, skip_bad)?;
     let names: Vec<String> = model.classes.iter().map(|c| c.name.clone()).collect();
-    let spec = lab::score::EvalSpec {
-        damage_pct: damage,
-        repair,
-        seed,
-        kernels,
-    };
-    let ev = lab::score::evaluate(model, &ds, &spec)?;
+    let ev = lab::score::evaluate(model, &ds, spec)?;
     if json {
-        println!("{}", ev.to_json(&names, &spec));
+        println!("{}", ev.to_json(&names, spec));
     } else {
-        print!("{}", ev.table(&names, &spec));
+        print!("{}", ev.table(&names, spec));
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -309,12 +242,4 @@ pub fn dataset(a: &DatasetArgs) -> Result<ExitCode> {
     }
     println!("wrote {} images to {}", samples.len(), out.display());
     Ok(ExitCode::SUCCESS)
-}
-
-/// `--unknown-rate`: a share in 0..=0.5.
-fn parse_rate(s: &str) -> Result<f64, String> {
-    match s.parse::<f64>() {
-        Ok(r) if (0.0..=0.5).contains(&r) => Ok(r),
-        _ => Err(format!("`{s}` is not a share in 0..=0.5 (0.02 is 2%)")),
-    }
 }

@@ -10,8 +10,8 @@ use std::process::ExitCode;
 use anyhow::{Context, Result};
 use controller::ControllerConfig;
 
-use crate::runtime::Signals;
 use protocol::bus::BusSource;
+use protocol::component::Signals;
 
 #[derive(clap::Args)]
 pub struct ControllerArgs {

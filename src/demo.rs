@@ -159,7 +159,7 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
         // Ctrl-C ends a recorded run properly (the file's summary written); without a
         // recording it ends the process as always.
         let signals = if live.is_some() || log.is_some() {
-            Some(crate::runtime::Signals::install()?)
+            Some(protocol::component::Signals::install()?)
         } else {
             None
         };
@@ -177,7 +177,7 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
                 // Alone, a log is stamped as `presrs sim --log` stamps its own (simulated
                 // time from LOG_EPOCH_US); beside an MCAP file, on the wall clock as it is.
                 epoch_us: if live_recording {
-                    crate::runtime::epoch_us()
+                    protocol::clock::epoch_us()
                 } else {
                     sim::runner::LOG_EPOCH_US
                 },
@@ -217,8 +217,7 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
     summarize(&rows, falls, &track, &ctrl_cfg, &known, &a, leg_report)
 }
 
-/// The closed loop on the wall clock: `presrs sim`, `presrs node` and `presrs controller`'s own
-/// loops on one in-process bus, each on its own thread. Returns the step rows and the falls.
+/// One step's line of the live log.
 fn print_row(row: &StepRecord) {
     println!(
         "t {:7.2} s  step {:4}  true {:<8} classified {:<8} {:5.1}%  gait G{}  {:.2} m/s",
@@ -226,8 +225,7 @@ fn print_row(row: &StepRecord) {
     );
 }
 
-/// Simulator, node and controller on one in-process bus, 1 ms at a time, for `steps` steps:
-/// one row per TerrainClass (printed as it comes when `show`).
+/// The step CSV and the summary (a table, or one JSON object with `--json`).
 fn summarize(
     rows: &[StepRecord],
     falls: u64,

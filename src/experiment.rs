@@ -2,7 +2,6 @@
 //! `OUT/results.md` (or `OUT/WHICH.md`) with `OUT/figures/`, under a header saying where the
 //! data came from and how to regenerate it.
 
-use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -90,33 +89,14 @@ pub fn run(a: ExperimentArgs) -> Result<ExitCode> {
         "all" => "results.md".to_string(),
         one => format!("{one}.md"),
     };
-    let mut command = format!(
-        "presrs experiment {} --out {}",
-        a.which.name(),
-        a.out.display()
-    );
-    if a.quick {
-        command.push_str(" --quick");
-    }
-    if a.normalize_load {
-        command.push_str(" --normalize-load");
-    }
-    for d in &a.extra_source {
-        let _ = write!(command, " --extra-source {}", d.display());
-    }
-    if let Some(t) = &a.terrains.terrains {
-        let _ = write!(command, " --terrains {}", t.display());
-    }
-    if let Some(u) = &ctx.user {
-        let _ = write!(command, " --data {}", u.dir.display());
-        if let Some(c) = a.crop {
-            let _ = write!(
-                command,
-                " --crop {},{},{},{}",
-                c.top, c.bottom, c.left, c.right
-            );
-        }
-    }
+    // The command as given (its binary named `presrs`): what regenerates this file.
+    let command = std::iter::once("presrs".to_string())
+        .chain(std::env::args().skip(1).map(|a| match a.contains(' ') {
+            true => format!("'{a}'"),
+            false => a,
+        }))
+        .collect::<Vec<_>>()
+        .join(" ");
     let head = ctx.provenance(&command, t0.elapsed().as_secs_f64());
     let path = a.out.join(name);
     std::fs::write(&path, head + &md).with_context(|| format!("writing {}", path.display()))?;

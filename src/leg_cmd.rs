@@ -8,7 +8,7 @@ use std::process::ExitCode;
 use anyhow::{Context, Result};
 use protocol::bus::BusSource;
 
-use crate::runtime::Signals;
+use protocol::component::Signals;
 
 #[derive(clap::Args)]
 pub struct LegArgs {

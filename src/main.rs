@@ -15,7 +15,6 @@ mod experiment;
 mod leg_cmd;
 mod mcap_cmd;
 mod node_cmd;
-mod runtime;
 mod sim_cmd;
 
 #[derive(Parser)]
@@ -74,7 +73,12 @@ enum Cmd {
         #[arg(long)]
         data: PathBuf,
         #[command(flatten)]
-        opts: cli::EvalOptions,
+        spec: lab::score::EvalSpec,
+        #[arg(long)]
+        json: bool,
+        /// Skip unreadable files (counted) instead of stopping.
+        #[arg(long)]
+        skip_bad: bool,
         #[command(flatten)]
         terrains: protocol::TerrainsArg,
     },
@@ -141,9 +145,11 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Cmd::Eval {
             model,
             data,
-            opts,
+            spec,
+            json,
+            skip_bad,
             terrains,
-        } => cli::eval(&model, &data, &opts, &terrains),
+        } => cli::eval(&model, &data, &spec, json, skip_bad, &terrains),
         Cmd::Classify {
             model,
             files,

@@ -12,7 +12,7 @@ use node::{NodeService, Output};
 use protocol::bus::BusSource;
 use protocol::messages::TerrainClass;
 
-use crate::runtime::Signals;
+use protocol::component::Signals;
 
 #[derive(clap::Args)]
 pub struct NodeArgs {

@@ -17,8 +17,8 @@ use sim::service::RunOptions;
 
 use std::sync::atomic::Ordering;
 
-use crate::runtime::Signals;
 use protocol::bus::{BusSource, Tap};
+use protocol::component::Signals;
 use sim::runner::SimRobot;
 
 #[derive(clap::Args)]
@@ -150,7 +150,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         source,
         &catalog,
         &signals.stop,
-        &mut |_, robot| observe(crate::runtime::epoch_us(), robot),
+        &mut |_, robot| observe(protocol::clock::epoch_us(), robot),
     );
     if let Some(l) = listener {
         signals.stop.store(true, Ordering::Relaxed);

@@ -394,16 +394,23 @@ mod tests {
     }
 }
 
-/// How [`evaluate`] tests a model.
+/// How [`evaluate`] tests a model (with the `clap` feature, `presrs eval`'s options).
 #[derive(Clone, Copy, Debug)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
 pub struct EvalSpec {
-    /// Simulated sensor damage per image, percent (eq. 6).
+    /// Simulated sensor damage per image, percent of sensels on dead rows and columns (eq. 6).
+    #[cfg_attr(feature = "clap", arg(long = "damage", value_name = "PCT"))]
     pub damage_pct: Option<f64>,
     /// The paper's repair filter before classifying.
+    #[cfg_attr(feature = "clap", arg(long))]
     pub repair: bool,
     /// Seed of the damage.
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 1))]
     pub seed: u64,
-    /// Which SIMD kernels classify.
+    /// Which SIMD kernels classify: `native` (the fastest this CPU has: AVX2/FMA/F16C on
+    /// x86-64) or `portable` (the target's baseline SIMD only, as on an ARM computer), to
+    /// compare their speed.
+    #[cfg_attr(feature = "clap", arg(long, default_value = "native"))]
     pub kernels: node::classifier::Kernels,
 }
 

@@ -29,10 +29,7 @@ impl MonotonicClock {
     /// A monotonic clock that reads UNIX-epoch microseconds at creation, so its readings can be
     /// compared with SocketCAN receive timestamps.
     pub fn unix() -> Self {
-        let offset_us = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map(|d| d.as_micros() as u64)
-            .unwrap_or(0);
+        let offset_us = epoch_us();
         Self {
             start: Instant::now(),
             offset_us,
@@ -63,12 +60,17 @@ pub struct WallClock {
 
 impl Clock for WallClock {
     fn now_us(&self) -> u64 {
-        let now = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map(|d| d.as_micros() as u64)
-            .unwrap_or(0);
+        let now = epoch_us();
         self.last.fetch_max(now, Ordering::Relaxed).max(now)
     }
+}
+
+/// The system's real-time clock, µs since the UNIX epoch (0 if the clock is before it): the
+/// time base of SocketCAN's receive timestamps and of recordings stamped on the wall clock.
+pub fn epoch_us() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_micros() as u64)
 }
 
 /// The robot's clock as one runner keeps it, to share between runners: wall time since its

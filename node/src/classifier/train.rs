@@ -17,32 +17,68 @@ use super::novelty::{
     SHRINK_IMAGES, median, upper_quantile,
 };
 
-/// How to train: the paper's split and the preprocessing.
+/// How to train: the paper's split and the preprocessing. With the `clap` feature these are
+/// also `presrs train`'s options (the field's doc is its help).
 #[derive(Clone, Debug)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
 pub struct TrainOptions {
     /// Images drawn per class (section 7.2: 20).
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 20))]
     pub per_class: usize,
     /// Of those, images to train on; the rest validate the kernel width (13 of 20).
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 13))]
     pub train: usize,
-    /// Crop before the features.
+    /// Rows/columns removed before the features: top,bottom,left,right (the paper: 2,2,2,2 on
+    /// the static platform; 0,3,6,0 on the foot).
+    #[cfg_attr(feature = "clap", arg(long, default_value = "0,0,0,0"))]
     pub crop: Crop,
-    /// Downsampling factor after the crop (1 = full resolution).
+    /// Keep every k-th row and column after the crop (1 = full resolution, at most 8).
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 1, value_parser = parse_downsample))]
     pub downsample: usize,
     /// Scale each image to the training set's mean total intensity (the paper's intensity scaling).
+    #[cfg_attr(feature = "clap", arg(long))]
     pub normalize_load: bool,
-    /// PCA dimensions; `None`: the paper's 52, or as many as the samples support.
+    /// PCA dimensions; default: the paper's 52, or as many as the samples support.
+    #[cfg_attr(feature = "clap", arg(long = "dims", value_name = "N"))]
     pub h: Option<usize>,
     /// Seed of the random split.
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 1))]
     pub seed: u64,
-    /// The share of known-terrain images the model may call unknown: the rejection threshold
-    /// is set so that this share of its held-out (leave-one-out) training images falls below
-    /// it. 0 keeps only images far below every training image (the least typical, less 10 nats).
+    /// The share of known-terrain images the model may call unknown (0..=0.5): the novelty
+    /// threshold is set so that this share of held-out known images scores above it. 0 keeps
+    /// the paper's classifier without the novelty score, which rejects almost nothing.
+    #[cfg_attr(
+        feature = "clap",
+        arg(long, default_value_t = DEFAULT_UNKNOWN_RATE, value_parser = parse_rate)
+    )]
     pub unknown_rate: f64,
     /// Also call unknown an image whose load (summed working image, before normalisation) lies
-    /// outside its class's training range (see `load_ranges`): catches ground whose texture
-    /// matches a known terrain but that yields differently, at the price of false unknowns when
-    /// the robot's stances differ from the training stances (gait transitions).
+    /// outside its class's training range: catches ground whose texture matches a known terrain
+    /// but that yields differently (on the simulator: sand that reads as clay), at the price of
+    /// false unknowns when the robot's stances differ from the training stances (gait
+    /// transitions).
+    #[cfg_attr(feature = "clap", arg(long))]
     pub check_load: bool,
+}
+
+/// `--downsample`: 1..=8.
+#[cfg(feature = "clap")]
+fn parse_downsample(s: &str) -> Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(k) if (1..=8).contains(&k) => Ok(k),
+        _ => Err(format!(
+            "`{s}` is not a factor in 1..=8 (1: full resolution)"
+        )),
+    }
+}
+
+/// `--unknown-rate`: a share in 0..=0.5.
+#[cfg(feature = "clap")]
+fn parse_rate(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(r) if (0.0..=0.5).contains(&r) => Ok(r),
+        _ => Err(format!("`{s}` is not a share in 0..=0.5 (0.02 is 2%)")),
+    }
 }
 
 /// `train --unknown-rate`'s default: 2% of known-terrain images may be called unknown.

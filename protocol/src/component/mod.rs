@@ -61,10 +61,12 @@
 
 mod lockstep;
 mod run;
+mod signals;
 mod threaded;
 
 pub use lockstep::LockStep;
 pub use run::{RunOptions, RunStats, run, run_opened};
+pub use signals::{SignalError, Signals};
 pub use threaded::{Link, LinkStats, Threaded, spawn};
 
 use crate::bus::ControllerState;
