@@ -156,46 +156,25 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
             )),
             None => None,
         };
-        // Ctrl-C ends a recorded run properly (the file's summary written); without a
-        // recording it ends the process as always.
-        let signals = if live.is_some() || log.is_some() {
-            Some(protocol::component::Signals::install()?)
-        } else {
-            None
-        };
-        let tap = live.as_ref().map(|l| l.tap());
-        let mut truth = |t_us: u64, robot: &sim::runner::SimRobot| {
-            if let (Some(tap), Some(t)) = (&tap, lab::closed_loop::sim_truth(robot, &track, 0)) {
-                tap.offer_truth(t_us, 0, t);
+        let on_step = |row: &StepRecord| {
+            if show {
+                print_row(row)
             }
         };
-        let rec = signals
-            .as_ref()
-            .map(|signals| lab::closed_loop::LoopRecording {
-                tap: tap.as_ref().map(|t| t.as_ref() as &dyn protocol::bus::Tap),
+        // Ctrl-C ends a recorded run properly (the file's summary written); without a
+        // recording it ends the process as always.
+        let run = if live.is_some() || log.is_some() {
+            let signals = protocol::component::Signals::install()?;
+            let out = lab::closed_loop::DemoOutputs {
+                live: live.as_ref(),
                 log: log.as_mut().map(|w| w as &mut dyn std::io::Write),
-                // Alone, a log is stamped as `presrs sim --log` stamps its own (simulated
-                // time from LOG_EPOCH_US); beside an MCAP file, on the wall clock as it is.
-                epoch_us: if live_recording {
-                    protocol::clock::epoch_us()
-                } else {
-                    sim::runner::LOG_EPOCH_US
-                },
-                truth: &mut truth,
-                pace: a.live.foxglove.is_some().then_some(1.0),
+                paced: a.live.foxglove.is_some(),
                 stop: &signals.stop,
-            });
-        let run = lab::closed_loop::run_recorded(
-            &track,
-            model,
-            &lp,
-            |row| {
-                if show {
-                    print_row(row)
-                }
-            },
-            rec,
-        );
+            };
+            lab::closed_loop::run_to(&track, model, &lp, on_step, out)
+        } else {
+            lab::closed_loop::run(&track, model, &lp, on_step)
+        };
         if let Some(r) = live {
             r.finish_logged();
         }

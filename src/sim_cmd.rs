@@ -190,24 +190,22 @@ fn write_log(
     tap: Option<&record::LiveTap>,
     observe: &mut dyn FnMut(u64, &SimRobot),
 ) -> Result<ExitCode> {
-    use std::io::Write;
     let duration_us = (a.duration.unwrap_or(0.0).max(0.0) * 1e6) as u64;
     let file = std::fs::File::create(log).with_context(|| format!("--log {}", log.display()))?;
-    let mut w = std::io::BufWriter::new(file);
-    let mut err = None;
-    let mut frames = 0u64;
-    let steps = sim::runner::record(cfg, a.seed, duration_us, observe, &mut |st| {
+    let mut tap = |st: &protocol::Stamped| {
         if let Some(tap) = tap {
-            tap.offer(&st);
+            tap.offer(st);
         }
-        if err.is_none() {
-            frames += 1;
-            err = protocol::candump::write_record(&mut w, "can0", &st).err();
-        }
-    });
-    if let Some(e) = err.or_else(|| w.flush().err()) {
-        return Err(e).with_context(|| format!("writing --log {}", log.display()));
-    }
+    };
+    let (frames, steps) = sim::runner::record_candump(
+        cfg,
+        a.seed,
+        duration_us,
+        observe,
+        &mut tap,
+        &mut std::io::BufWriter::new(file),
+    )
+    .with_context(|| format!("writing --log {}", log.display()))?;
     if let Some(p) = &a.truth {
         let end = sim::runner::LOG_EPOCH_US + duration_us;
         std::fs::write(p, sim::runner::truth_labels(&steps, end))

@@ -131,6 +131,48 @@ pub fn run(
     run_recorded(track, model, p, on_step, None)
 }
 
+/// Where `presrs demo` records a lock-step run: a live recorder (MCAP, Foxglove), a candump
+/// log, or both.
+pub struct DemoOutputs<'a> {
+    /// Gets every frame and foot 0's truth, stamped on the wall clock.
+    pub live: Option<&'a record::LiveRecorder>,
+    /// Every frame as a candump log ([`LoopRecording::log`]). Without `live` it is stamped as
+    /// `presrs sim --log` stamps its own: simulated time from [`sim::runner::LOG_EPOCH_US`].
+    pub log: Option<&'a mut dyn std::io::Write>,
+    /// Paced to real time, so that a live view has something to watch.
+    pub paced: bool,
+    /// Ends the run early when set (SIGINT).
+    pub stop: &'a std::sync::atomic::AtomicBool,
+}
+
+/// [`run`] recorded to `out`.
+pub fn run_to(
+    track: &Track,
+    model: Model,
+    p: &LoopParams,
+    on_step: impl FnMut(&StepRecord),
+    out: DemoOutputs,
+) -> Result<LoopRun, LabError> {
+    let tap = out.live.map(|l| l.tap());
+    let mut truth = |t_us: u64, robot: &SimRobot| {
+        if let (Some(tap), Some(t)) = (&tap, sim_truth(robot, track, 0)) {
+            tap.offer_truth(t_us, 0, t);
+        }
+    };
+    let rec = LoopRecording {
+        tap: tap.as_deref().map(|t| t as &dyn protocol::bus::Tap),
+        log: out.log.map(|w| &mut *w as &mut dyn std::io::Write),
+        epoch_us: match out.live {
+            Some(_) => protocol::clock::epoch_us(),
+            None => sim::runner::LOG_EPOCH_US,
+        },
+        truth: &mut truth,
+        pace: out.paced.then_some(1.0),
+        stop: out.stop,
+    };
+    run_recorded(track, model, p, on_step, Some(rec))
+}
+
 /// [`run`], recorded (see [`LoopRecording`]).
 pub fn run_recorded(
     track: &Track,

@@ -734,6 +734,34 @@ pub fn record(
         .collect()
 }
 
+/// [`record`] as a candump log (`candump -L` lines, interface `can0`) written to `w`, every
+/// frame also handed to `tap` (a live recording). Returns the frames written and the steps'
+/// truth; the first write error stops the writing and is returned.
+pub fn record_candump(
+    cfg: SimConfig,
+    seed: u64,
+    duration_us: u64,
+    observe: &mut dyn FnMut(u64, &SimRobot),
+    tap: &mut dyn FnMut(&protocol::Stamped),
+    mut w: &mut dyn std::io::Write,
+) -> std::io::Result<(u64, Vec<StepTruth>)> {
+    let mut err = None;
+    let mut frames = 0u64;
+    let steps = record(cfg, seed, duration_us, observe, &mut |st| {
+        tap(&st);
+        if err.is_none() {
+            match protocol::candump::write_record(&mut w, "can0", &st) {
+                Ok(()) => frames += 1,
+                Err(e) => err = Some(e),
+            }
+        }
+    });
+    match err {
+        Some(e) => Err(e),
+        None => w.flush().map(|()| (frames, steps)),
+    }
+}
+
 /// Labels (`start_s,end_s,terrain,foot` lines, the format `presrs capture --labels` reads) for
 /// the steps of a [`record`]: one range per run of steps on one terrain, from the first
 /// touchdown to the next terrain's first touchdown (the last to `end_us`).
@@ -764,6 +792,66 @@ pub fn truth_labels(steps: &[StepTruth], end_us: u64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Writes into a buffer, failing from the `fail_at`-th write on (a disk that fills).
+    struct Filling {
+        buf: Vec<u8>,
+        writes: usize,
+        fail_at: usize,
+    }
+
+    impl std::io::Write for Filling {
+        fn write(&mut self, b: &[u8]) -> std::io::Result<usize> {
+            self.writes += 1;
+            if self.writes >= self.fail_at {
+                return Err(std::io::Error::other("disk full"));
+            }
+            self.buf.extend_from_slice(b);
+            Ok(b.len())
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn a_candump_record_reads_back_frame_for_frame_and_a_write_error_is_returned() {
+        let run = |w: &mut Filling| {
+            let mut tapped = 0u64;
+            let r = record_candump(
+                SimConfig::default(),
+                1,
+                1_000_000,
+                &mut |_, _| {},
+                &mut |_| tapped += 1,
+                w,
+            );
+            (r, tapped)
+        };
+        let mut ok = Filling {
+            buf: Vec::new(),
+            writes: 0,
+            fail_at: usize::MAX,
+        };
+        let (r, tapped) = run(&mut ok);
+        let (frames, _) = r.unwrap();
+        // 1 s of 100 Hz images, about 31 FD segments each, besides the leg's own frames.
+        assert!(frames > 3000, "{frames} frames");
+        assert_eq!(tapped, frames, "the tap sees every frame written");
+        let back = protocol::candump::read_log(ok.buf.as_slice()).unwrap();
+        assert_eq!(back.len() as u64, frames);
+        assert_eq!(back[0].iface, "can0");
+        assert!(back[0].stamped.t_us >= LOG_EPOCH_US);
+
+        let mut full = Filling {
+            buf: Vec::new(),
+            writes: 0,
+            fail_at: 100,
+        };
+        let (r, tapped) = run(&mut full);
+        assert_eq!(r.unwrap_err().to_string(), "disk full");
+        assert!(tapped > 3000, "the robot ran on: {tapped} frames tapped");
+    }
 
     #[test]
     fn a_track_names_catalog_terrains_and_refuses_what_it_cannot_simulate() {
