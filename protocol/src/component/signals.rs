@@ -1,6 +1,6 @@
 //! The process's signals as the flags a runner reads: SIGINT and SIGTERM set `stop` (the flag
-//! [`run`](super::run) and [`spawn`](super::spawn) end on), SIGHUP sets `reload` (a node
-//! re-reads its model and config, as a daemon does under systemd's `ExecReload`).
+//! [`run`](super::run) and [`spawn`](super::spawn) end on), SIGHUP sets `reload` (`presrs
+//! node` reloads its model file, as a daemon does under systemd's `ExecReload`).
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
