@@ -91,10 +91,11 @@ pub fn run(a: ExperimentArgs) -> Result<ExitCode> {
     };
     // The command as given (its binary named `presrs`): what regenerates this file.
     let command = std::iter::once("presrs".to_string())
-        .chain(std::env::args().skip(1).map(|a| match a.contains(' ') {
-            true => format!("'{a}'"),
-            false => a,
-        }))
+        .chain(
+            std::env::args()
+                .skip(1)
+                .map(|a| if a.contains(' ') { format!("'{a}'") } else { a }),
+        )
         .collect::<Vec<_>>()
         .join(" ");
     let head = ctx.provenance(&command, t0.elapsed().as_secs_f64());

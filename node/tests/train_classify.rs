@@ -409,6 +409,18 @@ fn training_rejects_bad_requests() {
         e.contains("--downsample 0") && e.contains("1 (full resolution) to 8"),
         "{e}"
     );
+    // An unknown rate the model file could not load with: refused before training.
+    let o = TrainOptions {
+        per_class: 10,
+        train: 6,
+        unknown_rate: 0.9,
+        ..TrainOptions::default()
+    };
+    let e = train(&data, &classes(), &o).unwrap_err().to_string();
+    assert!(
+        e.contains("--unknown-rate 0.9") && e.contains("0 to 0.5"),
+        "{e}"
+    );
     let (mut model, ..) = trained();
     model.downsample = 0;
     let json = serde_json::to_string(&model).unwrap();

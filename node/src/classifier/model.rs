@@ -12,6 +12,10 @@ use super::image::Crop;
 pub const MODEL_VERSION: u32 = 1;
 /// Largest downsampling factor (a 44x44 image at 8 keeps 6x6 pixels).
 pub const MAX_DOWNSAMPLE: usize = 8;
+
+/// The largest share of known-terrain images a model may be calibrated to call unknown
+/// (`train --unknown-rate`): past it the rejection would discard more than it protects.
+pub const MAX_UNKNOWN_RATE: f64 = 0.5;
 /// Most classes a model may have: one per terrain id of a catalog (0-254; 255 is "unknown").
 /// The classifier's per-class buffers are sized to the model's classes when it is built.
 pub const MAX_CLASSES: usize = 255;
@@ -413,11 +417,11 @@ impl Model {
             ));
         }
         if let Some(r) = self.unknown_rate
-            && !(0.0..=0.5).contains(&r)
+            && !(0.0..=MAX_UNKNOWN_RATE).contains(&r)
         {
             return Err(Invalid::new(
                 "unknown_rate",
-                format!("unknown_rate {r} is not a share in 0..=0.5"),
+                format!("unknown_rate {r} is not a share in 0..={MAX_UNKNOWN_RATE}"),
             ));
         }
         if let Some(v) = self.normalize_load

@@ -160,7 +160,10 @@ impl Novelty {
         if c.pixels.len() != c.classes.len() || c.classes.iter().any(|&k| k >= n_classes) {
             return Err("novelty.calibration's images and classes do not match".into());
         }
-        if !((0.0..=0.5).contains(&c.rate) && c.margin.is_finite() && c.margin >= 1.0) {
+        if !((0.0..=super::model::MAX_UNKNOWN_RATE).contains(&c.rate)
+            && c.margin.is_finite()
+            && c.margin >= 1.0)
+        {
             return Err("novelty.calibration's rate or margin is out of range".into());
         }
         Ok(())

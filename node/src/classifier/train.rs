@@ -10,7 +10,8 @@ use rand::seq::SliceRandom;
 use super::features::{FeatureExtractor, fft_len};
 use super::image::{Crop, PressureImage};
 use super::model::{
-    ClassInfo, MAX_CLASSES, MAX_DOWNSAMPLE, MODEL_VERSION, MinContact, Model, StoredImages,
+    ClassInfo, MAX_CLASSES, MAX_DOWNSAMPLE, MAX_UNKNOWN_RATE, MODEL_VERSION, MinContact, Model,
+    StoredImages,
 };
 use super::novelty::{
     Calibration, CalibrationSource, NOVELTY_K, Novelty, NoveltyScore, SAME_RUN_MARGIN,
@@ -61,23 +62,26 @@ pub struct TrainOptions {
     pub check_load: bool,
 }
 
-/// `--downsample`: 1..=8.
+/// `--downsample`: 1..=MAX_DOWNSAMPLE, refused as the command line is read (`train` refuses it
+/// too, for callers that build the options themselves).
 #[cfg(feature = "clap")]
 fn parse_downsample(s: &str) -> Result<usize, String> {
     match s.parse::<usize>() {
-        Ok(k) if (1..=8).contains(&k) => Ok(k),
+        Ok(k) if (1..=MAX_DOWNSAMPLE).contains(&k) => Ok(k),
         _ => Err(format!(
-            "`{s}` is not a factor in 1..=8 (1: full resolution)"
+            "`{s}` is not a factor in 1..={MAX_DOWNSAMPLE} (1: full resolution)"
         )),
     }
 }
 
-/// `--unknown-rate`: a share in 0..=0.5.
+/// `--unknown-rate`: a share in 0..=MAX_UNKNOWN_RATE (as `parse_downsample`).
 #[cfg(feature = "clap")]
 fn parse_rate(s: &str) -> Result<f64, String> {
     match s.parse::<f64>() {
-        Ok(r) if (0.0..=0.5).contains(&r) => Ok(r),
-        _ => Err(format!("`{s}` is not a share in 0..=0.5 (0.02 is 2%)")),
+        Ok(r) if (0.0..=MAX_UNKNOWN_RATE).contains(&r) => Ok(r),
+        _ => Err(format!(
+            "`{s}` is not a share in 0..={MAX_UNKNOWN_RATE} (0.02 is 2%)"
+        )),
     }
 }
 
@@ -101,7 +105,7 @@ impl Default for TrainOptions {
 }
 
 /// Why a training request cannot be met.
-#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+#[derive(Debug, thiserror::Error, PartialEq)]
 pub enum TrainError {
     /// A class has too few images.
     #[error("class `{class}` has {have} images; training needs at least --per-class {need}")]
@@ -126,6 +130,9 @@ pub enum TrainError {
     /// A downsampling factor outside 1..=MAX_DOWNSAMPLE.
     #[error("--downsample {0}: use 1 (full resolution) to {MAX_DOWNSAMPLE}")]
     Downsample(usize),
+    /// An unknown rate outside 0..=MAX_UNKNOWN_RATE (the model file would not load).
+    #[error("--unknown-rate {0}: use a share from 0 to {MAX_UNKNOWN_RATE} (0.02 is 2%)")]
+    UnknownRate(f64),
     /// Too few or too many classes.
     #[error("{0} classes; a model holds 2 to {MAX_CLASSES}")]
     Classes(usize),
@@ -194,6 +201,9 @@ pub fn train(
     }
     if !(1..=MAX_DOWNSAMPLE).contains(&o.downsample) {
         return Err(TrainError::Downsample(o.downsample));
+    }
+    if !(0.0..=MAX_UNKNOWN_RATE).contains(&o.unknown_rate) {
+        return Err(TrainError::UnknownRate(o.unknown_rate));
     }
     if o.train == 0 || o.train >= o.per_class {
         return Err(TrainError::BadSplit {
