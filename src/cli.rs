@@ -5,6 +5,7 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
+use lab::simdata::TrainingSet;
 use node::classifier::dataset::{load_dataset, read_image, read_images, write_pgm};
 use node::classifier::train::TrainOptions;
 use node::classifier::{Classifier, Crop, Model, repair as repair_mod};
@@ -18,13 +19,8 @@ pub(crate) fn load_or_train(model: Option<&Path>) -> Result<Model> {
         Some(p) => format!("loading --model {}", p.display()),
         None => "the demo model".into(),
     })?;
-    match source {
-        lab::model::Source::Given => {}
-        lab::model::Source::Cached(p) => eprintln!("using the cached demo model {}", p.display()),
-        lab::model::Source::Trained(Ok(p)) => eprintln!("cached the model at {}", p.display()),
-        lab::model::Source::Trained(Err(e)) => {
-            eprintln!("could not cache the model ({e}); it will be trained again next time")
-        }
+    if let Some(said) = source.describe() {
+        eprintln!("{said}");
     }
     Ok(m)
 }
@@ -56,24 +52,10 @@ pub struct TrainArgs {
 pub fn train(a: &TrainArgs) -> Result<ExitCode> {
     let (data, out, opts) = (&a.data, &a.out, &a.opts);
     let catalog = a.terrains.catalog()?;
-    let ds = load_dataset(data, a.skip_bad)?;
-    if !ds.bad.is_empty() {
-        eprintln!(
-            "skipped {} bad files (--skip-bad); first: {}",
-            ds.bad.len(),
-            ds.bad[0]
-        );
-    }
-    let set = presrs::simdata::TrainingSet::from_dataset(ds, &catalog)?;
-    if set.images.is_empty() {
-        bail!("{}: no images found", data.display());
-    }
+    let (set, _) = TrainingSet::load(data, &catalog, a.skip_bad)?;
     let cal = match &a.calibrate {
         Some(dir) if opts.unknown_rate > 0.0 => {
-            let ds = load_dataset(dir, a.skip_bad).with_context(|| {
-                format!("reading the calibration run --calibrate {}", dir.display())
-            })?;
-            let s = presrs::simdata::TrainingSet::from_dataset(ds, &catalog)
+            let (s, _) = TrainingSet::load(dir, &catalog, a.skip_bad)
                 .with_context(|| format!("the calibration run --calibrate {}", dir.display()))?;
             Some((s, vec![dir.display().to_string()]))
         }
@@ -131,27 +113,14 @@ pub fn classify(
             let d = c
                 .classify_image(img, false)
                 .with_context(|| f.display().to_string())?;
-            let name = d.label(&names);
-            let frame = if i > 0 {
-                format!("#{i}")
-            } else {
-                String::new()
+            let file = match i {
+                0 => f.display().to_string(),
+                i => format!("{}#{i}", f.display()),
             };
             if json {
-                // JSON has no infinity: an image without contact has no novelty to give.
-                let num = |v: f64| v.is_finite().then_some(v);
-                let v = serde_json::json!({
-                    "file": format!("{}{frame}", f.display()),
-                    "terrain": name,
-                    "contact": d.contact,
-                    "best": d.contact.then(|| names[d.best].as_str()),
-                    "confidence": d.confidence,
-                    "novelty": num(d.novelty),
-                    "threshold": num(d.threshold),
-                });
-                println!("{v}");
+                println!("{}", d.to_json(&file, &names));
             } else {
-                println!("{}{frame}\t{name}\t{:.3}", f.display(), d.confidence);
+                println!("{file}\t{}\t{:.3}", d.label(&names), d.confidence);
             }
         }
     }
@@ -224,17 +193,7 @@ pub fn dataset(a: &DatasetArgs) -> Result<ExitCode> {
         seed: a.seed,
     });
     lab::simdata::write_images(&samples, out)?;
-    for (t, n, [load, stance_s, speed]) in lab::simdata::means(&samples, &a.kind.terrains()) {
-        if a.kind == sim::dataset::Kind::Dynamic {
-            println!(
-                "{}: {n} images; load at the sample {load:.1} N, stance {:.0} ms, speed {speed:.2} m/s (means)",
-                t.name(),
-                stance_s * 1e3,
-            );
-        } else {
-            println!("{}: {n} images, load {load:.1} N", t.name());
-        }
-    }
+    print!("{}", lab::simdata::describe(&samples, a.kind));
     println!("wrote {} images to {}", samples.len(), out.display());
     Ok(ExitCode::SUCCESS)
 }

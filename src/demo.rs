@@ -37,7 +37,7 @@ pub struct DemoArgs {
     /// No controller: the hopper holds this gait (G1, G2 or G3) on every terrain, as in the
     /// paper's data collection; the node still classifies every step.
     #[arg(long, value_name = "GAIT", conflicts_with = "realtime")]
-    pub fixed_gait: Option<String>,
+    pub fixed_gait: Option<controller::Gait>,
     /// The node's configuration (as `presrs node --config`); default: the node's defaults.
     #[arg(long, value_name = "FILE")]
     pub node_config: Option<PathBuf>,
@@ -91,14 +91,7 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
         ctrl_cfg.terrains = a.terrains.terrains.clone();
     }
     model.check_catalog(&node_cfg.catalog()?)?;
-    let fixed = match &a.fixed_gait {
-        Some(g) => Some(
-            controller::Gait::by_name(g)
-                .with_context(|| format!("--fixed-gait {g}: expected G1, G2 or G3"))?
-                .id,
-        ),
-        None => None,
-    };
+    let fixed = a.fixed_gait.as_ref().map(|g| g.id);
     let lp = LoopParams {
         node: node_cfg,
         controller: if fixed.is_some() {

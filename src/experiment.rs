@@ -52,18 +52,11 @@ pub struct ExperimentArgs {
 pub fn run(a: ExperimentArgs) -> Result<ExitCode> {
     // One dataset folder (`--data` or an `--extra-source`), named by its flag in errors.
     let load = |flag: &str, dir: &PathBuf, crop: Crop| -> Result<UserData> {
-        let ds = node::classifier::dataset::load_dataset(dir, a.skip_bad)
+        let (set, _) = TrainingSet::load(dir, &a.terrains.catalog()?, a.skip_bad)
             .with_context(|| format!("reading {flag} {}", dir.display()))?;
-        if !ds.bad.is_empty() {
-            eprintln!(
-                "skipped {} bad files (--skip-bad); first: {}",
-                ds.bad.len(),
-                ds.bad[0]
-            );
-        }
         Ok(UserData {
             dir: dir.clone(),
-            set: TrainingSet::from_dataset(ds, &a.terrains.catalog()?)?,
+            set,
             crop,
             normalize_load: a.normalize_load,
         })
@@ -90,14 +83,7 @@ pub fn run(a: ExperimentArgs) -> Result<ExitCode> {
         one => format!("{one}.md"),
     };
     // The command as given (its binary named `presrs`): what regenerates this file.
-    let command = std::iter::once("presrs".to_string())
-        .chain(
-            std::env::args()
-                .skip(1)
-                .map(|a| if a.contains(' ') { format!("'{a}'") } else { a }),
-        )
-        .collect::<Vec<_>>()
-        .join(" ");
+    let command = lab::report::command_line(std::env::args().skip(1));
     let head = ctx.provenance(&command, t0.elapsed().as_secs_f64());
     let path = a.out.join(name);
     std::fs::write(&path, head + &md).with_context(|| format!("writing {}", path.display()))?;

@@ -57,16 +57,7 @@ pub fn run(a: McapArgs) -> Result<ExitCode> {
             serde_json::json!({ "frames": records.len(), "out": a.out, "stats": s })
         );
     }
-    eprintln!(
-        "{} frames -> {}: {} messages ({} images, {} model TerrainClass); {} undecodable and {} foreign frames not recorded",
-        records.len(),
-        a.out.display(),
-        s.messages,
-        s.images,
-        s.model_decisions,
-        s.undecodable,
-        s.foreign
-    );
+    eprintln!("{} frames -> {}: {s}", records.len(), a.out.display());
     Ok(ExitCode::SUCCESS)
 }
 
@@ -109,20 +100,6 @@ pub fn view(a: ViewArgs) -> Result<ExitCode> {
         &a.out,
     )
     .with_context(|| format!("--out {}", a.out.display()))?;
-    eprintln!(
-        "{}: {:.1} s, {} images, {} TerrainClass of foot {}{}; image at {} -> {}",
-        a.recording.display(),
-        s.span_s,
-        s.images,
-        s.steps,
-        a.foot,
-        if s.has_truth {
-            ", with the simulator's truth"
-        } else {
-            ""
-        },
-        s.image_t_s.map_or("-".into(), |t| format!("{t:.2} s")),
-        a.out.display()
-    );
+    eprintln!("{}: {s} -> {}", a.recording.display(), a.out.display());
     Ok(ExitCode::SUCCESS)
 }

@@ -7,10 +7,9 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 use anyhow::{Context, Result};
+use node::NodeService;
 use node::classifier::Model;
-use node::{NodeService, Output};
 use protocol::bus::BusSource;
-use protocol::messages::TerrainClass;
 
 use protocol::component::Signals;
 
@@ -98,60 +97,17 @@ pub fn run(a: NodeArgs) -> Result<ExitCode> {
     }
 }
 
-/// The log through the node on the log's own clock: each record's time ticks the node before
-/// the record is processed, as a live node's clock would have.
+/// The log through the node on the log's own clock ([`node::replay`]), each decision printed.
 fn replay(mut node: NodeService, log: &Path, json: bool) -> Result<ExitCode> {
     let records = protocol::candump::read_log_file(log)?;
     let catalog = node.catalog().clone();
-    node.replay(records.iter().map(|r| &r.stamped), &mut |t_us, o| {
-        if let Output::Class { foot, class } = o {
-            print_class(t_us, foot, &class, json, &catalog);
+    let summary = node::replay::replay_log(&mut node, &records, &mut |t_us, foot, tc| {
+        if json {
+            println!("{}", node::replay::class_json(t_us, foot, tc, &catalog));
+        } else {
+            println!("{}", node::replay::class_line(t_us, foot, tc, &catalog));
         }
     });
-    let span = |r: Option<&protocol::candump::LogRecord>| r.map_or(0, |r| r.stamped.t_us);
-    let c = node.counters();
-    let r = node.reassembly_stats();
-    eprintln!(
-        "replayed {} frames ({:.1} s): {} steps, {} classified, {} without a sample; {} images, {} CRC failures, {} incomplete, {} undecodable frames",
-        records.len(),
-        span(records.last()).saturating_sub(span(records.first())) as f64 * 1e-6,
-        c.steps,
-        c.classified,
-        c.no_sample,
-        r.delivered,
-        r.crc_failures,
-        r.incomplete,
-        c.decode_errors
-    );
+    eprintln!("{summary}");
     Ok(ExitCode::SUCCESS)
-}
-
-fn print_class(
-    t_us: u64,
-    foot: u8,
-    tc: &TerrainClass,
-    json: bool,
-    catalog: &protocol::TerrainCatalog,
-) {
-    let name = catalog.describe(tc.terrain);
-    if json {
-        println!(
-            "{}",
-            serde_json::json!({
-                "t_us": t_us, "foot": foot, "step": tc.step, "terrain": name,
-                "terrain_id": tc.terrain, "confidence_pct": tc.confidence_pct,
-                "damage_pct": tc.damage_pct, "flags": tc.flags, "latency_us": tc.latency_us,
-            })
-        );
-    } else {
-        println!(
-            "{:.6} foot {foot} step {:5} {:<13} {:5.1}%  damage {:4.1}%  flags 0x{:02X}",
-            t_us as f64 * 1e-6,
-            tc.step,
-            name,
-            tc.confidence_pct,
-            tc.damage_pct,
-            tc.flags
-        );
-    }
 }

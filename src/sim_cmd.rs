@@ -159,22 +159,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     if let Some(r) = recording {
         r.finish_logged();
     }
-    // No gait table: the simulator scores the node, not the controller.
-    let sum = lab::Summary::of(&r.steps, &Default::default());
-    let (n, correct) = (sum.steps, sum.correct);
-    eprintln!(
-        "presrs sim: {:.1} s simulated in {:.1} s wall; {} touchdowns, {} falls; {n} TerrainClass heard, {correct} correct{}; {} send errors",
-        r.simulated_s,
-        r.wall_s,
-        r.touchdowns,
-        r.falls,
-        if n > 0 {
-            format!(" ({:.1}%)", 100.0 * sum.accuracy)
-        } else {
-            String::new()
-        },
-        r.send_errors
-    );
+    eprintln!("presrs sim: {r}");
     if let Some(p) = &a.report {
         std::fs::write(p, serde_json::to_string_pretty(&r)?)
             .with_context(|| format!("writing --report {}", p.display()))?;

@@ -146,8 +146,8 @@ fn speedpp2d_a_left_out_subject_is_unknown_more_often_than_not_and_known_ones_ra
         String::from_utf8_lossy(&out.stderr)
     );
     let catalog = protocol::TerrainCatalog::load(Some(&dir.join("terrains.toml"))).unwrap();
-    let ds = node::classifier::dataset::load_dataset(&dir, false).unwrap();
-    let set = TrainingSet::from_dataset(ds, &catalog).unwrap();
+    let (set, bad) = TrainingSet::load(&dir, &catalog, false).unwrap();
+    assert!(bad.is_empty());
     assert_eq!(set.images.len(), 600);
     assert_eq!(set.classes.len(), 10);
     assert_eq!(set.run_names().len(), 3);

@@ -116,9 +116,26 @@ impl Gait {
     }
 }
 
+/// The paper's gait by name, as [`Gait::by_name`] (for command-line options: `--fixed-gait G1`).
+impl std::str::FromStr for Gait {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        Self::by_name(s).ok_or_else(|| format!("`{s}` is not a gait: expected G1, G2 or G3"))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_gait_parses_by_its_papers_name_and_nothing_else() {
+        assert_eq!("G3".parse::<Gait>(), Ok(Gait::g3()));
+        assert_eq!("g1".parse::<Gait>(), Ok(Gait::g1()));
+        let e = "G4".parse::<Gait>().unwrap_err();
+        assert!(e.contains("G4") && e.contains("G1, G2 or G3"), "{e}");
+    }
 
     #[test]
     fn paper_gaits_are_valid_and_named() {

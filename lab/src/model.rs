@@ -80,6 +80,20 @@ pub enum Source {
     Trained(Result<PathBuf, node::classifier::model::ModelError>),
 }
 
+impl Source {
+    /// What to tell the user about where the model came from (nothing for a file they gave).
+    pub fn describe(&self) -> Option<String> {
+        match self {
+            Source::Given => None,
+            Source::Cached(p) => Some(format!("using the cached demo model {}", p.display())),
+            Source::Trained(Ok(p)) => Some(format!("cached the model at {}", p.display())),
+            Source::Trained(Err(e)) => Some(format!(
+                "could not cache the model ({e}); it will be trained again next time"
+            )),
+        }
+    }
+}
+
 /// The model at `path`, or without one the cached simulator model, trained and cached on
 /// first use (`before_training` runs first: training takes a while, say so).
 pub fn load_or_train(
@@ -100,4 +114,19 @@ pub fn load_or_train(
     }
     let saved = m.save(&cache).map(|()| cache);
     Ok((m, Source::Trained(saved)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn where_the_model_came_from_is_said_unless_the_user_gave_it() {
+        assert_eq!(Source::Given.describe(), None);
+        let p = PathBuf::from("/c/m.json");
+        let said = Source::Cached(p.clone()).describe().unwrap();
+        assert!(said.contains("cached demo model /c/m.json"), "{said}");
+        let said = Source::Trained(Ok(p)).describe().unwrap();
+        assert!(said.contains("cached the model at /c/m.json"), "{said}");
+    }
 }

@@ -182,6 +182,18 @@ pub struct Report {
     pub extra: Vec<UserData>,
 }
 
+/// The command that regenerates a report: `presrs` and the `args` given after the binary's
+/// name, each holding a space quoted for a POSIX shell.
+pub fn command_line(args: impl IntoIterator<Item = String>) -> String {
+    std::iter::once("presrs".to_string())
+        .chain(
+            args.into_iter()
+                .map(|a| if a.contains(' ') { format!("'{a}'") } else { a }),
+        )
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
 impl Report {
     /// The document's opening: where its data came from (the simulator, the lab's `--data`,
     /// the `extra` sources for the open-set section), and `command`, which regenerates it
@@ -1202,5 +1214,17 @@ mod selection_tests {
         );
         let e = "openset".parse::<Selection>().unwrap_err();
         assert!(e.contains("open-set"), "{e}");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_command_line_quotes_what_a_shell_would_split() {
+        let args = ["experiment", "all", "--out", "my docs"].map(String::from);
+        assert_eq!(command_line(args), "presrs experiment all --out 'my docs'");
+        assert_eq!(command_line([]), "presrs");
     }
 }

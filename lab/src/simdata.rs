@@ -21,9 +21,26 @@ pub struct NotInCatalog {
     pub name: String,
 }
 
+/// A dataset folder that could not become a training set ([`TrainingSet::load`]).
+#[derive(Debug, thiserror::Error)]
+pub enum LoadError {
+    /// A file or folder could not be read (the error names it).
+    #[error(transparent)]
+    Read(#[from] node::classifier::dataset::ImageError),
+    /// A class folder names no terrain.
+    #[error(transparent)]
+    NotInCatalog(#[from] NotInCatalog),
+    /// No image at all.
+    #[error(
+        "{0}: no images found; want DIR/<terrain>/<images> (PGM, CSV or TekScan ASCII), as \
+         `presrs capture` writes them"
+    )]
+    Empty(String),
+}
+
 /// Images, each one's class (an index into `classes`), and the classes in the order of the
 /// terrains given: the name and the terrain id the model puts on the bus.
-#[derive(Clone)]
+#[derive(Clone, Debug)]
 pub struct TrainingSet {
     /// One entry per class: its name and the terrain id the model sends.
     pub classes: Vec<ClassInfo>,
@@ -161,6 +178,27 @@ impl TrainingSet {
             labels,
             runs,
         }
+    }
+
+    /// Reads `DIR/<class>/<images>` ([`node::classifier::dataset::load_dataset`]) and names
+    /// its classes from `catalog` ([`TrainingSet::from_dataset`]). With `skip_bad`, unreadable
+    /// files are skipped, each logged as a warning, and returned; without it the first is an
+    /// error. A folder without a single image is an error either way.
+    pub fn load(
+        dir: &std::path::Path,
+        catalog: &TerrainCatalog,
+        skip_bad: bool,
+    ) -> Result<(Self, Vec<node::classifier::dataset::ImageError>), LoadError> {
+        let mut ds = node::classifier::dataset::load_dataset(dir, skip_bad)?;
+        let bad = std::mem::take(&mut ds.bad);
+        for e in &bad {
+            tracing::warn!("skipped (--skip-bad): {e}");
+        }
+        let set = Self::from_dataset(ds, catalog)?;
+        if set.images.is_empty() {
+            return Err(LoadError::Empty(dir.display().to_string()));
+        }
+        Ok((set, bad))
     }
 
     /// A user's dataset (`DIR/<class>/<images>`): every class folder must be named after a
@@ -367,4 +405,98 @@ pub fn means(samples: &[Sample], terrains: &[Terrain]) -> Vec<(Terrain, usize, [
             })
         })
         .collect()
+}
+
+/// A generated set at a glance, as `presrs dataset` prints it: a line per terrain with its
+/// count and mean load (dynamic sets: also stance time and speed).
+pub fn describe(samples: &[Sample], kind: sim::dataset::Kind) -> String {
+    let mut out = String::new();
+    for (t, n, [load, stance_s, speed]) in means(samples, &kind.terrains()) {
+        let name = t.name();
+        out += &if kind == sim::dataset::Kind::Dynamic {
+            format!(
+                "{name}: {n} images; load at the sample {load:.1} N, stance {:.0} ms, speed \
+                 {speed:.2} m/s (means)\n",
+                stance_s * 1e3
+            )
+        } else {
+            format!("{name}: {n} images, load {load:.1} N\n")
+        };
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use node::classifier::dataset::write_pgm;
+
+    #[test]
+    fn a_generated_set_is_described_per_terrain_in_means() {
+        let kind = sim::dataset::Kind::Dynamic;
+        let t = kind.terrains();
+        let sample = |terrain: Terrain, load_n: f64| Sample {
+            terrain,
+            rows: 1,
+            cols: 1,
+            pixels: vec![0],
+            load_n,
+            stance_s: 0.15,
+            speed_m_s: 0.5,
+        };
+        let samples = [sample(t[0], 20.0), sample(t[0], 30.0), sample(t[1], 10.0)];
+        let text = describe(&samples, kind);
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines.len(), 2, "{text}");
+        assert_eq!(
+            lines[0],
+            format!(
+                "{}: 2 images; load at the sample 25.0 N, stance 150 ms, speed 0.50 m/s (means)",
+                t[0].name()
+            )
+        );
+        // Terrains of another set are not this one's.
+        let kind = sim::dataset::Kind::Static;
+        assert_eq!(describe(&samples, kind), "");
+        let s = kind.terrains()[0];
+        let text = describe(&[sample(s, 20.0), sample(s, 30.0)], kind);
+        assert_eq!(text, format!("{}: 2 images, load 25.0 N\n", s.name()));
+    }
+
+    #[test]
+    fn a_dataset_folder_loads_with_its_catalog_and_says_what_is_wrong() {
+        let dir = std::env::temp_dir().join(format!("presrs-lab-load-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let catalog = TerrainCatalog::paper();
+        std::fs::create_dir_all(dir.join("sand")).unwrap();
+        // A class folder without an image: refused, naming the folder.
+        let e = TrainingSet::load(&dir, &catalog, true).unwrap_err();
+        assert!(matches!(e, LoadError::Empty(_)), "{e}");
+        assert!(e.to_string().contains(&dir.display().to_string()), "{e}");
+        for (class, v) in [("sand", 10u16), ("clay", 200)] {
+            std::fs::create_dir_all(dir.join(class)).unwrap();
+            let img = PressureImage::new(4, 4, 8, vec![v; 16]);
+            write_pgm(&img, &dir.join(class).join("0.pgm")).unwrap();
+        }
+        std::fs::write(dir.join("sand").join("1.pgm"), b"not an image").unwrap();
+        // A bad file stops the load unless skipped; skipped, it is returned, not lost.
+        assert!(TrainingSet::load(&dir, &catalog, false).is_err());
+        let (set, bad) = TrainingSet::load(&dir, &catalog, true).unwrap();
+        assert_eq!(bad.len(), 1);
+        assert!(bad[0].path.ends_with("1.pgm"), "{:?}", bad[0]);
+        let names: Vec<&str> = set.classes.iter().map(|c| c.name.as_str()).collect();
+        assert_eq!(names, ["clay", "sand"]);
+        assert_eq!(set.labels, [0, 1]);
+        assert_eq!(set.images[1].pixels[0], 10);
+        // A folder named after no terrain: refused with the fix.
+        std::fs::create_dir_all(dir.join("asphalt")).unwrap();
+        write_pgm(
+            &PressureImage::new(4, 4, 8, vec![1; 16]),
+            &dir.join("asphalt").join("0.pgm"),
+        )
+        .unwrap();
+        let e = TrainingSet::load(&dir, &catalog, true).unwrap_err();
+        assert!(e.to_string().contains("--terrains FILE"), "{e}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }

@@ -23,6 +23,30 @@ pub struct ViewSummary {
     pub image_t_s: Option<f64>,
     /// Whether the recording holds the simulator's truth (speed, true terrain).
     pub has_truth: bool,
+    /// The foot shown.
+    pub foot: u8,
+}
+
+impl std::fmt::Display for ViewSummary {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{:.1} s, {} images, {} TerrainClass of foot {}{}; image at ",
+            self.span_s,
+            self.images,
+            self.steps,
+            self.foot,
+            if self.has_truth {
+                ", with the simulator's truth"
+            } else {
+                ""
+            },
+        )?;
+        match self.image_t_s {
+            Some(t) => write!(f, "{t:.2} s"),
+            None => write!(f, "-"),
+        }
+    }
 }
 
 struct Image {
@@ -283,6 +307,7 @@ pub fn render(
         steps: classes.len(),
         image_t_s: cursor,
         has_truth: !truth.is_empty(),
+        foot,
     })
 }
 
@@ -294,5 +319,24 @@ mod tests {
     fn heat_runs_from_dark_to_bright() {
         let (lo, hi) = (heat(0.0), heat(1.0));
         assert!(lo.0 as u32 + lo.1 as u32 + lo.2 as u32 <= hi.0 as u32 + hi.1 as u32 + hi.2 as u32);
+    }
+
+    #[test]
+    fn the_summary_says_what_the_view_shows() {
+        let mut s = ViewSummary {
+            span_s: 12.34,
+            images: 1200,
+            steps: 40,
+            image_t_s: Some(11.5),
+            has_truth: true,
+            foot: 1,
+        };
+        assert_eq!(
+            s.to_string(),
+            "12.3 s, 1200 images, 40 TerrainClass of foot 1, with the simulator's truth; image \
+             at 11.50 s"
+        );
+        (s.has_truth, s.image_t_s) = (false, None);
+        assert!(s.to_string().ends_with("of foot 1; image at -"), "{s}");
     }
 }

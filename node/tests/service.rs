@@ -536,6 +536,33 @@ fn a_replay_decides_each_step_as_the_log_clock_says() {
         // the nearest image (captured at 65 ms, received 1 ms later), not on a tick grid.
         assert_eq!(t - (1_000_000 + k as u64 * 400_000), 66_000, "step {k}");
     }
+    // The same frames as a candump log: the same decisions, and a summary that counts them.
+    let records: Vec<_> = frames
+        .iter()
+        .map(|st| protocol::candump::LogRecord {
+            iface: "can0".into(),
+            stamped: *st,
+        })
+        .collect();
+    let mut node = NodeService::new(NodeConfig::default(), model()).unwrap();
+    let mut lines = Vec::new();
+    let sum = presrs_node::replay::replay_log(&mut node, &records, &mut |t, foot, tc| {
+        lines.push(presrs_node::replay::class_line(t, foot, tc, &catalog))
+    });
+    assert_eq!(lines.len(), terrains.len(), "{lines:?}");
+    for (line, &terrain) in lines.iter().zip(&terrains) {
+        assert!(line.contains(NAMES[terrain]), "{line}");
+    }
+    assert_eq!(sum.frames, frames.len());
+    assert_eq!(sum.span_us, frames[frames.len() - 1].t_us - frames[0].t_us);
+    assert_eq!((sum.counters.steps, sum.counters.classified), (3, 3));
+    assert_eq!(sum.reassembly.crc_failures, 0);
+    let text = sum.to_string();
+    assert!(
+        text.starts_with(&format!("replayed {} frames", frames.len()))
+            && text.contains("3 steps, 3 classified"),
+        "{text}"
+    );
 }
 
 /// A classic-CAN foot at the spec's worst case (docs/protocol.md): one image per step, the

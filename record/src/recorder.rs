@@ -116,6 +116,17 @@ pub struct RecordStats {
     pub reordered: u64,
 }
 
+impl std::fmt::Display for RecordStats {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} messages ({} images, {} model TerrainClass); {} undecodable and {} foreign \
+             frames not recorded",
+            self.messages, self.images, self.model_decisions, self.undecodable, self.foreign
+        )
+    }
+}
+
 /// Decodes frames into channels for one [`Sink`]. Owns its reassembler: the recording sees
 /// every image the traffic carries, whatever the node made of it.
 pub struct Recorder {
@@ -556,6 +567,11 @@ mod tests {
         }
         let s = r.stats();
         assert_eq!((s.messages, s.undecodable, s.foreign), (1, 1, 1));
+        assert_eq!(
+            s.to_string(),
+            "1 messages (0 images, 0 model TerrainClass); 1 undecodable and 1 foreign frames \
+             not recorded"
+        );
     }
 
     #[test]

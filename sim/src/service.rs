@@ -129,6 +129,29 @@ pub struct SimReport {
     pub leg_state: Option<LegStateCheck>,
 }
 
+impl std::fmt::Display for SimReport {
+    /// One line: time simulated against wall time, touchdowns, falls, the TerrainClass heard
+    /// and how many named the terrain under the foot, send errors.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let n = self.steps.len();
+        let correct = self
+            .steps
+            .iter()
+            .filter(|s| s.truth == s.classified)
+            .count();
+        write!(
+            f,
+            "{:.1} s simulated in {:.1} s wall; {} touchdowns, {} falls; {n} TerrainClass \
+             heard, {correct} correct",
+            self.simulated_s, self.wall_s, self.touchdowns, self.falls
+        )?;
+        if n > 0 {
+            write!(f, " ({:.1}%)", 100.0 * correct as f64 / n as f64)?;
+        }
+        write!(f, "; {} send errors", self.send_errors)
+    }
+}
+
 /// How a run goes besides the robot's config.
 #[derive(Clone, Debug)]
 pub struct RunOptions {
@@ -371,5 +394,50 @@ pub fn run(
         send_errors: stats.send_errors,
         leg_state: sim.leg_state_check(),
         steps: sim.records,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_report_line_scores_what_was_heard() {
+        let step = |truth: &str, classified: &str| StepRecord {
+            t_s: 1.0,
+            foot: 0,
+            step: 1,
+            truth: truth.into(),
+            classified: classified.into(),
+            confidence_pct: 90.0,
+            damage_pct: 0.0,
+            gait: 2,
+            speed_m_s: 0.5,
+        };
+        let mut r = SimReport {
+            simulated_s: 12.0,
+            wall_s: 3.04,
+            touchdowns: 40,
+            falls: 1,
+            fall_times_s: vec![5.0],
+            send_errors: 0,
+            steps: vec![],
+            leg_state: None,
+        };
+        assert_eq!(
+            r.to_string(),
+            "12.0 s simulated in 3.0 s wall; 40 touchdowns, 1 falls; 0 TerrainClass heard, 0 \
+             correct; 0 send errors"
+        );
+        r.steps = vec![
+            step("wood", "wood"),
+            step("wood", "carpet"),
+            step("clay", "clay"),
+        ];
+        assert!(
+            r.to_string()
+                .contains("3 TerrainClass heard, 2 correct (66.7%);"),
+            "{r}"
+        );
     }
 }

@@ -57,6 +57,23 @@ impl Decision {
             None => "unknown",
         }
     }
+
+    /// The decision as `presrs classify --json` prints it: `file`, `terrain` ([`Self::label`]),
+    /// `contact`, `best` (the nearest class, also when unknown), `confidence`, `novelty` and
+    /// `threshold` (null without contact: JSON has no infinity), so that anyone can draw the
+    /// novelty's ROC on their own images.
+    pub fn to_json(&self, file: &str, names: &[String]) -> serde_json::Value {
+        let num = |v: f64| v.is_finite().then_some(v);
+        serde_json::json!({
+            "file": file,
+            "terrain": self.label(names),
+            "contact": self.contact,
+            "best": self.contact.then(|| names.get(self.best).map(String::as_str)).flatten(),
+            "confidence": self.confidence,
+            "novelty": num(self.novelty),
+            "threshold": num(self.threshold),
+        })
+    }
 }
 
 pub use super::model::{DepthMismatch, ImageMismatch, SizeMismatch};
@@ -534,5 +551,30 @@ mod tests {
         assert_eq!(d.label(&names), "unknown");
         d.class = Some(7);
         assert_eq!(d.label(&names), "unknown");
+    }
+
+    #[test]
+    fn the_json_report_gives_the_score_and_its_threshold_or_null() {
+        let names = vec!["wood".to_string(), "carpet".to_string()];
+        let v = Decision::NO_CONTACT.to_json("a.pgm", &names);
+        assert_eq!(v["terrain"], "unknown (no contact)");
+        assert!(v["best"].is_null() && v["novelty"].is_null() && v["threshold"].is_null());
+        let d = Decision {
+            class: None,
+            best: 1,
+            contact: true,
+            confidence: 0.75,
+            novelty: 1.5,
+            threshold: 1.1,
+            ..Decision::NO_CONTACT
+        };
+        let v = d.to_json("b.pgm#2", &names);
+        assert_eq!(v["file"], "b.pgm#2");
+        assert_eq!(v["terrain"], "unknown");
+        assert_eq!(v["best"], "carpet");
+        assert_eq!(
+            (v["novelty"].as_f64(), v["threshold"].as_f64()),
+            (Some(1.5), Some(1.1))
+        );
     }
 }

@@ -1,0 +1,132 @@
+//! A candump log through the node on the log's own clock (`presrs node --replay`), and the
+//! lines in which the node's TerrainClass stream is printed.
+//!
+//! Each record's time ticks the node before the record is processed, as a live node's clock
+//! would have: a step whose sample deadline passed between two records is decided at the later
+//! record's time, as it would have been live at the next frame.
+
+use std::fmt;
+
+use protocol::TerrainCatalog;
+use protocol::candump::LogRecord;
+use protocol::messages::TerrainClass;
+use protocol::tactile::ReassemblyStats;
+
+use crate::service::{NodeService, Output};
+use crate::stance::Counters;
+
+/// What a replay did: the records read and what the node made of them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ReplaySummary {
+    /// Records replayed.
+    pub frames: usize,
+    /// From the first record's time to the last's, µs.
+    pub span_us: u64,
+    /// The node's counters after the log.
+    pub counters: Counters,
+    /// Its tactile reassembly's.
+    pub reassembly: ReassemblyStats,
+}
+
+impl fmt::Display for ReplaySummary {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let (c, r) = (&self.counters, &self.reassembly);
+        write!(
+            f,
+            "replayed {} frames ({:.1} s): {} steps, {} classified, {} without a sample; {} \
+             images, {} CRC failures, {} incomplete, {} undecodable frames",
+            self.frames,
+            self.span_us as f64 * 1e-6,
+            c.steps,
+            c.classified,
+            c.no_sample,
+            r.delivered,
+            r.crc_failures,
+            r.incomplete,
+            c.decode_errors
+        )
+    }
+}
+
+/// Replays `records` through `node`, handing each TerrainClass (log time, foot, decision) to
+/// `on_class`.
+pub fn replay_log(
+    node: &mut NodeService,
+    records: &[LogRecord],
+    on_class: &mut impl FnMut(u64, u8, &TerrainClass),
+) -> ReplaySummary {
+    node.replay(records.iter().map(|r| &r.stamped), &mut |t_us, o| {
+        if let Output::Class { foot, class } = o {
+            on_class(t_us, foot, &class);
+        }
+    });
+    let t = |r: Option<&LogRecord>| r.map_or(0, |r| r.stamped.t_us);
+    ReplaySummary {
+        frames: records.len(),
+        span_us: t(records.last()).saturating_sub(t(records.first())),
+        counters: node.counters(),
+        reassembly: node.reassembly_stats(),
+    }
+}
+
+/// One TerrainClass as a line for people: time (s), foot, step, terrain name, confidence,
+/// damage and flags.
+pub fn class_line(t_us: u64, foot: u8, tc: &TerrainClass, catalog: &TerrainCatalog) -> String {
+    format!(
+        "{:.6} foot {foot} step {:5} {:<13} {:5.1}%  damage {:4.1}%  flags 0x{:02X}",
+        t_us as f64 * 1e-6,
+        tc.step,
+        catalog.describe(tc.terrain),
+        tc.confidence_pct,
+        tc.damage_pct,
+        tc.flags
+    )
+}
+
+/// One TerrainClass as a JSON object: every field of the message, the terrain also by name.
+pub fn class_json(
+    t_us: u64,
+    foot: u8,
+    tc: &TerrainClass,
+    catalog: &TerrainCatalog,
+) -> serde_json::Value {
+    serde_json::json!({
+        "t_us": t_us, "foot": foot, "step": tc.step, "terrain": catalog.describe(tc.terrain),
+        "terrain_id": tc.terrain, "confidence_pct": tc.confidence_pct,
+        "damage_pct": tc.damage_pct, "flags": tc.flags, "latency_us": tc.latency_us,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tc(terrain: u8) -> TerrainClass {
+        TerrainClass {
+            step: 7,
+            terrain,
+            confidence_pct: 91.5,
+            damage_pct: 2.0,
+            flags: 0x04,
+            latency_us: 1234,
+        }
+    }
+
+    #[test]
+    fn lines_name_the_terrain_and_keep_every_field() {
+        let cat = TerrainCatalog::paper();
+        let line = class_line(1_500_000, 1, &tc(0), &cat);
+        assert!(line.starts_with("1.500000 foot 1 step     7 "), "{line}");
+        assert!(
+            line.contains(" 91.5%") && line.ends_with("flags 0x04"),
+            "{line}"
+        );
+        let unknown = class_line(0, 0, &tc(protocol::messages::TERRAIN_UNKNOWN), &cat);
+        assert!(unknown.contains(&cat.describe(0xFF)), "{unknown}");
+        let v = class_json(1_500_000, 1, &tc(0), &cat);
+        assert_eq!(v["terrain"], cat.describe(0));
+        assert_eq!(v["terrain_id"], 0);
+        assert_eq!(v["latency_us"], 1234);
+        assert_eq!(v["step"], 7);
+    }
+}
