@@ -54,7 +54,7 @@ pub fn run(a: BenchNodeArgs) -> Result<ExitCode> {
         "--seconds {}: allowed (0, 3600]",
         a.seconds
     );
-    let model = crate::cli::load_or_train(a.model.as_deref())?;
+    let model = lab::model::load_or_train_logged(a.model.as_deref()).context("--model")?;
     anyhow::ensure!(
         model.input_rows == SIDE && model.input_cols == SIDE,
         "the model takes {}x{} images; the benchmark plays the PreSRS's 44x44",

@@ -10,21 +10,6 @@ use node::classifier::dataset::{load_dataset, read_image, read_images, write_pgm
 use node::classifier::train::TrainOptions;
 use node::classifier::{Classifier, Crop, Model, repair as repair_mod};
 
-/// The model given, or the cached simulator model (trained on first run), saying which.
-pub(crate) fn load_or_train(model: Option<&Path>) -> Result<Model> {
-    let (m, source) = lab::model::load_or_train(model, || {
-        eprintln!("no model given: training one on simulated G1-G3 stances (first run only)...")
-    })
-    .with_context(|| match model {
-        Some(p) => format!("loading --model {}", p.display()),
-        None => "the demo model".into(),
-    })?;
-    if let Some(said) = source.describe() {
-        eprintln!("{said}");
-    }
-    Ok(m)
-}
-
 /// `presrs train`.
 #[derive(clap::Args)]
 pub struct TrainArgs {

@@ -76,7 +76,7 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
     let catalog = a.terrains.catalog()?;
     let track =
         sim::runner::Track::load_or_default(a.track.as_deref(), &catalog).context("--track")?;
-    let mut model = crate::cli::load_or_train(a.model.as_deref())?;
+    let mut model = lab::model::load_or_train_logged(a.model.as_deref()).context("--model")?;
     if a.check_load {
         anyhow::ensure!(
             node::classifier::train::add_load_check(&mut model),

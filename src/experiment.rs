@@ -75,7 +75,7 @@ pub fn run(a: ExperimentArgs) -> Result<ExitCode> {
     let t0 = std::time::Instant::now();
     let md = ctx.markdown(
         &a.which.0,
-        &mut || crate::cli::load_or_train(None).map_err(Into::into),
+        &mut || lab::model::load_or_train_logged(None).map_err(Into::into),
         &mut |w| eprintln!("experiment {w:?}..."),
     )?;
     let name = match a.which.name() {

@@ -116,6 +116,18 @@ pub fn load_or_train(
     Ok((m, Source::Trained(saved)))
 }
 
+/// [`load_or_train`], saying on the log (`tracing`, info) that it trains (it takes a while) and
+/// where the model came from: what a command-line tool wants.
+pub fn load_or_train_logged(path: Option<&Path>) -> Result<Model, LabError> {
+    let (m, source) = load_or_train(path, || {
+        tracing::info!("no model given: training one on simulated G1-G3 stances (first run only)")
+    })?;
+    if let Some(said) = source.describe() {
+        tracing::info!("{said}");
+    }
+    Ok(m)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -128,5 +140,8 @@ mod tests {
         assert!(said.contains("cached demo model /c/m.json"), "{said}");
         let said = Source::Trained(Ok(p)).describe().unwrap();
         assert!(said.contains("cached the model at /c/m.json"), "{said}");
+        // A file given is that file or an error naming it, never the cached model instead.
+        let e = load_or_train_logged(Some(Path::new("/nonexistent/m.json"))).unwrap_err();
+        assert!(e.to_string().contains("/nonexistent/m.json"), "{e}");
     }
 }
