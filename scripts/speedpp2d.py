@@ -14,6 +14,11 @@ into this repository):
     OUT/terrains.toml               a terrains file naming the subjects (ids 100-109)
 
     python3 scripts/speedpp2d.py --out DIR
+    presrs experiment open-set --normalize-load --extra-source DIR --terrains DIR/terrains.toml
+
+Load-normalise (`--normalize-load`, also for `presrs train`): the three speeds load the foot
+differently and the person is in the shape. Measured (open-set, seeds 1-3): a left-out subject
+called unknown 87-93% (AUROC 0.980-0.983) with it, 55-63% (0.915-0.936) without.
 
 Needs `pip install jiku-data` (scripts/install-deps.sh installs it with the test requirements).
 """

@@ -32,8 +32,8 @@ pub struct ExperimentArgs {
     #[arg(long, value_name = "T,B,L,R", requires = "data")]
     pub crop: Option<Crop>,
     /// With `--data` or `--extra-source`: scale each image to the set's mean load before its
-    /// features (stance images of a hopping foot, as `train --normalize-load`). Used by the
-    /// open-set section.
+    /// features, as `train --normalize-load` does: for images taken at several loads (a foot
+    /// hopping or walking at several speeds, e.g. SpeedPP2D). Used by the open-set section.
     #[arg(long)]
     pub normalize_load: bool,
     /// With `--data`: go on past unreadable images and count them.

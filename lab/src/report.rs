@@ -1052,8 +1052,15 @@ fn open_set(ctx: &Report) -> Result<String, ReportError> {
     };
     let mut sources: Vec<OpenSetSource> = Vec::new();
     for u in ctx.user.iter().chain(&ctx.extra) {
+        // Whether the images were scaled to one load changes what a class is (a person, not
+        // a person at a speed): the table says so.
+        let scaled = if u.normalize_load {
+            " (load-normalised)"
+        } else {
+            ""
+        };
         sources.push(OpenSetSource::from_runs(
-            format!("`{}`", u.dir.display()),
+            format!("`{}`{scaled}", u.dir.display()),
             &u.set,
             opts(u.crop, u.normalize_load),
         ));
