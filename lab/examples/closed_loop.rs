@@ -28,7 +28,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             row.t_s, row.truth, row.classified, row.gait
         );
     })?;
-    let right = run.rows.iter().filter(|r| r.truth == r.classified).count();
+    let right = run.rows.iter().filter(|r| r.is_correct()).count();
     println!(
         "{right}/{} steps right, {} falls",
         run.rows.len(),

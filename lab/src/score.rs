@@ -222,7 +222,7 @@ impl Summary {
     /// Scores `rows` against `terrain_gaits` (the controller's table: terrain name -> gait).
     pub fn of(rows: &[StepRecord], terrain_gaits: &BTreeMap<String, u8>) -> Self {
         let n = rows.len();
-        let correct = rows.iter().filter(|r| r.truth == r.classified).count();
+        let correct = rows.iter().filter(|r| r.is_correct()).count();
         let switches = rows.windows(2).filter(|w| w[0].gait != w[1].gait).count();
         let mut steps_to_switch = Vec::new();
         for i in 1..n {

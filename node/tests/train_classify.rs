@@ -397,26 +397,27 @@ fn training_rejects_bad_requests() {
         ..TrainOptions::default()
     };
     assert!(train(&data, &classes(), &o).is_err());
-    // A downsampling of 0 would disable the model silently: refused in training and in a file.
-    let o = TrainOptions {
+    // A valid split, so that the one option changed is what is refused.
+    let split = TrainOptions {
         per_class: 10,
         train: 6,
-        downsample: 0,
         ..TrainOptions::default()
     };
-    let e = train(&data, &classes(), &o).unwrap_err().to_string();
+    let refusal = |o: TrainOptions| train(&data, &classes(), &o).unwrap_err().to_string();
+    // A downsampling of 0 would disable the model silently: refused in training and in a file.
+    let e = refusal(TrainOptions {
+        downsample: 0,
+        ..split.clone()
+    });
     assert!(
         e.contains("--downsample 0") && e.contains("1 (full resolution) to 8"),
         "{e}"
     );
     // An unknown rate the model file could not load with: refused before training.
-    let o = TrainOptions {
-        per_class: 10,
-        train: 6,
+    let e = refusal(TrainOptions {
         unknown_rate: 0.9,
-        ..TrainOptions::default()
-    };
-    let e = train(&data, &classes(), &o).unwrap_err().to_string();
+        ..split
+    });
     assert!(
         e.contains("--unknown-rate 0.9") && e.contains("0 to 0.5"),
         "{e}"

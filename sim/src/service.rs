@@ -63,6 +63,11 @@ impl StepRecord {
             speed_m_s: speed,
         }
     }
+
+    /// The node named the terrain under the foot (every score of a run counts these).
+    pub fn is_correct(&self) -> bool {
+        self.truth == self.classified
+    }
 }
 
 /// A leg of motors: how the LegState its bridge sends agrees with the simulator's truth,
@@ -134,11 +139,7 @@ impl std::fmt::Display for SimReport {
     /// and how many named the terrain under the foot, send errors.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let n = self.steps.len();
-        let correct = self
-            .steps
-            .iter()
-            .filter(|s| s.truth == s.classified)
-            .count();
+        let correct = self.steps.iter().filter(|s| s.is_correct()).count();
         write!(
             f,
             "{:.1} s simulated in {:.1} s wall; {} touchdowns, {} falls; {n} TerrainClass \

@@ -32,12 +32,19 @@
 //!
 //! Measured and not taken (`presrs experiment open-set`, seeds 1-3, mean leave-one-class-out
 //! AUROC of the novelty less its threshold on SpeedPP2D without load normalisation / static /
-//! sandpaper / dynamic; this score 0.928 / 0.999 / 0.817 / 0.855): the kNN ratio alone 0.903 / 1.000 / 0.876 / 0.854; the
-//! sum of the ratios 0.935 / 0.996 / 0.853 / 0.820, their root-sum-square 0.934 / 0.999 / 0.855
-//! / 0.820, their geometric mean 0.936 / 0.994 / 0.853 / 0.817; the kNN distance with each PCA
-//! component scaled to unit variance over the stored samples 0.937 / 0.950 / 0.780 / 0.853
-//! (static's left-out terrain called unknown 74-75% instead of 99-100%). None is better on
-//! every source; each trades one source for another within the seeds' spread.
+//! sandpaper / dynamic):
+//!
+//! | score | AUROC |
+//! |---|---|
+//! | this one, the larger ratio | 0.928 / 0.999 / 0.817 / 0.855 |
+//! | the kNN ratio alone | 0.903 / 1.000 / 0.876 / 0.854 |
+//! | the sum of the ratios | 0.935 / 0.996 / 0.853 / 0.820 |
+//! | their root-sum-square | 0.934 / 0.999 / 0.855 / 0.820 |
+//! | their geometric mean | 0.936 / 0.994 / 0.853 / 0.817 |
+//! | kNN on PCA components scaled to unit variance | 0.937 / 0.950 / 0.780 / 0.853 |
+//!
+//! (The last called static's left-out terrain unknown 74-75% instead of 99-100%.) None is
+//! better on every source; each trades one source for another within the seeds' spread.
 //!
 //! **Calibration.** The thresholds are the `1 - rate` quantile of the novelty of known images
 //! the stored samples do not include: at best from another run (another recording of the same
