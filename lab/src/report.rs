@@ -1134,7 +1134,9 @@ fn open_set(ctx: &Report) -> Result<String, ReportError> {
          third; a lab's set is split by the runs of its capture manifest (per class: the last \
          run is the fresh one, the one before it calibrates). The score is the novelty \
          (node/src/classifier/novelty.rs: the larger of the kNN distance to the best class over \
-         that class's spread and the PCA residual over its typical size).\n\n\
+         that class's spread and the PCA residual over its typical size; the calibration run's \
+         images classified right are references of the kNN, and the directions they show \
+         outside the PCA subspace leave the residual).\n\n\
          *AUROC*: how well a score separates the left-out class from the fresh known images, \
          whatever the threshold (1 perfect, 0.5 chance): ours, the Parzen density of earlier \
          models, and the plain nearest-neighbour distance in the model's PCA space (the ceiling \

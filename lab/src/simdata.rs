@@ -87,8 +87,9 @@ impl Trained {
                 let c = &nv.calibration;
                 writeln!(
                     o,
-                    "unknown terrain: calibrated on {} ({} images{}) to --unknown-rate {}: the \
-                     check calls {:.1}% of them unknown ({:.1}% were taken for another terrain){}",
+                    "unknown terrain: calibrated on {} ({} images{}) to --unknown-rate {}{}: \
+                     the check calls {:.1}% of them unknown ({:.1}% were taken for another \
+                     terrain){}",
                     c.source.describe(),
                     c.images,
                     if c.runs.is_empty() {
@@ -96,7 +97,18 @@ impl Trained {
                     } else {
                         format!(" of {}", c.runs.join(", "))
                     },
-                    c.rate,
+                    unknown_rate,
+                    if nv.reference_classes.is_empty() {
+                        String::new()
+                    } else {
+                        format!(
+                            " (the held-out run's {} images classified right are now the \
+                             model's references for the next run; scored without them, the \
+                             calibration set its thresholds at {:.3})",
+                            nv.reference_classes.len(),
+                            c.rate
+                        )
+                    },
                     100.0 * c.called_unknown,
                     100.0 * c.misclassified,
                     if c.margin > 1.0 {

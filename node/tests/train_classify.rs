@@ -2,6 +2,7 @@
 //! their spatial statistics, as the paper's terrains do), and the model file's guards.
 
 use presrs_node::classifier::model::{MODEL_VERSION, ModelError};
+use presrs_node::classifier::novelty::{HELD_OUT_RATE_FACTOR, NUISANCE_DIRECTIONS, Novelty};
 use presrs_node::classifier::train::{Labelled, TrainOptions, train};
 use presrs_node::classifier::{ClassInfo, Classifier, Crop, Kernels, Model, PressureImage, repair};
 use rand::{Rng, SeedableRng};
@@ -519,6 +520,26 @@ fn a_model_without_a_novelty_score_decides_by_density_as_before() {
     }
 }
 
+/// `model` calibrated on another run of the same three textures (`n` images each, made with
+/// `seed`, named `name`): the run's images and the calibration's check.
+fn calibrate_on_another_run(
+    model: &mut Model,
+    seed: u64,
+    n: usize,
+    name: &str,
+) -> (Vec<PressureImage>, f64) {
+    let (imgs, labels) = dataset(seed, n);
+    let names = ["wood", "carpet", "grass"];
+    let run: Vec<(&PressureImage, &str)> = imgs
+        .iter()
+        .zip(&labels)
+        .map(|(i, &k)| (i, names[k]))
+        .collect();
+    let check =
+        presrs_node::classifier::train::calibrate_on_runs(model, &run, &[name.into()]).unwrap();
+    (imgs, check)
+}
+
 /// Calibration on another run: the thresholds move to that run's images, the model says where
 /// they came from, and bad runs are refused naming the run and the fix.
 #[test]
@@ -530,14 +551,7 @@ fn calibration_on_another_run_and_its_bad_inputs() {
     assert_eq!(same.calibration.source, CalibrationSource::SameRun);
     assert_eq!(same.calibration.margin, 1.15);
     // Another run of the same three textures.
-    let (imgs, labels) = dataset(9, 30);
-    let names = ["wood", "carpet", "grass"];
-    let run: Vec<(&PressureImage, &str)> = imgs
-        .iter()
-        .zip(&labels)
-        .map(|(i, &k)| (i, names[k]))
-        .collect();
-    let check = calibrate_on_runs(&mut model, &run, &["run2.log".into()]).unwrap();
+    let (imgs, check) = calibrate_on_another_run(&mut model, 9, 30, "run2.log");
     let nv = model.novelty.clone().unwrap();
     assert_eq!(nv.calibration.source, CalibrationSource::HeldOutRuns);
     assert_eq!(nv.calibration.runs, vec!["run2.log".to_string()]);
@@ -545,6 +559,60 @@ fn calibration_on_another_run_and_its_bad_inputs() {
     // 90 images of the other run and up to 60 unused ones of the training run.
     assert!(nv.calibration.images >= 90, "{}", nv.calibration.images);
     assert!(check <= 0.05, "the check called {check} unknown");
+    // The other run's images classified right are the kNN's references, and the residual
+    // leaves out the directions they show; the thresholds are set at 1.5x the rate.
+    assert_eq!(nv.calibration.held_out_images, 90);
+    let n_ref = nv.reference_classes.len();
+    assert!((80..=90).contains(&n_ref), "{n_ref} references");
+    assert_eq!(nv.reference.len(), n_ref * model.h);
+    let n_feat = model.pca_mean.len();
+    assert_eq!(nv.nuisance.len(), NUISANCE_DIRECTIONS * n_feat);
+    assert_eq!(nv.calibration.rate, 0.02 * HELD_OUT_RATE_FACTOR);
+    // Unit rows, orthogonal to each other and to the PCA rows (to f32 rounding).
+    let row = |m: &[f32], i: usize| m[i * n_feat..(i + 1) * n_feat].to_vec();
+    let dot = |a: &[f32], b: &[f32]| {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| *x as f64 * *y as f64)
+            .sum::<f64>()
+    };
+    for i in 0..NUISANCE_DIRECTIONS {
+        let v = row(&nv.nuisance, i);
+        assert!((dot(&v, &v) - 1.0).abs() < 1e-4);
+        for j in 0..model.h {
+            assert!(dot(&v, &row(&model.pca_matrix, j)).abs() < 1e-3);
+        }
+        for j in 0..i {
+            assert!(dot(&v, &row(&nv.nuisance, j)).abs() < 1e-4);
+        }
+    }
+    // The references and nuisance directions make the held-out run's own images less novel
+    // than they scored when the thresholds were set (where they were measured as new).
+    let mut without = model.clone();
+    if let Some(n) = without.novelty.as_mut() {
+        n.reference.clear();
+        n.reference_classes.clear();
+        n.nuisance.clear();
+    }
+    let (mut with_c, mut without_c) = (Classifier::new(model.clone()), Classifier::new(without));
+    let (mut lower, mut n) = (0, 0);
+    for img in &imgs {
+        let a = with_c
+            .classify(&img.pixels, img.rows, img.cols, false)
+            .unwrap();
+        let b = without_c
+            .classify(&img.pixels, img.rows, img.cols, false)
+            .unwrap();
+        n += 1;
+        lower += (a.novelty < b.novelty) as usize;
+        assert!(
+            a.novelty <= b.novelty + 1e-9,
+            "{} > {}",
+            a.novelty,
+            b.novelty
+        );
+    }
+    assert!(lower * 10 >= n * 9, "{lower} of {n} lower");
     // The model with its calibration survives the file.
     let text = serde_json::to_string(&model).unwrap();
     assert_eq!(Model::from_json(&text, "m.json").unwrap(), model);
@@ -562,12 +630,40 @@ fn calibration_on_another_run_and_its_bad_inputs() {
         .to_string();
     assert!(e.contains("40x40") && e.contains("44x44"), "{e}");
     // A hand-edited novelty entry is refused by name.
-    let mut bad = model.clone();
-    bad.novelty.as_mut().unwrap().thresholds.pop();
-    let e = Model::from_json(&serde_json::to_string(&bad).unwrap(), "bad.json")
-        .unwrap_err()
-        .to_string();
-    assert!(e.contains("novelty") && e.contains("bad.json"), "{e}");
+    for edit in [
+        (|n: &mut Novelty| {
+            n.thresholds.pop();
+        }) as fn(&mut Novelty),
+        |n| {
+            n.reference.pop();
+        },
+        |n| n.reference_classes[0] = 7,
+        |n| {
+            n.nuisance.pop();
+        },
+    ] {
+        let mut bad = model.clone();
+        edit(bad.novelty.as_mut().unwrap());
+        let e = Model::from_json(&serde_json::to_string(&bad).unwrap(), "bad.json")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("novelty") && e.contains("bad.json"), "{e}");
+    }
+    // A file from before the references (no `reference`, `nuisance`, `held_out_images`) loads
+    // and scores as it did.
+    let mut old: serde_json::Value = serde_json::to_value(&model).unwrap();
+    let o = old["novelty"].as_object_mut().unwrap();
+    for key in ["reference", "reference_classes", "nuisance"] {
+        assert!(o.remove(key).is_some());
+    }
+    o["calibration"]
+        .as_object_mut()
+        .unwrap()
+        .remove("held_out_images");
+    let old = Model::from_json(&old.to_string(), "old.json").unwrap();
+    let nv = old.novelty.as_ref().unwrap();
+    assert!(nv.reference.is_empty() && nv.nuisance.is_empty());
+    assert_eq!(nv.calibration.held_out_images, 0);
 }
 
 /// The refit to dead sensor lines calibrates the novelty again on the same images with the same
@@ -587,4 +683,16 @@ fn a_refit_recalibrates_the_novelty() {
     assert_eq!(a.calibration.margin, b.calibration.margin);
     assert_eq!(m.images, model.images);
     assert!(b.calibration.called_unknown <= 0.1);
+    // Calibrated on another run: the references and nuisance directions are found again in
+    // the new PCA space.
+    let mut model = model;
+    calibrate_on_another_run(&mut model, 9, 20, "r2");
+    let m = refit(&model, &dead_rows, &dead_cols).unwrap();
+    let (a, b) = (model.novelty.as_ref().unwrap(), m.novelty.as_ref().unwrap());
+    assert_eq!(b.calibration.held_out_images, 60);
+    assert!(
+        !b.reference_classes.is_empty() && b.reference.len() == b.reference_classes.len() * m.h
+    );
+    assert_eq!(b.nuisance.len(), a.nuisance.len());
+    assert_ne!(a.reference, b.reference);
 }

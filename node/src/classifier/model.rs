@@ -466,6 +466,33 @@ impl Model {
         if let Some(nv) = &self.novelty {
             nv.validate(self.classes.len())
                 .map_err(|msg| Invalid::new("novelty", msg))?;
+            let n_feat = self.pca_mean.len();
+            if n_feat == 0 || !nv.nuisance.len().is_multiple_of(n_feat) {
+                return Err(Invalid::new(
+                    "novelty",
+                    format!(
+                        "novelty.nuisance has {} values: not whole rows of {n_feat} features",
+                        nv.nuisance.len()
+                    ),
+                ));
+            }
+            if nv.nuisance.iter().any(|v| !v.is_finite()) {
+                return Err(Invalid::new(
+                    "novelty",
+                    "non-finite numbers in novelty.nuisance",
+                ));
+            }
+            if nv.reference.len() != nv.reference_classes.len() * self.h {
+                return Err(Invalid::new(
+                    "novelty",
+                    format!(
+                        "novelty.reference has {} values for {} images of h = {}",
+                        nv.reference.len(),
+                        nv.reference_classes.len(),
+                        self.h
+                    ),
+                ));
+            }
             if let Some(i) = nv.calibration.pixels.iter().position(|p| p.len() != r * c) {
                 return Err(Invalid::new(
                     "novelty",

@@ -95,7 +95,8 @@ pub struct Classifier {
     q: Vec<f32>,
     /// F - mean (models with a novelty score).
     centred: Vec<f32>,
-    /// (U U^T)^-1 - I for the half-precision weights the projection runs with, h x h (empty for
+    /// (U U^T)^-1 - I for the half-precision weights the projection runs with, h x h padded to
+    /// stride x stride with zeros (empty for
     /// the f32 weights, orthonormal to 1e-7, and for models without a novelty score).
     gram_corr: Vec<f32>,
     /// The stored samples, each padded with zeros to `stride` (h rounded up to 8) so that the
@@ -103,6 +104,17 @@ pub struct Classifier {
     samples: Vec<f32>,
     /// Per stored sample: -|q - x_i|^2 / (2 s^2), the log of its kernel up to a constant.
     log_kernel: Vec<f64>,
+    /// The novelty's reference images (other runs' known images), padded as `samples` and
+    /// sorted by class: only the best class's are measured.
+    reference: Vec<f32>,
+    /// Per class, its range of reference images.
+    reference_of: Vec<std::ops::Range<usize>>,
+    /// Per reference image, its squared distance to the image (the best class's only).
+    reference_d2: Vec<f64>,
+    /// The novelty's nuisance directions in half precision (as `w16`: empty without
+    /// AVX2/FMA/F16C), and the centred feature vector's coordinates along them.
+    nuisance16: Vec<u16>,
+    nuisance_q: Vec<f32>,
     dead_rows: Vec<bool>,
     dead_cols: Vec<bool>,
     inv_two_s2: f64,
@@ -113,9 +125,11 @@ pub struct Classifier {
     max_e: Vec<f64>,
     sums: Vec<f64>,
     log_posteriors: Vec<f64>,
-    /// Per class, its `MAX_K` smallest squared distances to the image, ascending (the kNN
-    /// ratio of the novelty score); sized once.
-    knn: Vec<[f64; MAX_K]>,
+    /// The best class's `MAX_K` smallest squared distances to the image, ascending (the kNN
+    /// ratio of the novelty score).
+    knn: [f64; MAX_K],
+    /// Per class, the indices of its stored samples.
+    samples_of: Vec<Vec<usize>>,
     /// A stored sample left out of the kNN distances (calibrating on the stored samples
     /// themselves); `usize::MAX` otherwise.
     exclude: usize,
@@ -169,17 +183,21 @@ impl Classifier {
                 avx2_fma,
             );
         }
+        let stride = model.h.div_ceil(8) * 8;
+        // Padded to stride x stride with zeros, as the projection is.
         let gram_corr = if model.novelty.is_some() && !w16.is_empty() {
             let h = model.h;
-            let mut g = gram_inverse(&model.pca_matrix, &w16, h);
+            let g = gram_inverse(&model.pca_matrix, &w16, h);
+            let mut e = vec![0.0f32; stride * stride];
             for a in 0..h {
-                g[a * h + a] -= 1.0;
+                for b in 0..h {
+                    e[a * stride + b] = (g[a * h + b] - if a == b { 1.0 } else { 0.0 }) as f32;
+                }
             }
-            g.into_iter().map(|v| v as f32).collect()
+            e
         } else {
             Vec::new()
         };
-        let stride = model.h.div_ceil(8) * 8;
         let mut samples = vec![0.0; stride * model.n_samples()];
         if model.h > 0 {
             for (dst, src) in samples
@@ -189,6 +207,34 @@ impl Classifier {
                 dst[..model.h].copy_from_slice(src);
             }
         }
+        let mut reference = Vec::new();
+        let mut reference_of = vec![0..0; n_classes];
+        let mut nuisance16 = Vec::new();
+        if let Some(nv) = model.novelty.as_ref().filter(|_| model.h > 0) {
+            for (k, range) in reference_of.iter_mut().enumerate() {
+                let start = reference.len() / stride;
+                for (src, _) in nv
+                    .reference
+                    .chunks_exact(model.h)
+                    .zip(&nv.reference_classes)
+                    .filter(|(_, c)| **c == k)
+                {
+                    reference.extend_from_slice(src);
+                    reference.resize(reference.len() + stride - model.h, 0.0);
+                }
+                *range = start..reference.len() / stride;
+            }
+            if avx2_fma && !w16.is_empty() {
+                nuisance16 = half_matrix(&nv.nuisance);
+            }
+        }
+        let mut samples_of = vec![Vec::new(); n_classes];
+        for (i, &c) in model.sample_classes.iter().enumerate() {
+            if let Some(v) = samples_of.get_mut(c) {
+                v.push(i);
+            }
+        }
+        let most_references = reference_of.iter().map(|r| r.len()).max().unwrap_or(0);
         Self {
             fx,
             work: vec![0; work_rows * work_cols],
@@ -202,6 +248,17 @@ impl Classifier {
             gram_corr,
             samples,
             log_kernel: vec![0.0; model.n_samples()],
+            reference,
+            reference_of,
+            reference_d2: vec![0.0; most_references],
+            nuisance16,
+            nuisance_q: vec![
+                0.0;
+                model
+                    .novelty
+                    .as_ref()
+                    .map_or(0, |nv| nv.nuisance.len() / n.max(1))
+            ],
             dead_rows: vec![false; work_rows],
             dead_cols: vec![false; work_cols],
             inv_two_s2: 1.0 / (2.0 * s * s),
@@ -210,7 +267,8 @@ impl Classifier {
             max_e: vec![0.0; n_classes],
             sums: vec![0.0; n_classes],
             log_posteriors: vec![0.0; n_classes],
-            knn: vec![[f64::INFINITY; MAX_K]; n_classes],
+            knn: [f64::INFINITY; MAX_K],
+            samples_of,
             exclude: usize::MAX,
             parts: (f64::NAN, f64::NAN),
             // Older model files carry no contact figures: then only a blank image is refused.
@@ -376,25 +434,22 @@ impl Classifier {
             let q = &self.q[..h];
             let mut q2: f64 = q.iter().map(|&v| v as f64 * v as f64).sum();
             // G^-1 = I + E with E of order 1e-3: Q^T E Q in f32 is exact enough, and
-            // vectorises (2,700 multiply-adds for h = 52).
-            q2 += quad_form(&self.gram_corr, q, self.avx2_fma);
-            let residual = (c2 - q2).max(0.0).sqrt();
-            let k = nv.k;
-            for b in self.knn.iter_mut() {
-                b[..k].fill(f64::INFINITY);
+            // vectorises (3,136 multiply-adds for h = 52 padded to 56).
+            q2 += quad_form(&self.gram_corr, &self.q, self.avx2_fma);
+            // Less its length along the nuisance directions (orthogonal to the rows): where
+            // the known terrains' runs differ, not the terrain.
+            let mut nuisance = 0.0;
+            if !self.nuisance_q.is_empty() {
+                project(
+                    &nv.nuisance,
+                    &self.nuisance16,
+                    &self.centred,
+                    &mut self.nuisance_q,
+                    self.avx2_fma,
+                );
+                nuisance = self.nuisance_q.iter().map(|&v| v as f64 * v as f64).sum();
             }
-            for (i, (&d2, &c)) in self.log_kernel.iter().zip(&m.sample_classes).enumerate() {
-                let b = &mut self.knn[c];
-                if d2 < b[k - 1] && i != self.exclude {
-                    // Insertion into the class's k smallest, ascending.
-                    let mut j = k - 1;
-                    while j > 0 && b[j - 1] > d2 {
-                        b[j] = b[j - 1];
-                        j -= 1;
-                    }
-                    b[j] = d2;
-                }
-            }
+            let residual = (c2 - q2 - nuisance).max(0.0).sqrt();
             self.parts.1 = residual;
         }
         let (log_dens, max_e, sums) = (&mut self.log_dens, &mut self.max_e, &mut self.sums);
@@ -442,7 +497,26 @@ impl Classifier {
             .is_none_or(|r| (r[best][0]..=r[best][1]).contains(&total));
         let (novelty, threshold) = match &m.novelty {
             Some(nv) => {
-                let b = &self.knn[best][..nv.k];
+                // The best class's stored samples and references only: the kNN ratio looks at
+                // no other class.
+                let b = &mut self.knn[..nv.k];
+                b.fill(f64::INFINITY);
+                let to_d2 = -1.0 / self.inv_two_s2;
+                for &i in &self.samples_of[best] {
+                    if i != self.exclude {
+                        insert_smallest(b, self.log_kernel[i] * to_d2);
+                    }
+                }
+                let range = self.reference_of[best].clone();
+                if !range.is_empty() {
+                    let stride = self.q.len();
+                    let d2 = &mut self.reference_d2[..range.len()];
+                    let refs = &self.reference[range.start * stride..range.end * stride];
+                    sq_dists(refs, &self.q, d2, self.avx2_fma);
+                    for &v in d2.iter() {
+                        insert_smallest(b, v);
+                    }
+                }
                 let (mut sum, mut n) = (0.0, 0usize);
                 for &d2 in b.iter().take_while(|d| d.is_finite()) {
                     sum += d2.sqrt();
@@ -474,6 +548,18 @@ impl Classifier {
             novelty,
             threshold,
         }
+    }
+
+    /// The last decision's projection into the model's PCA space (h values; meaningful after a
+    /// decision in contact). For calibration.
+    pub fn projection(&self) -> &[f32] {
+        &self.q[..self.model.h]
+    }
+
+    /// The last decision's centred feature vector, F - mean (models with a novelty score). For
+    /// calibration.
+    pub fn centred(&self) -> &[f32] {
+        &self.centred
     }
 
     /// The last decision's novelty parts: the mean distance to the best class's k nearest
@@ -532,6 +618,21 @@ impl Classifier {
             self.repair_work();
         }
         Ok(self.decide())
+    }
+}
+
+/// Inserts `d2` into `b`, the ascending smallest values so far, when it is smaller than the
+/// largest of them.
+#[inline]
+fn insert_smallest(b: &mut [f64], d2: f64) {
+    let k = b.len();
+    if d2 < b[k - 1] {
+        let mut j = k - 1;
+        while j > 0 && b[j - 1] > d2 {
+            b[j] = b[j - 1];
+            j -= 1;
+        }
+        b[j] = d2;
     }
 }
 

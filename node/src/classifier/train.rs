@@ -14,8 +14,8 @@ use super::model::{
     StoredImages,
 };
 use super::novelty::{
-    Calibration, CalibrationSource, NOVELTY_K, Novelty, NoveltyScore, SAME_RUN_MARGIN,
-    SHRINK_IMAGES, median, upper_quantile,
+    Calibration, CalibrationSource, HELD_OUT_RATE_FACTOR, NOVELTY_K, NUISANCE_DIRECTIONS, Novelty,
+    NoveltyScore, SAME_RUN_MARGIN, SHRINK_IMAGES, median, upper_quantile,
 };
 
 /// How to train: the paper's split and the preprocessing. With the `clap` feature these are
@@ -323,7 +323,15 @@ pub fn train(
             CalibrationSource::LeaveOneOut
         };
         let (pixels, cls): (Vec<_>, Vec<_>) = cal.into_iter().unzip();
-        set_novelty(&mut model, pixels, cls, source, Vec::new(), SAME_RUN_MARGIN);
+        set_novelty(
+            &mut model,
+            pixels,
+            cls,
+            source,
+            Vec::new(),
+            SAME_RUN_MARGIN,
+            0,
+        );
     }
     Ok((model, split))
 }
@@ -449,6 +457,7 @@ pub fn calibrate_on_runs(
         );
         classes.push(k);
     }
+    let held_out = pixels.len();
     // With the training run's unused images too: more images for the tails, and both kinds
     // of spread (within a run, across runs) in one calibration. (Not again after an earlier
     // calibration on runs: those images would count twice.)
@@ -468,6 +477,7 @@ pub fn calibrate_on_runs(
         CalibrationSource::HeldOutRuns,
         runs.to_vec(),
         1.0,
+        held_out,
     );
     match &model.novelty {
         Some(nv) => Ok(nv.calibration.called_unknown),
@@ -486,6 +496,7 @@ fn set_novelty(
     source: CalibrationSource,
     runs: Vec<String>,
     margin: f64,
+    held_out: usize,
 ) {
     let n_classes = model.classes.len();
     let k = NOVELTY_K;
@@ -507,7 +518,11 @@ fn set_novelty(
             misclassified: 0.0,
             pixels: Vec::new(),
             classes: Vec::new(),
+            held_out_images: 0,
         },
+        reference: Vec::new(),
+        reference_classes: Vec::new(),
+        nuisance: Vec::new(),
     };
     let mut m = model.clone();
     m.novelty = Some(provisional.clone());
@@ -520,6 +535,8 @@ fn set_novelty(
     // and a left-out grit passed as 150 unseen).
     let mut parts: Vec<(usize, f64, f64)> = Vec::new();
     let mut wrong = 0usize;
+    let (mut reference, mut reference_classes) = (Vec::new(), Vec::new());
+    let mut residuals: Vec<Vec<f64>> = Vec::new();
     let loo = source == CalibrationSource::LeaveOneOut;
     let labels: &[usize] = if loo { &model.sample_classes } else { &classes };
     let images: &[Vec<u16>] = match (&model.images, loo) {
@@ -537,12 +554,28 @@ fn set_novelty(
             if knn.is_finite() && res.is_finite() {
                 parts.push((d.best, knn, res));
             }
+            // A held-out run's known image: a reference for the next run (see the module docs
+            // of `novelty`). Scored above without the references: conservatively, as an image
+            // of a run the model has not seen.
+            if !loo && i < held_out && source == CalibrationSource::HeldOutRuns {
+                reference.extend_from_slice(cls.projection());
+                reference_classes.push(d.best);
+                residuals.push(residual_vector(&model.pca_matrix, model.h, cls.centred()));
+            }
         }
     }
     if parts.is_empty() {
         model.novelty = None;
         return;
     }
+    // Calibration images of a held-out run are scored as a run the model has never seen; the
+    // next run is scored with them as references, and comes out less novel: the quantile is
+    // taken at a measured multiple of the rate asked (see [`HELD_OUT_RATE_FACTOR`]).
+    let cal_rate = if reference_classes.is_empty() {
+        rate
+    } else {
+        (rate * HELD_OUT_RATE_FACTOR).min(super::model::MAX_UNKNOWN_RATE)
+    };
     let mut nv = provisional;
     let of_class = |k: usize, f: &dyn Fn(&(usize, f64, f64)) -> f64| -> Vec<f64> {
         parts.iter().filter(|p| p.0 == k).map(f).collect()
@@ -564,7 +597,7 @@ fn set_novelty(
     // pooled threshold and a left-out static terrain went unnoticed (75% called unknown, 100%
     // with it).
     {
-        let q = 1.0 - rate;
+        let q = 1.0 - cal_rate;
         let mut zk: Vec<f64> = parts
             .iter()
             .map(|&(b, knn, _)| knn / nv.class_spread[b])
@@ -585,7 +618,7 @@ fn set_novelty(
         .iter()
         .map(|&(b, knn, res)| nv.score_of(b, knn, res))
         .collect();
-    let q = 1.0 - rate;
+    let q = 1.0 - cal_rate;
     let pooled = upper_quantile(&mut scores.clone(), q);
     for kk in 0..n_classes {
         let mut v: Vec<f64> = parts
@@ -617,8 +650,55 @@ fn set_novelty(
     if !loo {
         nv.calibration.pixels = pixels;
         nv.calibration.classes = classes;
+        nv.calibration.held_out_images = held_out;
     }
+    nv.calibration.rate = cal_rate;
+    nv.reference = reference;
+    nv.reference_classes = reference_classes;
+    nv.nuisance = nuisance_directions(&residuals, NUISANCE_DIRECTIONS);
     model.novelty = Some(nv);
+}
+
+/// The part of the centred feature vector `c` outside the span of the PCA rows `u` (h rows),
+/// in f64: the nuisance directions are fitted on it once per calibration.
+fn residual_vector(u: &[f32], h: usize, c: &[f32]) -> Vec<f64> {
+    let n = c.len();
+    let mut e: Vec<f64> = c.iter().map(|&v| v as f64).collect();
+    for j in 0..h {
+        let row = &u[j * n..(j + 1) * n];
+        let a: f64 = row.iter().zip(c).map(|(&w, &v)| w as f64 * v as f64).sum();
+        for (x, &w) in e.iter_mut().zip(row) {
+            *x -= a * w as f64;
+        }
+    }
+    e
+}
+
+/// The `r` leading right singular vectors of the residual vectors (rows), as f32 rows: the
+/// directions outside the PCA subspace along which the held-out runs' known images lie (no more
+/// than there are images: their span is all they show).
+fn nuisance_directions(residuals: &[Vec<f64>], r: usize) -> Vec<f32> {
+    if r == 0 || residuals.is_empty() {
+        return Vec::new();
+    }
+    let n = residuals[0].len();
+    let e = DMatrix::<f64>::from_fn(residuals.len(), n, |i, j| residuals[i][j]);
+    let svd = e.svd(false, true);
+    let Some(v_t) = svd.v_t else {
+        return Vec::new();
+    };
+    let mut order: Vec<usize> = (0..svd.singular_values.len()).collect();
+    order.sort_by(|&a, &b| svd.singular_values[b].total_cmp(&svd.singular_values[a]));
+    let tol = svd.singular_values.max() * 1e-9;
+    let mut out = Vec::with_capacity(r * n);
+    for &axis in order
+        .iter()
+        .take(r)
+        .take_while(|&&a| svd.singular_values[a] > tol)
+    {
+        out.extend((0..n).map(|k| v_t[(axis, k)] as f32));
+    }
+    out
 }
 
 /// `v` when it is a positive number, else `fallback` (else 1).
@@ -737,6 +817,7 @@ pub fn refit(model: &Model, dead_rows: &[bool], dead_cols: &[bool]) -> Result<Mo
             c.source,
             c.runs,
             c.margin,
+            c.held_out_images,
         );
         if let Some(n) = m.novelty.as_mut() {
             n.calibration.pixels = c.pixels;

@@ -50,7 +50,8 @@ pub(super) fn project(w: &[f32], w16: &[u16], c: &[f32], q: &mut [f32], avx2_fma
     portable::project(w, c, q);
 }
 
-/// `q^T E q` for the h x h matrix `E` (empty: 0), in f32.
+/// `q^T E q` for the symmetric matrix `E`, `q.len()` rows of `q.len()` (a multiple of 8: `q`
+/// zero-padded past h), in f32; 0 for an empty `E`.
 pub(super) fn quad_form(e: &[f32], q: &[f32], avx2_fma: bool) -> f64 {
     #[cfg(not(target_arch = "x86_64"))]
     let _ = avx2_fma;
@@ -93,6 +94,35 @@ mod tests {
     use super::*;
     use crate::classifier::Kernels;
     use portable::half_to_f64;
+
+    #[test]
+    fn the_quadratic_form_is_q_e_q() {
+        // h = 13 padded to 16; E symmetric, zero past h.
+        let (h, n) = (13, 16);
+        let mut e = vec![0.0f32; n * n];
+        for a in 0..h {
+            for b in 0..h {
+                e[a * n + b] = ((a + b) % 5) as f32 * 1e-3 - 2e-3;
+            }
+        }
+        let q: Vec<f32> = (0..n)
+            .map(|i| if i < h { i as f32 - 6.0 } else { 0.0 })
+            .collect();
+        let mut want = 0.0f64;
+        for a in 0..h {
+            for b in 0..h {
+                want += (q[a] * e[a * n + b] * q[b]) as f64;
+            }
+        }
+        for avx2_fma in [false, Kernels::Native.avx2_fma()] {
+            let got = quad_form(&e, &q, avx2_fma);
+            assert!(
+                (got - want).abs() <= 1e-5 * want.abs().max(1.0),
+                "{got} vs {want}"
+            );
+        }
+        assert_eq!(quad_form(&[], &q, false), 0.0);
+    }
 
     #[test]
     fn distances_are_exact_sums_of_squares() {
