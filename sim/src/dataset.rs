@@ -177,17 +177,27 @@ pub fn stances(
     let (rows, cols) = (skin.params.rows, skin.params.cols);
     let mut steps = 0usize;
     let mut last_td: Option<(f64, f64)> = None;
-    while out.len() < n && steps < 20 + 4 * n {
+    // A sample's stance time is known at its liftoff: the hopper goes on until the last one's.
+    // (It stopped at the last image, which then read a stance of 0 s, and the first sample's
+    // speed read 0, its previous touchdown being a settling step: `presrs dataset dynamic`'s
+    // means were low by one sample in n.)
+    let done = |out: &[Sample]| out.len() >= n && out.last().is_none_or(|s| s.stance_s > 0.0);
+    while !done(&out) && steps < 20 + 4 * n {
         match hopper.advance(1.0, ground, &mut cmd) {
             Some(Event::Touchdown { t, beta, .. }) => {
                 cmd.on_touchdown(beta);
                 steps += 1;
-                if steps <= 20 {
+                let x0 = hopper.x;
+                if steps <= 20 || out.len() >= n {
+                    // Settling, or the last sample's stance ended in a fall: no image here.
+                    last_td = Some((t, x0));
+                    if out.len() >= n {
+                        break;
+                    }
                     continue;
                 }
                 let k = ((t + STANCE_SAMPLE_S - phase) / FRAME_PERIOD_S).round();
                 let t_frame = phase + k * FRAME_PERIOD_S;
-                let x0 = hopper.x;
                 match hopper.advance(t_frame - t, ground, &mut cmd) {
                     None => {
                         let contact = skin.contact_on(terrain, Footprint::FOOT, rng);
@@ -228,4 +238,27 @@ pub fn stances(
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_dynamic_sample_has_its_stance_time_and_speed() {
+        let s = generate(&Options {
+            kind: Kind::Dynamic,
+            n: Some(4),
+            gait: Gait::g2(),
+            damage_pct: 0.0,
+            sensor: 1,
+            seed: 7,
+        });
+        assert_eq!(s.len(), 16);
+        for x in &s {
+            // G2's stances last 0.16-0.19 s and it hops at 0.35-1.0 m/s (hopper.rs).
+            assert!((0.12..0.25).contains(&x.stance_s), "{x:?}");
+            assert!((0.2..1.2).contains(&x.speed_m_s), "{x:?}");
+        }
+    }
 }
