@@ -1596,9 +1596,27 @@ fn leg_bridge_drives_each_protocols_simulated_motors_as_processes() {
                 .unwrap(),
         );
         let sim_start = Instant::now();
-        // The controller dies at `kill_at` of robot time (the simulator's clock runs at
-        // `speed` of the wall clock, or slower when the machine cannot keep up: never ahead).
-        std::thread::sleep(Duration::from_secs_f64(kill_at / speed));
+        // The controller dies at `kill_at` of robot time: when the foot's clock says so. (It
+        // slept `kill_at / speed` of wall time before, and a loaded machine ran the simulator
+        // at a sixth of `speed`: the kill came at 1.3 s of robot time, 0 steps judged.)
+        // The foot's clock (s) in the last FootContact heard by `by`.
+        let foot_clock = |heard: &[(Instant, protocol::CanFrame)], by: Instant| {
+            heard
+                .iter()
+                .rev()
+                .filter(|(t, _)| *t <= by)
+                .find_map(|(_, f)| match decode(f, &ids) {
+                    Ok(Some((0, Message::FootContact(fc)))) => Some(fc.timestamp_us as f64 * 1e-6),
+                    _ => None,
+                })
+        };
+        while foot_clock(&heard.lock().unwrap(), Instant::now()).is_none_or(|t| t < kill_at) {
+            assert!(
+                sim_start.elapsed() < Duration::from_secs_f64(20.0 * sim_s / speed),
+                "{proto}: the simulator's clock did not reach {kill_at} s"
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
         drop(controller);
         let killed = Instant::now();
         let status = sim.0.wait().unwrap();
@@ -1618,15 +1636,7 @@ fn leg_bridge_drives_each_protocols_simulated_motors_as_processes() {
         // Robot time of the kill on the simulator's clock: the foot's last timestamp heard
         // before it (the simulator falls behind `speed` under TCG: by 5 s, 2 s behind);
         // steps and falls are judged before it, less a second.
-        let kill_robot = heard
-            .iter()
-            .rev()
-            .filter(|(t, _)| *t <= killed)
-            .filter_map(|(_, f)| match decode(f, &ids) {
-                Ok(Some((0, Message::FootContact(fc)))) => Some(fc.timestamp_us as f64 * 1e-6),
-                _ => None,
-            })
-            .next()
+        let kill_robot = foot_clock(&heard, killed)
             .unwrap_or_else(|| (killed - sim_start).as_secs_f64() * speed);
         let before = kill_robot - 1.0;
         let steps: Vec<&serde_json::Value> = r["steps"]

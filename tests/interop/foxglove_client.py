@@ -23,6 +23,9 @@ async def main(url, topics, timeout):
                 return 1
             await asyncio.sleep(0.2)
     subs, got, schemas, next_id = {}, {}, {}, 1
+    # What the server said, for the error line when a topic gets nothing: its advertised
+    # topics, its status messages and how many data messages came at all.
+    advertised, statuses, data_messages = [], [], 0
     # channel id per wanted topic, from the server's advertisements
     channels = {}
     # foxglove's server can answer a subscribe sent right after a channel's advertisement
@@ -52,8 +55,11 @@ async def main(url, topics, timeout):
                 continue
             if isinstance(msg, str):
                 m = json.loads(msg)
+                if m.get("op") == "status":
+                    statuses.append(m.get("message", ""))
                 if m.get("op") == "advertise":
                     new = []
+                    advertised.extend(ch["topic"] for ch in m["channels"])
                     for ch in m["channels"]:
                         if ch["topic"] not in topics:
                             continue
@@ -71,6 +77,7 @@ async def main(url, topics, timeout):
                 op = msg[0]
                 if op != 1:  # MessageData
                     continue
+                data_messages += 1
                 sub, log_time = struct.unpack_from("<IQ", msg, 1)
                 topic = subs.get(sub)
                 if topic and topic not in got:
@@ -84,7 +91,9 @@ async def main(url, topics, timeout):
                         "message": json.loads(msg[13:].decode()),
                     }
     for t in topics:
-        print(json.dumps(got.get(t, {"topic": t, "error": "nothing received"})))
+        nothing = {"topic": t, "error": "nothing received", "advertised": advertised,
+                   "server_status": statuses[-5:], "data_messages": data_messages}
+        print(json.dumps(got.get(t, nothing)))
     return 0 if len(got) == len(topics) else 1
 
 
