@@ -124,10 +124,17 @@ fn dynamic_stances_tell_clay_and_grass_but_not_wood_from_carpet() {
     // that no distance in this feature space beats.
     assert!(row("wood").nn_auroc < 0.5, "{rows:?}");
     let m = means(&rows);
-    // Measured (seeds 1-3): fresh known 2.5-8.3% unknown (3.6-11.1% before the calibration
-    // run's images were references; the dynamic runs are 10 stances per gait and terrain: the
-    // widest spread of any source).
+    // Measured (seeds 1-10): fresh known 0-8.3% unknown, median 4.2% (3.6-11.1% on seeds 1-3
+    // before the calibration run's images were references; the dynamic runs are 10 stances
+    // per gait and terrain: the widest spread of any source).
     assert!(m.unknown_known <= 0.1, "{rows:?}");
+    // Most of them are stances the model took for another terrain (grass for clay), where
+    // unknown costs no accuracy and spares the robot that terrain's gait: the cost, stances it
+    // had right and called unknown, is the accuracy gap (seed 1: 2.5% unknown, 0.3 points;
+    // seeds 1-10: 0-5 points, median 0.65).
+    assert!(m.unknown_known_misclassified <= m.unknown_known, "{rows:?}");
+    assert!(m.unknown_known_misclassified >= 0.01, "{rows:?}");
+    assert!(m.known_accuracy_open - m.known_accuracy <= 0.02, "{rows:?}");
 }
 
 /// The real pressure maps: 10 subjects, runs = blocks of later trials.

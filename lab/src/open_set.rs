@@ -62,6 +62,10 @@ pub struct OpenSetRow {
     pub unknown_held_out: f64,
     /// Share of the known test images called unknown (the goal: few).
     pub unknown_known: f64,
+    /// Of those, the share of the known test images whose best class was another terrain:
+    /// called unknown, they cost no accuracy (they were wrong) and spare the robot a wrong
+    /// terrain's gait. `unknown_known` less this is the cost: images the model had right.
+    pub unknown_known_misclassified: f64,
     /// AUROC of the novelty (less its class's threshold) separating the left-out class from
     /// the known test images: 1 perfect, 0.5 chance, whatever the threshold.
     pub auroc: f64,
@@ -105,6 +109,7 @@ impl OpenSetMeans {
                 held_out: "mean".into(),
                 unknown_held_out: m(|r| r.unknown_held_out),
                 unknown_known: m(|r| r.unknown_known),
+                unknown_known_misclassified: m(|r| r.unknown_known_misclassified),
                 auroc: m(|r| r.auroc),
                 density_auroc: m(|r| r.density_auroc),
                 nn_auroc: m(|r| r.nn_auroc),
@@ -116,6 +121,83 @@ impl OpenSetMeans {
             },
             auroc_range: (lo, hi),
         }
+    }
+}
+
+/// One figure over several seeds: its median, lowest and highest value.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Spread {
+    /// The median (of an even count, the mean of the middle two).
+    pub median: f64,
+    /// The lowest value.
+    pub min: f64,
+    /// The highest value.
+    pub max: f64,
+}
+
+impl Spread {
+    /// The spread of `v` (NaN everywhere when it is empty).
+    pub fn of(v: &[f64]) -> Self {
+        let mut v = v.to_vec();
+        let median = node::classifier::novelty::median(&mut v);
+        Self {
+            median,
+            min: v.first().copied().unwrap_or(f64::NAN),
+            max: v.last().copied().unwrap_or(f64::NAN),
+        }
+    }
+}
+
+/// One source's means ([`OpenSetMeans`]) over several seeds: each seed draws another split
+/// and, for the simulated sources, other runs. A single seed can be a kind one: this is the
+/// spread to report.
+#[derive(Clone, Debug, Default)]
+pub struct SeedSpread {
+    /// The seeds, in the order of `means`.
+    pub seeds: Vec<u64>,
+    /// The source's means on each seed.
+    pub means: Vec<OpenSetRow>,
+}
+
+impl SeedSpread {
+    /// Adds one seed's means.
+    pub fn push(&mut self, seed: u64, means: OpenSetRow) {
+        self.seeds.push(seed);
+        self.means.push(means);
+    }
+
+    /// The spread of one figure of the means.
+    pub fn of(&self, f: fn(&OpenSetRow) -> f64) -> Spread {
+        Spread::of(&self.means.iter().map(f).collect::<Vec<_>>())
+    }
+
+    /// The seeds whose means `miss` says miss a target.
+    pub fn missing(&self, miss: impl Fn(&OpenSetRow) -> bool) -> Vec<u64> {
+        self.seeds
+            .iter()
+            .zip(&self.means)
+            .filter(|(_, m)| miss(m))
+            .map(|(&s, _)| s)
+            .collect()
+    }
+}
+
+/// Means for tests: a separable source's, with `unknown_known` and `known_accuracy` given.
+#[cfg(test)]
+pub(crate) fn mean_row(unknown_known: f64, known_accuracy: f64) -> OpenSetRow {
+    OpenSetRow {
+        held_out: "mean".into(),
+        unknown_held_out: 0.9,
+        unknown_known,
+        unknown_known_misclassified: 0.0,
+        auroc: 0.99,
+        density_auroc: 0.5,
+        nn_auroc: 0.9,
+        known_accuracy,
+        known_accuracy_open: 0.99,
+        calibration_unknown: 0.02,
+        n_held_out: 10,
+        n_known: 30,
     }
 }
 
@@ -164,11 +246,12 @@ pub fn leave_one_class_out(src: &OpenSetSource) -> Result<Vec<OpenSetRow>, LabEr
                 .collect(),
         };
         let mut scored: Vec<Scored> = Vec::new();
-        let (mut right, mut right_open) = (0usize, 0usize);
+        let (mut right, mut right_open, mut wrong_unknown) = (0usize, 0usize, 0usize);
         for &(img, truth) in &known_test {
             let s = judge.score(img, false);
             right += (s.class == Some(truth)) as usize;
             right_open += (s.best == Some(truth)) as usize;
+            wrong_unknown += (s.class.is_none() && s.best.is_some_and(|b| b != truth)) as usize;
             scored.push(s);
         }
         let n_known = scored.len();
@@ -189,6 +272,7 @@ pub fn leave_one_class_out(src: &OpenSetSource) -> Result<Vec<OpenSetRow>, LabEr
             held_out: out_class.name.clone(),
             unknown_held_out: share(true),
             unknown_known: share(false),
+            unknown_known_misclassified: wrong_unknown as f64 / n_known.max(1) as f64,
             auroc: auroc(&scored, |s| s.novelty),
             density_auroc: auroc(&scored, |s| s.density),
             nn_auroc: auroc(&scored, |s| s.nn),
@@ -296,6 +380,21 @@ mod tests {
     }
 
     #[test]
+    fn a_spread_is_the_median_and_range_and_names_the_seeds_off_target() {
+        let sp = Spread::of(&[3.0, 1.0, 4.0, 2.0]);
+        assert_eq!((sp.median, sp.min, sp.max), (2.5, 1.0, 4.0));
+        assert!(Spread::of(&[]).median.is_nan());
+        let row = |unknown_known: f64| mean_row(unknown_known, 0.97);
+        let mut s = SeedSpread::default();
+        for (seed, u) in [(1, 0.02), (2, 0.05), (3, 0.01)] {
+            s.push(seed, row(u));
+        }
+        assert_eq!(s.of(|m| m.unknown_known).median, 0.02);
+        assert_eq!(s.missing(|m| m.unknown_known > 0.03), vec![2]);
+        assert!(s.missing(|m| m.unknown_held_out < 0.8).is_empty());
+    }
+
+    #[test]
     fn auroc_counts_pairs_and_ties() {
         let v = [s(false, 1.0), s(false, 2.0), s(true, 3.0), s(true, 2.0)];
         // Pairs (known, novel): (1,3) (1,2) (2,3) win, (2,2) ties: 3.5 of 4.
@@ -329,6 +428,13 @@ mod tests {
         assert!(m.auroc >= 0.9, "{rows:?}");
         assert!(m.unknown_held_out >= 0.75, "{rows:?}");
         assert!(m.unknown_known <= 0.08, "{rows:?}");
+        // Every known image called unknown was either right (the accuracy gap) or taken for
+        // another terrain (the bracketed share): the two add up (all these are in contact).
+        for r in &rows {
+            let right_lost = r.known_accuracy_open - r.known_accuracy;
+            let parts = r.unknown_known_misclassified + right_lost;
+            assert!((r.unknown_known - parts).abs() < 1e-9, "{r:?}");
+        }
         assert!(rows.iter().all(|r| r.n_held_out == 20 && r.n_known == 60));
     }
 }

@@ -1137,8 +1137,12 @@ pub fn add_load_check(m: &mut Model) -> bool {
 /// slow safe gait read 50.7k rising to 60k over 7 steps, against 61.0-69.0k learned from steady
 /// hopping (a fixed-G1 run on carpet reads 62.7-67.1k, as the training set does): 92 of 108
 /// sand steps were unknown, but so were 74 of 192 known ones, each keeping the robot at the
-/// safe gait, where the load stays low. Hence opt-in (`train --check-load`), best with training
-/// images captured from the robot's own runs, transitions included.
+/// safe gait, where the load stays low. Ranges from the robot's own closed-loop runs do not
+/// cure it: learned from a 300-step demo run on the default track (captured with `presrs
+/// capture --labels`), they left 21-25% of the known steps of two runs on that track with sand
+/// outside their range (77-81% of the sand steps), grass entered from sand reading 49-57k for
+/// up to nine steps against 57-66k: on the simulator sand's mark is the energy it takes out of
+/// a hop, and the next steps carry it (docs/real-robot.md, "Unknown terrain"). Hence opt-in.
 fn load_ranges(work: &[Vec<u16>], labels: &[usize], rate: f64) -> Vec<[f64; 2]> {
     let n_classes = labels.iter().max().map_or(0, |m| m + 1);
     let mut per: Vec<Vec<f64>> = vec![Vec::new(); n_classes];
