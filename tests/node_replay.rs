@@ -122,19 +122,10 @@ fn the_firmware_examples_log_is_a_run_the_node_decides() {
     std::fs::create_dir_all(&dir).unwrap();
     let model_path = common::small_model(&dir);
     let log = dir.join("foot.log");
-    common::output_ok(
-        Command::new(env!("CARGO"))
-            .current_dir(common::root())
-            .args([
-                "run",
-                "-q",
-                "-p",
-                "presrs-protocol",
-                "--example",
-                "foot_firmware",
-            ])
-            .args(["--", "--steps", "8", "--log", log.to_str().unwrap()]),
-    );
+    common::output_ok(&mut common::protocol_example(
+        "foot_firmware",
+        &["--steps", "8", "--log", log.to_str().unwrap()],
+    ));
     let got = replay_json(&log, &model_path);
     assert_eq!(got.len(), 8, "{got:?}");
     let log_start_us = 1_700_000_000_000_000u64;

@@ -200,6 +200,65 @@ pub fn python(args: &[&str]) -> String {
     stdout
 }
 
+/// The command that runs the protocol crate's example `name` (`args` after it): the binary
+/// `cargo test --workspace` built beside this test's when it is newer than every source it is
+/// built from (the protocol crate's `src/`, the example, its manifest, the lock file), else
+/// `cargo run`. Why: `cargo run -p presrs-protocol` resolves the crate's features alone, not as
+/// the workspace's test build did, and so compiled it and its dependencies again (49 s of the
+/// test command's 8 min on a 2-core machine).
+pub fn protocol_example(name: &str, args: &[&str]) -> std::process::Command {
+    let built = std::env::current_exe()
+        .ok()
+        .and_then(|t| Some(t.parent()?.parent()?.join("examples").join(name)));
+    let newest_source = {
+        let p = root().join("protocol");
+        let mut files = vec![
+            p.join("Cargo.toml"),
+            root().join("Cargo.lock"),
+            p.join("examples").join(format!("{name}.rs")),
+        ];
+        let mut dirs = vec![p.join("src")];
+        while let Some(d) = dirs.pop() {
+            for e in std::fs::read_dir(&d).into_iter().flatten().flatten() {
+                let path = e.path();
+                if path.is_dir() {
+                    dirs.push(path);
+                } else {
+                    files.push(path);
+                }
+            }
+        }
+        files
+            .iter()
+            .map(|f| std::fs::metadata(f).and_then(|m| m.modified()).ok())
+            .max()
+            .flatten()
+    };
+    let modified = |p: &std::path::Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
+    match (built, newest_source) {
+        (Some(bin), Some(src)) if modified(&bin).is_some_and(|b| b > src) => {
+            let mut c = std::process::Command::new(bin);
+            c.args(args);
+            c
+        }
+        _ => {
+            let mut c = std::process::Command::new(env!("CARGO"));
+            c.current_dir(root())
+                .args([
+                    "run",
+                    "-q",
+                    "-p",
+                    "presrs-protocol",
+                    "--example",
+                    name,
+                    "--",
+                ])
+                .args(args);
+            c
+        }
+    }
+}
+
 /// Runs `cmd` to the end; unless it succeeded, panics with its status and stderr.
 pub fn output_ok(cmd: &mut std::process::Command) -> std::process::Output {
     let out = cmd
