@@ -1039,10 +1039,6 @@ where
         .map_err(pe)
 }
 
-/// Leave-one-class-out per source (the simulator's static, sandpaper and dynamic sets, each in
-/// three runs on three sensors; the lab's own set and any extra sources, split by their runs):
-/// how much of a class the model never saw is called unknown, and how much of a fresh run of
-/// the known ones.
 /// The open-set section's sources for `seed`: the lab's and extra sets (the seed draws the
 /// split), then without `--data` the simulated ones (the seed also draws their runs).
 fn open_set_sources(ctx: &Report, seed: u64) -> Vec<crate::open_set::OpenSetSource> {
@@ -1136,6 +1132,11 @@ fn open_set_images(ctx: &Report) -> usize {
     if ctx.quick { 30 } else { 60 }
 }
 
+/// Leave-one-class-out per source (the simulator's static, sandpaper and dynamic sets, each in
+/// three runs on three sensors; the lab's own set and any extra sources, split by their runs):
+/// how much of a class the model never saw is called unknown, and how much of a fresh run of
+/// the known ones; with `open_set_seeds` above 1, the spread of the means over
+/// that many seeds.
 fn open_set(ctx: &Report) -> Result<String, ReportError> {
     use crate::open_set::{OpenSetMeans, SeedSpread, leave_one_class_out};
     use node::classifier::train::DEFAULT_UNKNOWN_RATE;
