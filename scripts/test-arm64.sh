@@ -7,7 +7,21 @@
 # 3. both Debian packages, and scripts/test-package.sh: they install into throwaway Debian
 #    roots, and the installed arm64 binary classifies every image of two simulated datasets
 #    as the x86-64 one does.
+#
+#   scripts/test-arm64.sh           all of it
+#   scripts/test-arm64.sh --build   only the builds (lints, test binaries, both packages' binaries):
+#                                   ./test-all.sh runs them at low priority beside the vcan VM,
+#                                   and the tests after it, where nothing else competes for time
 set -euo pipefail
+build_only=0
+case "${1:-}" in
+  "") ;;
+  --build) build_only=1 ;;
+  *) echo "test-arm64: unknown argument \`$1\` (use --build, or none)" >&2; exit 2 ;;
+esac
+t0=$SECONDS
+# Each step says when it started: the part is the test command's second longest.
+step() { echo "== arm64: $1 (at $((SECONDS - t0)) s)"; }
 root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root"
 
@@ -21,19 +35,28 @@ export CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_RUNNER="qemu-aarch64 -L /usr/aarch
 # tests and benches, linted on the host, compile for aarch64 in the next step. With
 # --all-targets the dev-dependencies (criterion, proptest) were checked for aarch64 too: 77 s
 # against 46 s on a fresh target directory (2-core machine, 2026-11-25).
-echo "== arm64: cargo clippy --target $triple --lib (node, protocol)"
+step "cargo clippy --target $triple --lib (node, protocol)"
 cargo clippy --quiet --target "$triple" -p presrs-node -p presrs-protocol --lib -- -D warnings
 
 # --release: the emulated tests run in seconds instead of minutes. One cargo invocation for the
 # node crate's tests and the CLI's: built apart, each with its own feature set (dev-dependencies
 # unify differently per package), the workspace compiled twice: 126 s + 170 s apart, 228 s
 # together on a fresh 2-core machine (2026-11-24). Doctests run on the host only.
-echo "== arm64: node crate and CLI classification tests under qemu-aarch64"
-PRESRS_TEST_RUNNER="qemu-aarch64 -L /usr/aarch64-linux-gnu" \
-  cargo test --quiet --release --target "$triple" -p presrs-node -p presrs \
-  --lib --test service --test train_classify --test cli_classifier
+tests=(--release --target "$triple" -p presrs-node -p presrs
+  --lib --test service --test train_classify --test cli_classifier)
+if [ "$build_only" = 1 ]; then
+  step "node crate and CLI classification tests: the aarch64 build"
+  cargo test --quiet --no-run "${tests[@]}"
+  step "the packages' binaries: cargo build --release --bin presrs, for aarch64 and this machine"
+  cargo build --release --quiet --target "$triple" --bin presrs
+  cargo build --release --quiet --bin presrs
+  step "builds done"
+  exit 0
+fi
+step "node crate and CLI classification tests under qemu-aarch64"
+PRESRS_TEST_RUNNER="qemu-aarch64 -L /usr/aarch64-linux-gnu" cargo test --quiet "${tests[@]}"
 
-echo "== arm64 and amd64 Debian packages"
-scripts/package-deb.sh --arch arm64
-scripts/package-deb.sh --arch amd64
-scripts/test-package.sh
+step "arm64 Debian package"; scripts/package-deb.sh --arch arm64
+step "amd64 Debian package"; scripts/package-deb.sh --arch amd64
+step "both packages in throwaway Debian roots"; scripts/test-package.sh
+step "done"
