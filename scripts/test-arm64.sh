@@ -7,18 +7,7 @@
 # 3. both Debian packages, and scripts/test-package.sh: they install into throwaway Debian
 #    roots, and the installed arm64 binary classifies every image of two simulated datasets
 #    as the x86-64 one does.
-#
-#   scripts/test-arm64.sh           all of it
-#   scripts/test-arm64.sh --build   only the builds (lints, test binaries, both packages' binaries):
-#                                   ./test-all.sh runs them at low priority beside the vcan VM,
-#                                   and the tests after it, where nothing else competes for time
 set -euo pipefail
-build_only=0
-case "${1:-}" in
-  "") ;;
-  --build) build_only=1 ;;
-  *) echo "test-arm64: unknown argument \`$1\` (use --build, or none)" >&2; exit 2 ;;
-esac
 t0=$SECONDS
 # Each step says when it started: the part is the test command's second longest.
 step() { echo "== arm64: $1 (at $((SECONDS - t0)) s)"; }
@@ -42,19 +31,10 @@ cargo clippy --quiet --target "$triple" -p presrs-node -p presrs-protocol --lib 
 # node crate's tests and the CLI's: built apart, each with its own feature set (dev-dependencies
 # unify differently per package), the workspace compiled twice: 126 s + 170 s apart, 228 s
 # together on a fresh 2-core machine (2026-11-24). Doctests run on the host only.
-tests=(--release --target "$triple" -p presrs-node -p presrs
-  --lib --test service --test train_classify --test cli_classifier)
-if [ "$build_only" = 1 ]; then
-  step "node crate and CLI classification tests: the aarch64 build"
-  cargo test --quiet --no-run "${tests[@]}"
-  step "the packages' binaries: cargo build --release --bin presrs, for aarch64 and this machine"
-  cargo build --release --quiet --target "$triple" --bin presrs
-  cargo build --release --quiet --bin presrs
-  step "builds done"
-  exit 0
-fi
 step "node crate and CLI classification tests under qemu-aarch64"
-PRESRS_TEST_RUNNER="qemu-aarch64 -L /usr/aarch64-linux-gnu" cargo test --quiet "${tests[@]}"
+PRESRS_TEST_RUNNER="qemu-aarch64 -L /usr/aarch64-linux-gnu" \
+  cargo test --quiet --release --target "$triple" -p presrs-node -p presrs \
+  --lib --test service --test train_classify --test cli_classifier
 
 step "arm64 Debian package"; scripts/package-deb.sh --arch arm64
 step "amd64 Debian package"; scripts/package-deb.sh --arch amd64

@@ -168,14 +168,7 @@ pub struct RunOptions {
 const LEG_HISTORY: usize = 64;
 
 /// The most robot time one pass of the simulator covers, µs: commands are read between passes.
-const MAX_STEP_US: u64 = 2_000;
-
-/// How far robot time may fall behind the runner's clock, µs, before it slows down instead.
-/// Within it the simulator catches up in passes of [`MAX_STEP_US`] without waiting between
-/// them ([`Component::due`]). Without it, the wait between passes decided the speed: in the
-/// vcan VM (TCG) `presrs sim --speed 0.35` ran 12 s of robot time in 51 s of wall time, at
-/// 36% of a vCPU. 20 ms is two images of the foot: the most it then sends in one burst.
-const MAX_BACKLOG_US: u64 = 20_000;
+const MAX_LAG_US: u64 = 2_000;
 
 /// The simulated robot as a part on the bus ([`Component`]): its robot time follows the
 /// runner's clock in steps of at least 1 ms, it sends what its feet and legs send, obeys
@@ -190,8 +183,6 @@ pub struct SimService<'a> {
     t_us: u64,
     /// Robot time given up because the machine could not keep up (see `tick`).
     stretched_us: u64,
-    /// Behind the runner's clock by at least a pass: the next one is due at once.
-    behind: bool,
     /// The foot whose leg is motors, and its LegState check.
     motor_leg: Option<(u8, LegStateCheck)>,
     /// That leg's truth over the last [`LEG_HISTORY`] ms of robot time: (µs, angle, length).
@@ -221,7 +212,6 @@ impl<'a> SimService<'a> {
             end_us: duration_s.map(|d| (d * 1e6) as u64),
             t_us: 0,
             stretched_us: 0,
-            behind: false,
         }
     }
 
@@ -342,23 +332,19 @@ impl Component for SimService<'_> {
 
     fn tick(&mut self, now_us: u64, out: &mut Outbox) {
         // Simulated time follows the runner's clock in steps of at least 1 ms.
-        let mut target = now_us.saturating_sub(self.stretched_us);
-        self.behind = false;
+        let target = now_us.saturating_sub(self.stretched_us);
         if target < self.t_us + 1000 || self.done() {
             return;
         }
         // A machine too slow for `speed` (a debug build, emulation, a loaded CI runner):
         // robot time slows down rather than jumping ahead to catch up. A jump would run the
         // leg for tens of ms on one stale command and deliver the foot's frames in bursts; a
-        // real leg never pauses, and neither does its controller's view of it. A short lag is
-        // worked off pass by pass, the bus read between passes.
-        if target > self.t_us + MAX_BACKLOG_US {
-            self.stretched_us += target - (self.t_us + MAX_BACKLOG_US);
-            target = self.t_us + MAX_BACKLOG_US;
+        // real leg never pauses, and neither does its controller's view of it.
+        if target > self.t_us + MAX_LAG_US {
+            self.stretched_us += target - (self.t_us + MAX_LAG_US);
         }
         let before = self.t_us;
-        self.t_us = target.min(self.t_us + MAX_STEP_US);
-        self.behind = target >= self.t_us + 1000;
+        self.t_us = target.min(self.t_us + MAX_LAG_US);
         self.robot.advance_to(self.t_us, &mut |f| out.push(f));
         if let Some((foot, _)) = self.motor_leg
             && let Some((a, l)) = self.robot.leg_truth(foot)
@@ -371,10 +357,6 @@ impl Component for SimService<'_> {
         if self.t_us / 10_000 != before / 10_000 {
             (self.observe)(self.t_us, &self.robot);
         }
-    }
-
-    fn due(&self) -> bool {
-        self.behind && !self.done()
     }
 
     fn done(&self) -> bool {
@@ -458,37 +440,5 @@ mod tests {
                 .contains("3 TerrainClass heard, 2 correct (66.7%);"),
             "{r}"
         );
-    }
-
-    /// Behind its clock, the simulator catches up in passes of at most 2 ms, asking for the
-    /// next at once; beyond 20 ms behind, robot time slows down instead of jumping.
-    #[test]
-    fn a_lag_is_worked_off_in_bounded_passes_and_a_long_one_stretches() {
-        let catalog = TerrainCatalog::paper();
-        let mut observe = |_: u64, _: &SimRobot| {};
-        let mut sim = SimService::new(SimConfig::default(), 1, None, &catalog, &mut observe);
-        let mut out = Outbox::with_capacity(64);
-        sim.tick(1_000, &mut out);
-        assert_eq!(sim.t_us, 1_000);
-        assert!(!sim.due(), "on time: nothing due before the next tick");
-        // 9 ms late: passes of 2 ms, each asking for the next, none stretched.
-        let mut passes = 0;
-        loop {
-            let before = sim.t_us;
-            sim.tick(10_000, &mut out);
-            assert!(sim.t_us - before <= MAX_STEP_US, "{before} -> {}", sim.t_us);
-            passes += 1;
-            if !sim.due() {
-                break;
-            }
-        }
-        assert_eq!((sim.t_us, sim.stretched_us, passes), (10_000, 0, 5));
-        // 100 ms late: 80 ms of it given up, 20 ms worked off.
-        sim.tick(110_000, &mut out);
-        assert_eq!((sim.t_us, sim.stretched_us), (12_000, 80_000));
-        while sim.due() {
-            sim.tick(110_000, &mut out);
-        }
-        assert_eq!(sim.t_us, 30_000);
     }
 }

@@ -5,45 +5,10 @@
 # - otherwise inside a virtme-ng VM booted with a Debian kernel (TCG emulation, ~20 s to boot),
 #   after installing what that needs. The test binary is built here and run in the VM.
 # Prints how many vcan tests passed; zero is a failure, never a skip.
-#
-#   tests/vcan/run.sh              build on the host, then run the suite
-#   tests/vcan/run.sh --prepare    only the host's part: builds, the system tests' model, the
-#                                  VM's packages; writes target/vcan-system/env
-#   tests/vcan/run.sh --prepared   only the run, from what --prepare wrote; calls no cargo, so
-#                                  another cargo build may hold the target directory meanwhile
-#                                  (./test-all.sh runs the arm64 part beside the VM this way)
 set -euo pipefail
 root=$(cd "$(dirname "$0")/../.." && pwd)
 cd "$root"
-mode=all
-case "${1:-}" in
-  "") ;;
-  --prepare) mode=prepare ;;
-  --prepared) mode=prepared ;;
-  -h|--help) sed -n '2,15p' "$0"; exit 0 ;;
-  *) echo "vcan suite: unknown argument \`$1\` (use --prepare or --prepared, or none)" >&2; exit 2 ;;
-esac
-# Wherever cargo puts its output (CARGO_TARGET_DIR or ./target). cargo metadata takes no lock
-# on the build directory: it answers while another cargo builds there.
-target_dir=$(cargo metadata --no-deps --format-version 1 |
-  python3 -c 'import json, sys; print(json.load(sys.stdin)["target_directory"])')
-work="$target_dir/vcan-system"
-state="$work/env"
 
-can_here() {
-  [ "$(id -u)" -eq 0 ] || return 1
-  python3 -c 'import socket; socket.socket(socket.AF_CAN, socket.SOCK_RAW, socket.CAN_RAW)' 2>/dev/null || return 1
-  modprobe vcan 2>/dev/null || true
-  ip link add dev presrs-probe0 type vcan 2>/dev/null && ip link del dev presrs-probe0
-}
-in_vm=1
-if [ "${PRESRS_VCAN_FORCE_VM:-0}" != 1 ] && can_here; then in_vm=0; fi
-
-if [ "$mode" = prepared ]; then
-  [ -s "$state" ] || { echo "vcan suite: $state is missing: run tests/vcan/run.sh --prepare first" >&2; exit 1; }
-  # shellcheck source=/dev/null
-  . "$state"
-else
 echo "vcan suite: building the test binary"
 bin=$(cargo test --features vcan --test vcan --no-run --message-format=json 2>/dev/null \
   | python3 -c 'import sys,json
@@ -57,8 +22,11 @@ for l in sys.stdin:
 echo "vcan suite: building presrs (release) and training the system tests' G2 model"
 cargo build --release --quiet
 cargo build --release --quiet -p presrs-protocol --example foot_firmware
-# In cargo's own target directory: a stale binary must not run.
-PRESRS_BIN="$target_dir/release/presrs"
+# Wherever cargo puts its output (CARGO_TARGET_DIR or ./target): a stale binary must not run.
+target_dir=$(cargo metadata --no-deps --format-version 1 |
+  python3 -c 'import json, sys; print(json.load(sys.stdin)["target_directory"])')
+export PRESRS_BIN="$target_dir/release/presrs"
+work="$target_dir/vcan-system"
 if [ ! -s "$work/g2-model.json" ] || [ "$PRESRS_BIN" -nt "$work/g2-model.json" ]; then
   rm -rf "$work" && mkdir -p "$work"
   "$PRESRS_BIN" dataset dynamic --gait G2 --n 60 --seed 21 --out "$work/g2" >/dev/null
@@ -73,18 +41,12 @@ if [ ! -s "$work/g2-model.json" ] || [ "$PRESRS_BIN" -nt "$work/g2-model.json" ]
   "$PRESRS_BIN" train --data "$work/g2" --out "$work/g2-model.json" --crop 0,3,6,0 \
     --per-class 45 --train 30 --normalize-load --seed 21 --calibrate "$work/cal"
 fi
-PRESRS_MODEL="$work/g2-model.json"
+export PRESRS_MODEL="$work/g2-model.json"
 # cantools parses presrs.dbc once, here (3.7 s), into a cache the VM's tests load in seconds;
 # parsed inside the VM it took most of a minute per test that decodes a candump log.
-PRESRS_DBC_CACHE="$work/dbc-cache"
+export PRESRS_DBC_CACHE="$work/dbc-cache"
 PRESRS_DBC_CACHE="$PRESRS_DBC_CACHE" python3 tests/interop/cantools_check.py log protocol/presrs.dbc /dev/null >/dev/null
-PRESRS_FIRMWARE="$target_dir/release/examples/foot_firmware"
-[ "$in_vm" = 1 ] && "$root/scripts/install-deps.sh" --vm
-printf 'bin=%q\nPRESRS_BIN=%q\nPRESRS_MODEL=%q\nPRESRS_DBC_CACHE=%q\nPRESRS_FIRMWARE=%q\n' \
-  "$bin" "$PRESRS_BIN" "$PRESRS_MODEL" "$PRESRS_DBC_CACHE" "$PRESRS_FIRMWARE" > "$state"
-fi
-[ "$mode" = prepare ] && { echo "vcan suite: prepared ($state)"; exit 0; }
-export PRESRS_BIN PRESRS_MODEL PRESRS_DBC_CACHE PRESRS_FIRMWARE
+export PRESRS_FIRMWARE="$target_dir/release/examples/foot_firmware"
 
 setup='modprobe vcan 2>/dev/null || true
 ip link add dev vcan0 type vcan 2>/dev/null || true; ip link set vcan0 mtu 72 up
@@ -94,7 +56,14 @@ ip link set lo up 2>/dev/null || true'
 # (lo: the live Foxglove view is served on 127.0.0.1.)
 # PRESRS_VCAN_FILTER: a test-name filter for the vcan binary (while developing; CI runs all).
 log=$(mktemp)
-if [ "$in_vm" = 0 ]; then
+can_here() {
+  [ "$(id -u)" -eq 0 ] || return 1
+  python3 -c 'import socket; socket.socket(socket.AF_CAN, socket.SOCK_RAW, socket.CAN_RAW)' 2>/dev/null || return 1
+  modprobe vcan 2>/dev/null || true
+  ip link add dev presrs-probe0 type vcan 2>/dev/null && ip link del dev presrs-probe0
+}
+
+if [ "${PRESRS_VCAN_FORCE_VM:-0}" != 1 ] && can_here; then
   where="on this kernel"
   bash -c "$setup"
   export PRESRS_BENCH_LABEL="vcan on this kernel"
@@ -106,6 +75,7 @@ else
   # The suite took 1531 s in the VM in the CI run of 2026-11-23 (13 tests; it was 1104 s with
   # 10), too close to the 30 min limit it had: a loaded host stretched it past a 20 min limit
   # once. The VM gets 45 min; the whole test command stays well inside CI's 90.
+  "$root/scripts/install-deps.sh" --vm
   kernel=$(ls /boot/vmlinuz-*-amd64 | sort -V | tail -1)
   echo "vcan suite: booting $kernel under TCG (KVM unavailable here)"
   set +e

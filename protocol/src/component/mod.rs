@@ -144,14 +144,6 @@ pub trait Component {
         false
     }
 
-    /// True when work is due now, not at the next tick: a simulator behind its clock that
-    /// catches up in bounded steps. The runner then reads the bus without waiting and ticks
-    /// again at once (under emulation a 300 µs wait took milliseconds, and a simulator that
-    /// waited between steps fell to two thirds of its speed).
-    fn due(&self) -> bool {
-        false
-    }
-
     /// True when it has finished on its own (a simulation of a set duration, a capture whose
     /// disk failed): the runner stops it.
     fn done(&self) -> bool {

@@ -166,10 +166,7 @@ pub fn run_opened(
             }
             if Instant::now() >= next_tick {
                 component.tick(now, &mut out);
-                next_tick = Instant::now();
-                if !component.due() {
-                    next_tick += opts.tick;
-                }
+                next_tick = Instant::now() + opts.tick;
             }
             if let Err(e) = flush(&mut out, b.as_mut(), opts, &link, now, name) {
                 failed(&e, &mut backoff, &mut stats);
@@ -388,47 +385,5 @@ mod tests {
             "{} {wall_us}",
             stats.end_us
         );
-    }
-
-    /// A component with work due is ticked again at once, not after `tick`: here an hour.
-    #[test]
-    fn a_component_with_work_due_is_ticked_without_waiting() {
-        struct Due(u64);
-        impl Component for Due {
-            fn name(&self) -> &'static str {
-                "due"
-            }
-            fn filters(&self) -> Vec<(u32, u32)> {
-                vec![(0x200, 0x7ff)]
-            }
-            fn on_frame(&mut self, _: &Stamped, _: u64, _: &mut Outbox) {}
-            fn tick(&mut self, _: u64, _: &mut Outbox) {
-                self.0 += 1;
-            }
-            fn due(&self) -> bool {
-                true
-            }
-            fn done(&self) -> bool {
-                self.0 >= 5
-            }
-        }
-        let bus = InProcBus::new();
-        let (tx, rx) = std::sync::mpsc::channel();
-        std::thread::spawn(move || {
-            let opts = RunOptions {
-                tick: Duration::from_secs(3600),
-                ..RunOptions::default()
-            };
-            let mut c = Due(0);
-            run(
-                &mut c,
-                &BusSource::InProc(bus),
-                &opts,
-                &AtomicBool::new(false),
-            );
-            let _ = tx.send(c.0);
-        });
-        // Waiting out `tick` once would take an hour; 30 s is only the watchdog.
-        assert_eq!(rx.recv_timeout(Duration::from_secs(30)), Ok(5));
     }
 }
