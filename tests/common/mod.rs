@@ -207,6 +207,7 @@ pub fn python(args: &[&str]) -> String {
 /// the workspace's test build did, and so compiled it and its dependencies again (49 s of the
 /// test command's 8 min on a 2-core machine).
 pub fn protocol_example(name: &str, args: &[&str]) -> std::process::Command {
+    let modified = |p: &std::path::Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
     let built = std::env::current_exe()
         .ok()
         .and_then(|t| Some(t.parent()?.parent()?.join("examples").join(name)));
@@ -228,35 +229,28 @@ pub fn protocol_example(name: &str, args: &[&str]) -> std::process::Command {
                 }
             }
         }
-        files
-            .iter()
-            .map(|f| std::fs::metadata(f).and_then(|m| m.modified()).ok())
-            .max()
-            .flatten()
+        files.iter().filter_map(|f| modified(f)).max()
     };
-    let modified = |p: &std::path::Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
-    match (built, newest_source) {
+    let mut c = match (built, newest_source) {
         (Some(bin), Some(src)) if modified(&bin).is_some_and(|b| b > src) => {
-            let mut c = std::process::Command::new(bin);
-            c.args(args);
-            c
+            std::process::Command::new(bin)
         }
         _ => {
             let mut c = std::process::Command::new(env!("CARGO"));
-            c.current_dir(root())
-                .args([
-                    "run",
-                    "-q",
-                    "-p",
-                    "presrs-protocol",
-                    "--example",
-                    name,
-                    "--",
-                ])
-                .args(args);
+            c.current_dir(root()).args([
+                "run",
+                "-q",
+                "-p",
+                "presrs-protocol",
+                "--example",
+                name,
+                "--",
+            ]);
             c
         }
-    }
+    };
+    c.args(args);
+    c
 }
 
 /// Runs `cmd` to the end; unless it succeeded, panics with its status and stderr.
