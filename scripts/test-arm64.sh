@@ -1,12 +1,13 @@
 #!/usr/bin/env bash
 # The arm64 checks, run by ./test-all.sh (about 9 minutes on a fresh 2-core machine):
 # 1. clippy for aarch64 on the libraries (the NEON code only compiles there);
-# 2. the node crate's unit and integration tests (classifier, stance pipeline) and the CLI
-#    classification tests, cross-built for aarch64 and run under qemu-aarch64: correctness
-#    only, never timings (qemu emulates the CPU);
-# 3. both Debian packages, and scripts/test-package.sh: they install into throwaway Debian
-#    roots, and the installed arm64 binary classifies every image of two simulated datasets
-#    as the x86-64 one does.
+# 2. the node crate's unit and integration tests (classifier, stance pipeline), cross-built
+#    for aarch64 and run under qemu-aarch64: correctness only, never timings (qemu emulates
+#    the CPU);
+# 3. both Debian packages; the CLI classification tests (tests/cli_classifier.rs, run by the
+#    host) drive the arm64 package's binary under qemu-aarch64; scripts/test-package.sh: the
+#    packages install into throwaway Debian roots, and the installed arm64 binary classifies
+#    every image of two simulated datasets as the x86-64 one does.
 set -euo pipefail
 t0=$SECONDS
 # Each step says when it started: the part is the test command's second longest.
@@ -27,16 +28,25 @@ export CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_RUNNER="qemu-aarch64 -L /usr/aarch
 step "cargo clippy --target $triple --lib (node, protocol)"
 cargo clippy --quiet --target "$triple" -p presrs-node -p presrs-protocol --lib -- -D warnings
 
-# --release: the emulated tests run in seconds instead of minutes. One cargo invocation for the
-# node crate's tests and the CLI's: built apart, each with its own feature set (dev-dependencies
-# unify differently per package), the workspace compiled twice: 126 s + 170 s apart, 228 s
-# together on a fresh 2-core machine (2026-11-24). Doctests run on the host only.
-step "node crate and CLI classification tests under qemu-aarch64"
-PRESRS_TEST_RUNNER="qemu-aarch64 -L /usr/aarch64-linux-gnu" \
-  cargo test --quiet --release --target "$triple" -p presrs-node -p presrs \
-  --lib --test service --test train_classify --test cli_classifier
+# --release: the emulated tests run in seconds instead of minutes. The node crate only: the
+# CLI's tests cross-built with it compiled the whole workspace and the CLI's dev-dependencies
+# in release for aarch64, and the package then compiled much of it again with its own
+# features (test build and run 412 s, package 164 s, in CI on a 2-core machine). Apart, on a
+# fresh target directory of the same machine: the node crate's test build 151 s (208 s while
+# it still had criterion and proptest, which it never used), the package after it 282 s.
+# Doctests run on the host only.
+step "node crate tests under qemu-aarch64"
+cargo test --quiet --release --target "$triple" -p presrs-node --lib --test service --test train_classify
 
 step "arm64 Debian package"; scripts/package-deb.sh --arch arm64
+# The CLI's classification tests against the binary the arm64 package ships. The test driver
+# is the host's, built with ./test-all.sh's features, so this compiles nothing there.
+step "CLI classification tests on the arm64 binary under qemu-aarch64"
+target_dir=$(cargo metadata --no-deps --format-version 1 |
+  python3 -c 'import json, sys; print(json.load(sys.stdin)["target_directory"])')
+PRESRS_TEST_BIN="$target_dir/$triple/release/presrs" \
+  PRESRS_TEST_RUNNER="qemu-aarch64 -L /usr/aarch64-linux-gnu" \
+  cargo test --quiet --workspace --features interop --test cli_classifier
 step "amd64 Debian package"; scripts/package-deb.sh --arch amd64
 step "both packages in throwaway Debian roots"; scripts/test-package.sh
 step "done"

@@ -1,9 +1,10 @@
 //! The vcan suite: real SocketCAN sockets on a virtual CAN interface.
 //!
 //! Needs `vcan0` up with MTU 72 (CAN FD) and `vcan1` up with MTU 16 (classic only); names can be
-//! changed with PRESRS_VCAN and PRESRS_VCAN_CLASSIC. `tests/vcan/run.sh` sets them up, in a
-//! virtme-ng VM when this kernel has no CAN, and runs this suite; it is behind the `vcan`
-//! feature so plain `cargo test` does not need CAN.
+//! changed with PRESRS_VCAN and PRESRS_VCAN_CLASSIC (tests/vcan/lanes.sh runs two lanes of tests
+//! at once, the second on vcan2 and vcan3, and sets the four up). `tests/vcan/run.sh` runs
+//! this suite through it, in a virtme-ng VM when this kernel has no CAN; it is behind the
+//! `vcan` feature so plain `cargo test` does not need CAN.
 #![cfg(feature = "vcan")]
 
 mod common;
@@ -26,7 +27,8 @@ fn classic_iface() -> String {
 }
 
 /// Says how long its test took when dropped (also when the test fails), for the suite's time
-/// budget: the VM runs the tests one at a time, and their sum is most of the test command.
+/// budget: the VM's tests are most of the test command (tests/vcan/lanes.sh runs them alone or
+/// in two lanes, and says which).
 struct Timed(&'static str, Instant);
 
 impl Drop for Timed {
@@ -1344,14 +1346,39 @@ fn node_and_sim_record_mcap_and_serve_a_live_foxglove_view() {
         .recv_timeout(Duration::from_secs(120))
         .expect("the node named no Foxglove port within 120 s");
     let fox = format!("127.0.0.1:{port}");
-    let client = std::process::Command::new("python3")
+    let ready = dir.join("client-ready");
+    let mut client = std::process::Command::new("python3")
         .arg(root().join("tests/interop/foxglove_client.py"))
         .arg(format!("ws://{fox}"))
-        .args(["/foot0/image", "/foot0/terrain", "--timeout", "240"])
+        .args([
+            "/foot0/image",
+            "/foot0/terrain",
+            "--timeout",
+            "600",
+            "--ready",
+        ])
+        .arg(&ready)
         .stdout(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    std::thread::sleep(Duration::from_millis(1500));
+    // The robot starts once the client is connected: under TCG and a loaded guest the client
+    // took up to 80 s to connect, and a simulator started after a fixed 1.5 s had finished
+    // its 8 s of robot time before (the client then subscribed in time for nothing).
+    let asked = Instant::now();
+    while !ready.exists() {
+        if let Some(status) = client.try_wait().unwrap() {
+            panic!("the Foxglove client ended before it connected: {status}");
+        }
+        assert!(
+            asked.elapsed() < Duration::from_secs(600),
+            "the Foxglove client did not connect within 600 s"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    eprintln!(
+        "foxglove client connected {:.1} s after it was started",
+        asked.elapsed().as_secs_f64()
+    );
     let mut report = serde_json::Value::Null;
     let log = candump_during(&iface, "mcap", || {
         report = sim_report(

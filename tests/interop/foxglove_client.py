@@ -3,7 +3,13 @@
 plain `websockets` package): connects to a presrs live view, subscribes to the topics given,
 and prints one JSON line per topic with the first message received on it, then exits.
 
-    foxglove_client.py ws://127.0.0.1:8765 /foot0/image /foot0/terrain [--timeout 60]
+    foxglove_client.py ws://127.0.0.1:8765 /foot0/image /foot0/terrain [--timeout 60] [--ready FILE]
+
+--ready FILE: the file is created once the server has said hello (serverInfo), so that a test
+starts the robot only when the client can see it. (In the vcan VM under load, this script
+took up to 80 s from its start to its first connection: the pyenv shim and `import websockets`
+alone took 14 s and more; a simulator started after a fixed 1.5 s had finished by then, and
+the client, subscribed in time for nothing, got no data.)
 
 Exits 1 when a topic got nothing before the timeout (the line says which)."""
 import asyncio, json, struct, sys, time
@@ -11,7 +17,7 @@ import asyncio, json, struct, sys, time
 import websockets
 
 
-async def main(url, topics, timeout):
+async def main(url, topics, timeout, ready=None):
     deadline = time.monotonic() + timeout
     ws = None
     while ws is None:  # the server may still be starting
@@ -55,6 +61,8 @@ async def main(url, topics, timeout):
                 continue
             if isinstance(msg, str):
                 m = json.loads(msg)
+                if m.get("op") == "serverInfo" and ready:
+                    open(ready, "w").close()
                 if m.get("op") == "status":
                     statuses.append(m.get("message", ""))
                 if m.get("op") == "advertise":
@@ -99,9 +107,13 @@ async def main(url, topics, timeout):
 
 if __name__ == "__main__":
     args = sys.argv[1:]
-    timeout = 60.0
+    timeout, ready = 60.0, None
     if "--timeout" in args:
         i = args.index("--timeout")
         timeout = float(args[i + 1])
         del args[i : i + 2]
-    sys.exit(asyncio.run(main(args[0], args[1:], timeout)))
+    if "--ready" in args:
+        i = args.index("--ready")
+        ready = args[i + 1]
+        del args[i : i + 2]
+    sys.exit(asyncio.run(main(args[0], args[1:], timeout, ready)))
