@@ -9,9 +9,10 @@ set -euo pipefail
 root=$(cd "$(dirname "$0")/../.." && pwd)
 cd "$root"
 
-# With ./test-all.sh's features plus vcan: only the CLI crate recompiles. Built with `vcan`
-# alone, the dependencies' features unified differently from that run's and a share of the
-# workspace compiled again.
+# The workspace's features as ./test-all.sh and scripts/test-arm64.sh's CLI step build them,
+# plus vcan: after that step, 4 s (clean-clone run of 2026-11-26). One target alone activates
+# fewer dev-dependencies than a full `cargo test`, so the first such build after it recompiles
+# part of the workspace (the CLI step pays that: 82 s).
 echo "vcan suite: building the test binary (at $SECONDS s)"
 bin=$(cargo test --workspace --features interop,vcan --test vcan --no-run --message-format=json 2>/dev/null \
   | python3 -c 'import sys,json
