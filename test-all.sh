@@ -11,17 +11,12 @@ part() { echo "== $1 (at $((SECONDS - t0)) s; $(df -h --output=avail . | tail -1
 export CARGO_INCREMENTAL=0
 part "install dependencies"; scripts/install-deps.sh
 part "cargo fmt --check"; cargo fmt --all --check
-# --test vcan: the vcan suite is `test = false` (tests/vcan/run.sh runs it), and so not one of
-# --all-targets.
-part "cargo clippy"
-cargo clippy --workspace --all-targets --test vcan --features vcan,interop -- -D warnings
+part "cargo clippy"; cargo clippy --workspace --all-targets --features vcan,interop -- -D warnings
 part "protocol without std, for the foot's microcontroller (thumbv7em-none-eabihf)"
 cargo build -p presrs-protocol --no-default-features --target thumbv7em-none-eabihf
 cargo clippy -p presrs-protocol --no-default-features --target thumbv7em-none-eabihf -- -D warnings
 part "cargo test (unit, property, cantools/python-can interop)"
-# With vcan, which only enables tests/vcan.rs (`test = false`: not built here): the vcan and
-# arm64 parts then reuse this build (scripts/test-binary.sh).
-cargo test --workspace --features interop,vcan
+cargo test --workspace --features interop
 part "arm64: cross-build, tests under qemu-aarch64, Debian packages"; scripts/test-arm64.sh
 part "vcan suite"; tests/vcan/run.sh
 part "all tests passed"

@@ -40,14 +40,15 @@ cargo test --quiet --release --target "$triple" -p presrs-node --lib --test serv
 
 step "arm64 Debian package"; scripts/package-deb.sh --arch arm64
 # The CLI's classification tests against the binary the arm64 package ships, driven by the
-# host's test binary as ./test-all.sh's `cargo test` built it (scripts/test-binary.sh; built
-# with `--test cli_classifier` alone it recompiled part of the workspace: 82 s for 6 s of tests).
+# host's test binary. Built with `--test cli_classifier` alone, cargo activates fewer
+# dev-dependencies than ./test-all.sh's full `cargo test` did and recompiles part of the
+# workspace: this step took 82 s for 6 s of tests (clean-clone run of 2026-11-26).
 step "CLI classification tests on the arm64 binary under qemu-aarch64"
 target_dir=$(cargo metadata --no-deps --format-version 1 |
   python3 -c 'import json, sys; print(json.load(sys.stdin)["target_directory"])')
-driver=$(scripts/test-binary.sh cli_classifier)
 PRESRS_TEST_BIN="$target_dir/$triple/release/presrs" \
-  PRESRS_TEST_RUNNER="qemu-aarch64 -L /usr/aarch64-linux-gnu" "$driver" --quiet
+  PRESRS_TEST_RUNNER="qemu-aarch64 -L /usr/aarch64-linux-gnu" \
+  cargo test --quiet --workspace --features interop --test cli_classifier
 step "amd64 Debian package"; scripts/package-deb.sh --arch amd64
 step "both packages in throwaway Debian roots"; scripts/test-package.sh
 step "done"

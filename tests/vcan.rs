@@ -3,9 +3,8 @@
 //! Needs `vcan0` up with MTU 72 (CAN FD) and `vcan1` up with MTU 16 (classic only); names can be
 //! changed with PRESRS_VCAN and PRESRS_VCAN_CLASSIC (tests/vcan/lanes.sh runs two lanes of tests
 //! at once, the second on vcan2 and vcan3, and sets the four up). `tests/vcan/run.sh` runs
-//! this suite through it, in a virtme-ng VM when this kernel has no CAN. It needs the `vcan`
-//! feature and is `test = false`, so plain `cargo test` does not need CAN; build it with
-//! `scripts/test-binary.sh vcan` (or `cargo test --features vcan --test vcan`).
+//! this suite through it, in a virtme-ng VM when this kernel has no CAN; it is behind the
+//! `vcan` feature so plain `cargo test` does not need CAN.
 #![cfg(feature = "vcan")]
 
 mod common;
