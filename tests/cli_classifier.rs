@@ -9,10 +9,8 @@ use rand::{Rng, SeedableRng};
 /// `presrs` as a command: this build's binary, or `PRESRS_TEST_BIN` when set, e.g. the arm64
 /// package's binary (scripts/test-arm64.sh). Another architecture's binary runs under
 /// qemu-user, named by `PRESRS_TEST_RUNNER` ("qemu-aarch64 -L /usr/aarch64-linux-gnu"): there
-/// is no binfmt_misc here to start it by itself. The test itself runs on the host: compiling
-/// it for aarch64 too compiled the whole workspace and its dev-dependencies a second time in
-/// release (an aarch64 test build of the node crate and this one: 374 s; the node crate's
-/// alone: see scripts/test-arm64.sh).
+/// is no binfmt_misc here to start it by itself. The test runs on the host, so the workspace
+/// is not cross-built a second time for it (times in scripts/test-arm64.sh).
 fn presrs_command() -> Command {
     let bin =
         std::env::var("PRESRS_TEST_BIN").unwrap_or_else(|_| env!("CARGO_BIN_EXE_presrs").into());

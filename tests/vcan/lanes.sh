@@ -74,11 +74,13 @@ else
   wait "$a" || rc=1
   wait "$b" || rc=1
 fi
+# Each phase's libtest summary, e.g. "test result: ok. 4 passed; 0 failed; ..."; a phase that
+# died before it counts nothing.
 passed=0; failed=0
 for f in "$logs"/*; do
-  p=$(grep -a -o 'test result: [a-zA-Z]*\. [0-9]* passed; [0-9]* failed' "$f" | tail -1)
-  passed=$((passed + $(echo "${p:-x 0 passed; 0 failed}" | grep -o '[0-9]* passed' | cut -d' ' -f1)))
-  failed=$((failed + $(echo "${p:-x 0 passed; 0 failed}" | grep -o '[0-9]* failed' | cut -d' ' -f1)))
+  read -r p q < <(grep -a -o 'test result: [a-zA-Z]*\. [0-9]* passed; [0-9]* failed' "$f" |
+    tail -1 | awk '{print $4, $6}')
+  passed=$((passed + ${p:-0})); failed=$((failed + ${q:-0}))
 done
 rm -rf "$logs"
 echo "VCAN_SUMMARY passed=$passed failed=$failed expected=$expected exit=$rc"

@@ -67,11 +67,11 @@ if [ "${PRESRS_VCAN_FORCE_VM:-0}" != 1 ] && can_here; then
   tests/vcan/lanes.sh "$bin" "${PRESRS_VCAN_FILTER:-}" 2>&1 | tee "$log"
 else
   where="inside a virtme-ng VM (this kernel has no CAN: AF_CAN unavailable)"
-  # TCG emulation runs the simulator at about half real time, so the system tests run the
-  # robot's clock at 0.35 of the wall clock (the simulator, node and controller all follow it).
-  # The suite took 1531 s in the VM in the CI run of 2026-11-23 (13 tests; it was 1104 s with
-  # 10), too close to the 30 min limit it had: a loaded host stretched it past a 20 min limit
-  # once. The VM gets 45 min; the whole test command stays well inside CI's 90.
+  # TCG emulation cannot keep real time, so the system tests run the robot's clock at 0.35 of
+  # the wall clock (the simulator, node and controller all follow it; the simulator reaches
+  # about 0.23). The suite took 1247 s in the VM in the clean-clone run of 2026-11-26 (14 tests,
+  # alone and in lanes; 1261 s one at a time before). The VM gets 45 min; a loaded host once
+  # stretched it past a 20 min limit.
   "$root/scripts/install-deps.sh" --vm
   kernel=$(ls /boot/vmlinuz-*-amd64 | sort -V | tail -1)
   echo "vcan suite: booting $kernel under TCG (KVM unavailable here; at $SECONDS s)"
@@ -80,8 +80,7 @@ else
   # 75 s with 2 vCPUs, 64 s with 4; one alone 51-53 s with either).
   set +e
   timeout 2700 vng -r "$kernel" --user root --disable-kvm --cpus 4 --memory 2G \
-    --exec "modprobe vcan 2>/dev/null || true
-export PATH='$PATH' HOME='$HOME' PRESRS_BIN='$PRESRS_BIN' PRESRS_MODEL='$PRESRS_MODEL' PRESRS_FIRMWARE='$PRESRS_FIRMWARE' PRESRS_DBC_CACHE='$PRESRS_DBC_CACHE'
+    --exec "export PATH='$PATH' HOME='$HOME' PRESRS_BIN='$PRESRS_BIN' PRESRS_MODEL='$PRESRS_MODEL' PRESRS_FIRMWARE='$PRESRS_FIRMWARE' PRESRS_DBC_CACHE='$PRESRS_DBC_CACHE'
 export PRESRS_SYSTEM_SPEED='${PRESRS_SYSTEM_SPEED:-0.35}'
 export PRESRS_BENCH_LABEL='emulated: vcan inside a TCG VM, 4 vCPUs on 2 host cores'
 cd '$root' && tests/vcan/lanes.sh '$bin' '${PRESRS_VCAN_FILTER:-}'" 2>&1 | tee "$log"
