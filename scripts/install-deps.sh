@@ -1,9 +1,12 @@
 #!/usr/bin/env bash
 # Installs what the tests need on a fresh Debian machine: Python cantools/python-can (the
 # independent CAN clients), jiku-data (real plantar-pressure images for the open-set test),
-# can-utils, and for kernels without CAN the VM runner (qemu, a Debian
-# kernel with the vcan module, busybox, virtme-ng). Idempotent; quick when all is there.
-#   --vm           also the VM runner
+# can-utils, and for kernels without CAN a kernel that has it. Idempotent; quick when all is
+# there.
+#   --uml          also User-mode Linux (Debian's user-mode-linux: a kernel with vcan that runs
+#                  as a program; tests/vcan/run.sh's default where this kernel has no CAN)
+#   --vm           also the VM runner (qemu, a Debian kernel with the vcan module, busybox,
+#                  virtme-ng; PRESRS_VCAN_RUNNER=vng)
 #   --cross arm64  also the arm64 cross toolchain (Debian's gcc-aarch64-linux-gnu, qemu-user to
 #                  run its binaries, the rustup target aarch64-unknown-linux-gnu)
 #   --package      also what tests the Debian package (debootstrap, for a throwaway root)
@@ -11,13 +14,14 @@ set -euo pipefail
 here=$(cd "$(dirname "$0")/.." && pwd)
 sudo=""; [ "$(id -u)" -eq 0 ] || sudo="sudo"
 
-vm=0; cross=""; package=0
+vm=0; uml=0; cross=""; package=0
 while [ $# -gt 0 ]; do
   case "$1" in
     --vm) vm=1; shift ;;
+    --uml) uml=1; shift ;;
     --cross) cross="${2:?--cross takes arm64}"; shift 2 ;;
     --package) package=1; shift ;;
-    *) echo "install-deps: unknown argument \`$1\` (use --vm, --cross arm64, --package)" >&2; exit 2 ;;
+    *) echo "install-deps: unknown argument \`$1\` (use --uml, --vm, --cross arm64, --package)" >&2; exit 2 ;;
   esac
 done
 need_apt=()
@@ -31,6 +35,9 @@ fi
 if [ "$package" = 1 ]; then
   command -v debootstrap >/dev/null || need_apt+=(debootstrap)
   command -v systemd-analyze >/dev/null || need_apt+=(systemd)
+fi
+if [ "$uml" = 1 ]; then
+  command -v linux.uml >/dev/null || need_apt+=(user-mode-linux)
 fi
 if [ "$vm" = 1 ]; then
   command -v qemu-system-x86_64 >/dev/null || need_apt+=(qemu-system-x86)

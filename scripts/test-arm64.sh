@@ -8,7 +8,18 @@
 #    host) drive the arm64 package's binary under qemu-aarch64; scripts/test-package.sh: the
 #    packages install into throwaway Debian roots, and the installed arm64 binary classifies
 #    every image of two simulated datasets as the x86-64 one does.
+#
+#   scripts/test-arm64.sh           all of it (each build is a no-op when already done)
+#   scripts/test-arm64.sh --build   only the builds: the lints, the aarch64 test binaries, the
+#                                   arm64 package's binary; ./test-all.sh runs them at idle
+#                                   priority beside the vcan suite, and the rest after it
 set -euo pipefail
+build_only=0
+case "${1:-}" in
+  "") ;;
+  --build) build_only=1 ;;
+  *) echo "test-arm64: unknown argument \`$1\` (use --build, or none)" >&2; exit 2 ;;
+esac
 t0=$SECONDS
 # Each step says when it started: the part is the test command's second longest.
 step() { echo "== arm64: $1 (at $((SECONDS - t0)) s)"; }
@@ -35,20 +46,34 @@ cargo clippy --quiet --target "$triple" -p presrs-node -p presrs-protocol --lib 
 # fresh target directory of the same machine: the node crate's test build 151 s (208 s while
 # it still had criterion and proptest, which it never used), the package after it 282 s.
 # Doctests run on the host only.
+node_tests=(--quiet --release --target "$triple" -p presrs-node --lib --test service --test train_classify)
+if [ "$build_only" = 1 ]; then
+  step "node crate tests: the aarch64 build"
+  cargo test --no-run "${node_tests[@]}"
+  step "the arm64 package's binary: cargo build --release --target $triple --bin presrs"
+  cargo build --release --quiet --target "$triple" --bin presrs
+  step "builds done"
+  exit 0
+fi
 step "node crate tests under qemu-aarch64"
-cargo test --quiet --release --target "$triple" -p presrs-node --lib --test service --test train_classify
+cargo test "${node_tests[@]}"
 
 step "arm64 Debian package"; scripts/package-deb.sh --arch arm64
 # The CLI's classification tests against the binary the arm64 package ships, driven by the
-# host's test binary. Built with `--test cli_classifier` alone, cargo activates fewer
-# dev-dependencies than ./test-all.sh's full `cargo test` did and recompiles part of the
-# workspace: this step took 82 s for 6 s of tests (clean-clone run of 2026-11-26).
+# host's test binary: the one ./test-all.sh's `cargo test` built, found by asking cargo for the
+# same selection (nothing to rebuild). `cargo test --test cli_classifier` alone activates fewer
+# dev-dependencies and recompiled part of the workspace: 82 s for 6 s of tests (2026-11-26).
 step "CLI classification tests on the arm64 binary under qemu-aarch64"
 target_dir=$(cargo metadata --no-deps --format-version 1 |
   python3 -c 'import json, sys; print(json.load(sys.stdin)["target_directory"])')
+cli_tests=$(cargo test --workspace --features interop --no-run --message-format=json 2>/dev/null |
+  python3 -c 'import sys, json
+for l in sys.stdin:
+    m = json.loads(l)
+    if m.get("reason") == "compiler-artifact" and m["target"]["name"] == "cli_classifier" and m.get("executable"): print(m["executable"])' | tail -1)
+[ -n "$cli_tests" ] || { echo "test-arm64: cargo built no cli_classifier test binary" >&2; exit 1; }
 PRESRS_TEST_BIN="$target_dir/$triple/release/presrs" \
-  PRESRS_TEST_RUNNER="qemu-aarch64 -L /usr/aarch64-linux-gnu" \
-  cargo test --quiet --workspace --features interop --test cli_classifier
+  PRESRS_TEST_RUNNER="qemu-aarch64 -L /usr/aarch64-linux-gnu" "$cli_tests" --quiet
 step "amd64 Debian package"; scripts/package-deb.sh --arch amd64
 step "both packages in throwaway Debian roots"; scripts/test-package.sh
 step "done"

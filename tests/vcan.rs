@@ -796,13 +796,27 @@ fn sim_node_and_controller_as_processes_classify_steps_and_survive_bus_and_proce
 /// 100 Hz to `presrs node` as a separate process. The report is printed for the note (labelled
 /// emulated when run.sh runs it in the VM); the test asserts that the node answered the steps,
 /// not a timing: the figures belong to the benchmark.
+///
+/// `PRESRS_BENCH_FEET` sets fewer feet where the kernel cannot carry six: bench-node plays on
+/// the wall clock, and in User-mode Linux every frame's system calls go through ptrace. There
+/// (2026-11-26, 2-core host) 1 foot was answered 17 of 17 steps (median latency 209 ms: the
+/// kernel queueing), 2 feet 9 of 33 and 4 feet 15 of 66 (latencies of seconds).
 #[test]
-fn node_bench_on_vcan_reports_latency_cpu_and_memory_for_six_feet() {
+fn node_bench_on_vcan_reports_latency_cpu_and_memory() {
     let _time = Timed(
-        "node_bench_on_vcan_reports_latency_cpu_and_memory_for_six_feet",
+        "node_bench_on_vcan_reports_latency_cpu_and_memory",
         Instant::now(),
     );
     let iface = fd_iface();
+    let feet: u32 = match std::env::var("PRESRS_BENCH_FEET") {
+        Ok(s) => s
+            .parse()
+            .ok()
+            .filter(|&n| (1..=6).contains(&n))
+            .unwrap_or_else(|| panic!("PRESRS_BENCH_FEET is `{s}`; give 1 to 6")),
+        Err(_) => 6,
+    };
+    let feet_s = feet.to_string();
     let label = std::env::var("PRESRS_BENCH_LABEL").unwrap_or_else(|_| "vcan".into());
     let model = system_model();
     let out = common::output_ok(
@@ -812,7 +826,7 @@ fn node_bench_on_vcan_reports_latency_cpu_and_memory_for_six_feet() {
                 "--iface",
                 &iface,
                 "--feet",
-                "6",
+                &feet_s,
                 "--seconds",
                 "5",
             ])
@@ -824,8 +838,12 @@ fn node_bench_on_vcan_reports_latency_cpu_and_memory_for_six_feet() {
     eprintln!("presrs bench-node on {iface}: {j}");
     let steps = j["steps"].as_u64().unwrap();
     let answered = j["terrain_class"].as_u64().unwrap();
-    // 6 feet, a step every 300 ms, 5 s measured.
-    assert!(steps >= 95, "{steps} steps played");
+    // A step every 300 ms per foot, 5 s measured: 100 steps for 6 feet, 95 or more played.
+    let due = f64::from(feet) * 5.0 / 0.3;
+    assert!(
+        steps as f64 >= 0.95 * due,
+        "{steps} steps played by {feet} feet"
+    );
     assert!(
         answered * 10 >= steps * 9,
         "{answered} TerrainClass for {steps} steps"
@@ -887,25 +905,26 @@ fn node_classifies_every_gait_with_a_g2_model_survives_damage_and_ignores_a_floo
     let iface = fd_iface();
     let mut per_gait = Vec::new();
     for gait in ["G1", "G2", "G3"] {
-        // The flood: other traffic as fast as cangen sends it, and short (undecodable) frames
-        // on FootContact's and TerrainClass's identifiers.
+        // The flood: other traffic every 0.2 ms, and short (undecodable) frames every 2 ms on
+        // FootContact's and TerrainClass's identifiers, in robot time: where the robot's clock
+        // runs at a fraction of the wall clock, so does the flood, keeping its share of the
+        // bus against the robot's own traffic (5000 frames a robot second against the foot's
+        // 3100). Unscaled in User-mode Linux at 0.35, 42 of 46 touchdowns were classified.
+        let gap_ms = |robot_ms: f64| format!("{}", robot_ms / system_speed());
         let flood: Vec<Proc> = if gait == "G2" {
-            [
-                vec!["-g", "0.2", "-I", "7A0", "-L", "8", "-D", "r"],
-                vec!["-g", "2", "-I", "100", "-L", "2", "-D", "r"],
-                vec!["-g", "2", "-I", "203", "-L", "3", "-D", "r"],
-            ]
-            .into_iter()
-            .map(|args| {
-                Proc(
-                    std::process::Command::new("cangen")
-                        .arg(&iface)
-                        .args(args)
-                        .spawn()
-                        .expect("cangen from can-utils must be installed"),
-                )
-            })
-            .collect()
+            [(0.2, "7A0", "8"), (2.0, "100", "2"), (2.0, "203", "3")]
+                .into_iter()
+                .map(|(gap, id, len)| {
+                    let gap = gap_ms(gap);
+                    Proc(
+                        std::process::Command::new("cangen")
+                            .arg(&iface)
+                            .args(["-g", &gap, "-I", id, "-L", len, "-D", "r"])
+                            .spawn()
+                            .expect("cangen from can-utils must be installed"),
+                    )
+                })
+                .collect()
         } else {
             Vec::new()
         };
