@@ -41,8 +41,8 @@ if ! modprobe vcan 2>/dev/null && ! [ -d /sys/module/vcan ]; then
 vcan-setup.sh: this kernel has no virtual CAN (vcan) support: 'modprobe vcan' failed and
 'ip link add ... type vcan' is refused. On Debian/Ubuntu the module is in linux-modules-extra
 (apt-get install linux-modules-extra-\$(uname -r)); in containers and sandboxes whose kernel has
-no CAN at all (socket(AF_CAN) fails with errno 97), run the vcan suite in a VM instead:
-    tests/vcan/run.sh        (boots a virtme-ng VM with its own kernel when needed)
+no CAN at all (socket(AF_CAN) fails with errno 97), run the vcan suite on a kernel of its own:
+    tests/vcan/run.sh        (boots User-mode Linux, a kernel with vcan run as a program)
 MSG
     exit 1
   fi

@@ -66,7 +66,7 @@ step "arm64 Debian package"; scripts/package-deb.sh --arch arm64
 step "CLI classification tests on the arm64 binary under qemu-aarch64"
 target_dir=$(cargo metadata --no-deps --format-version 1 |
   python3 -c 'import json, sys; print(json.load(sys.stdin)["target_directory"])')
-cli_tests=$(cargo test --workspace --features interop --no-run --message-format=json 2>/dev/null |
+cli_tests=$(cargo test --workspace --features interop,vcan --no-run --message-format=json 2>/dev/null |
   python3 -c 'import sys, json
 for l in sys.stdin:
     m = json.loads(l)

@@ -61,7 +61,7 @@ logs=$(mktemp -d)
 phase() {
   local name=$1 fd=$2 classic=$3 start=$SECONDS rc; shift 3
   echo "vcan: $name on $fd/$classic: ${*:-every test}"
-  PRESRS_VCAN=$fd PRESRS_VCAN_CLASSIC=$classic "$bin" --test-threads=1 --nocapture "$@" 2>&1 |
+  PRESRS_VCAN=$fd PRESRS_VCAN_CLASSIC=$classic "$bin" --include-ignored --test-threads=1 --nocapture "$@" 2>&1 |
     tee "$logs/$name" | sed -u "s/^/[$name] /"
   rc=${PIPESTATUS[0]}
   echo "vcan: $name took $((SECONDS - start)) s (exit $rc)"
