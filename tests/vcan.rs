@@ -810,8 +810,9 @@ fn sim_node_and_controller_as_processes_classify_steps_and_survive_bus_and_proce
 ///
 /// `PRESRS_BENCH_FEET` sets fewer feet where the kernel cannot carry six: bench-node plays on
 /// the wall clock, and in User-mode Linux every frame's system calls go through ptrace. There
-/// (2026-11-26, 2-core host) 1 foot was answered 17 of 17 steps (median latency 209 ms: the
-/// kernel queueing), 2 feet 9 of 33 and 4 feet 15 of 66 (latencies of seconds).
+/// (2026-11-26, 2-core host, UML pinned to one core as run.sh does) 1 foot was answered 17 of
+/// 17 steps (median latency 4.9 ms), 3 feet 19 of 50 and 6 feet 18 of 99 (latencies of
+/// seconds, the node at 97% of UML's one CPU).
 #[test]
 #[ignore = "needs vcan interfaces: tests/vcan/run.sh runs it"]
 fn node_bench_on_vcan_reports_latency_cpu_and_memory() {

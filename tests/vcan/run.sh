@@ -108,8 +108,9 @@ elif [ "$runner" = uml ]; then
   # the host's root as its root (hostfs) and vcan as a module. Its processes run natively and
   # only their system calls go through its kernel: the same 12 s G1 run of sim and node took
   # 19.4 s asked at full speed (39.4 s asked at 0.35) against 51-53 s at 0.35 in the TCG VM,
-  # which also needed 20 s to boot where this needs 5 (2026-11-26, this 2-core machine). It is
-  # one CPU: its lanes share it, and the host's other core stays free.
+  # which also needed 20 s to boot where this needs 5 (2026-11-26, this 2-core machine). The
+  # whole suite: 662 s here (clean clone, with the arm64 builds on the other core) against
+  # 1247 s in the VM.
   "$root/scripts/install-deps.sh" --uml
   init="$work/uml-init.sh"
   cat > "$init" <<INIT
