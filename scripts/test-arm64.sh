@@ -61,18 +61,11 @@ cargo test "${node_tests[@]}"
 
 step "arm64 Debian package"; scripts/package-deb.sh --arch arm64
 # The CLI's classification tests against the binary the arm64 package ships, driven by the
-# host's test binary: the one ./test-all.sh's `cargo test` built, found by asking cargo for the
-# same selection (nothing to rebuild). `cargo test --test cli_classifier` alone activates fewer
-# dev-dependencies and recompiled part of the workspace: 82 s for 6 s of tests (2026-11-26).
+# host's test binary, the one ./test-all.sh's `cargo test` built (scripts/test-exe.sh).
 step "CLI classification tests on the arm64 binary under qemu-aarch64"
 target_dir=$(cargo metadata --no-deps --format-version 1 |
   python3 -c 'import json, sys; print(json.load(sys.stdin)["target_directory"])')
-cli_tests=$(cargo test --workspace --features interop,vcan --no-run --message-format=json 2>/dev/null |
-  python3 -c 'import sys, json
-for l in sys.stdin:
-    m = json.loads(l)
-    if m.get("reason") == "compiler-artifact" and m["target"]["name"] == "cli_classifier" and m.get("executable"): print(m["executable"])' | tail -1)
-[ -n "$cli_tests" ] || { echo "test-arm64: cargo built no cli_classifier test binary" >&2; exit 1; }
+cli_tests=$(scripts/test-exe.sh cli_classifier)
 PRESRS_TEST_BIN="$target_dir/$triple/release/presrs" \
   PRESRS_TEST_RUNNER="qemu-aarch64 -L /usr/aarch64-linux-gnu" "$cli_tests" --quiet
 step "amd64 Debian package"; scripts/package-deb.sh --arch amd64

@@ -27,16 +27,9 @@ work="$target_dir/vcan-system"
 prepared="$work/prepared.env"
 
 prepare() {
-  # The selection ./test-all.sh's `cargo test` builds, so that after it nothing is rebuilt:
-  # `--test vcan` alone unifies the dependencies' features differently and recompiled part of
-  # the workspace (84 s, clean-clone run of 2026-11-26).
+  # The binary ./test-all.sh's `cargo test` built (nothing rebuilt after it).
   echo "vcan suite: building the test binary (at $SECONDS s)"
-  bin=$(cargo test --workspace --features interop,vcan --no-run --message-format=json 2>/dev/null |
-    python3 -c 'import sys, json
-for l in sys.stdin:
-    m = json.loads(l)
-    if m.get("reason") == "compiler-artifact" and m["target"]["name"] == "vcan" and m.get("executable"): print(m["executable"])' | tail -1)
-  [ -n "$bin" ] || { echo "vcan suite: could not build the vcan test binary" >&2; exit 1; }
+  bin=$(scripts/test-exe.sh vcan)
 
   # The system tests run `presrs sim/node/controller` as processes: the release build keeps real
   # time (also emulated), and the node needs a model trained on simulated G2 stances.
