@@ -91,6 +91,8 @@ can_here() {
 # `vng` (a virtme-ng VM under qemu TCG, the runner before 2026-11-26; still here for a host where
 # User-mode Linux cannot run, e.g. one that forbids ptrace).
 runner=${PRESRS_VCAN_RUNNER:-uml}
+# What the tests need from the host, for a guest kernel's shell (User-mode Linux or the VM).
+guest_env="export PATH='$PATH' HOME='$HOME' PRESRS_BIN='$PRESRS_BIN' PRESRS_MODEL='$PRESRS_MODEL' PRESRS_FIRMWARE='$PRESRS_FIRMWARE' PRESRS_DBC_CACHE='$PRESRS_DBC_CACHE'"
 if [ "${PRESRS_VCAN_FORCE_VM:-0}" != 1 ] && can_here; then
   where="on this kernel"
   export PRESRS_BENCH_LABEL="vcan on this kernel"
@@ -117,7 +119,7 @@ mods=/usr/lib/uml/modules/\$(uname -r)/kernel
 for m in net/can/can net/can/can-raw drivers/net/can/dev/can-dev drivers/net/can/vcan; do
   insmod "\$mods/\$m.ko" || echo "uml: could not load \$m.ko from \$mods"
 done
-export PATH='$PATH' HOME='$HOME' PRESRS_BIN='$PRESRS_BIN' PRESRS_MODEL='$PRESRS_MODEL' PRESRS_FIRMWARE='$PRESRS_FIRMWARE' PRESRS_DBC_CACHE='$PRESRS_DBC_CACHE'
+$guest_env
 # The robot's clock at half the wall clock, the leg and the fault drill at 0.35, the bench
 # with one foot: what this kernel carries (tests/vcan/lanes.sh and tests/vcan.rs say what was
 # measured).
@@ -154,7 +156,7 @@ elif [ "$runner" = vng ]; then
   # 75 s with 2 vCPUs, 64 s with 4; one alone 51-53 s with either).
   set +e
   timeout 2700 vng -r "$kernel" --user root --disable-kvm --cpus 4 --memory 2G \
-    --exec "export PATH='$PATH' HOME='$HOME' PRESRS_BIN='$PRESRS_BIN' PRESRS_MODEL='$PRESRS_MODEL' PRESRS_FIRMWARE='$PRESRS_FIRMWARE' PRESRS_DBC_CACHE='$PRESRS_DBC_CACHE'
+    --exec "$guest_env
 export PRESRS_SYSTEM_SPEED='${PRESRS_SYSTEM_SPEED:-0.35}'
 export PRESRS_BENCH_LABEL='emulated: vcan inside a TCG VM, 4 vCPUs on 2 host cores'
 cd '$root' && tests/vcan/lanes.sh '$bin' '${PRESRS_VCAN_FILTER:-}'" 2>&1 | tee "$log"
