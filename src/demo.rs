@@ -111,6 +111,7 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
             .map(|k| leg::LegConfig::for_driver(k, a.leg_config.as_deref()))
             .transpose()
             .context("--leg-config")?,
+        leg_stall: None,
     };
     let show = !a.json;
     let live_recording = a.live.mcap.is_some() || a.live.foxglove.is_some();

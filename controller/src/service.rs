@@ -67,6 +67,7 @@ impl Component for ControllerService {
         self.ids.filters(&[
             MessageKind::FootContact,
             MessageKind::LegState,
+            MessageKind::LegStatus,
             MessageKind::TerrainClass,
             MessageKind::NodeStatus,
             // Another controller's, heard while taking over a leg in mid-hop.
@@ -99,10 +100,17 @@ impl Component for ControllerService {
         self.log_switch();
         if self.ctrl.leg_gaps != self.gaps_logged {
             self.gaps_logged = self.ctrl.leg_gaps;
-            tracing::warn!(
-                gaps = self.gaps_logged,
-                "the leg's reports stopped for a while; listening to take it over again"
-            );
+            if self.ctrl.leg_needs_commands() {
+                tracing::warn!(
+                    gaps = self.gaps_logged,
+                    "the leg's reports stopped for a while; commanding on (a leg of motors stops without commands)"
+                );
+            } else {
+                tracing::warn!(
+                    gaps = self.gaps_logged,
+                    "the leg's reports stopped for a while; listening to take it over again"
+                );
+            }
         }
         if let Some(t) = self.ctrl.takeover
             && Some(t.at_us) != self.takeover_logged

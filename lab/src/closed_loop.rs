@@ -49,6 +49,11 @@ pub struct LoopParams<'a> {
     /// The leg through motors: the simulator's leg `foot` answers as this config's drivers and
     /// a leg bridge ([`leg::LegService`]) between the controller and them (`presrs demo --leg`).
     pub leg: Option<leg::LegConfig>,
+    /// With a leg of motors: its bridge's process does not run from `.0` (simulated µs) for
+    /// `.1` µs, as on a machine that cannot keep up with it (the vcan tests' emulated kernel
+    /// stalls a process for 100 ms and more); the frames that come meanwhile wait in its
+    /// socket and are read when it runs again.
+    pub leg_stall: Option<(u64, u64)>,
 }
 
 impl<'a> LoopParams<'a> {
@@ -65,6 +70,7 @@ impl<'a> LoopParams<'a> {
             node_restart: None,
             link_down: None,
             leg: None,
+            leg_stall: None,
         }
     }
 }
@@ -92,6 +98,50 @@ impl LoopRun {
 /// True while `t_us` lies in a fault's window (start, length), µs.
 fn during(window: Option<(u64, u64)>, t_us: u64) -> bool {
     window.is_some_and(|(at, len)| (at..at + len).contains(&t_us))
+}
+
+/// A part whose process does not run during `window` ([`LoopParams::leg_stall`]): what comes
+/// meanwhile is `held`, as in its socket, and read with the time it runs again.
+struct Stalled<'p> {
+    inner: &'p mut dyn Component,
+    window: Option<(u64, u64)>,
+    held: &'p mut Vec<protocol::Stamped>,
+}
+
+impl Stalled<'_> {
+    fn catch_up(&mut self, now_us: u64, out: &mut protocol::component::Outbox) {
+        for st in self.held.drain(..) {
+            self.inner.on_frame(&st, now_us, out);
+        }
+    }
+}
+
+impl Component for Stalled<'_> {
+    fn name(&self) -> &'static str {
+        self.inner.name()
+    }
+    fn filters(&self) -> Vec<(u32, u32)> {
+        self.inner.filters()
+    }
+    fn on_frame(
+        &mut self,
+        frame: &protocol::Stamped,
+        now_us: u64,
+        out: &mut protocol::component::Outbox,
+    ) {
+        if during(self.window, now_us) {
+            self.held.push(*frame);
+        } else {
+            self.catch_up(now_us, out);
+            self.inner.on_frame(frame, now_us, out);
+        }
+    }
+    fn tick(&mut self, now_us: u64, out: &mut protocol::component::Outbox) {
+        if !during(self.window, now_us) {
+            self.catch_up(now_us, out);
+            self.inner.tick(now_us, out);
+        }
+    }
 }
 
 /// A recording of a [`run`]: every frame on the bus and the simulator's truth.
@@ -257,6 +307,7 @@ pub fn run_recorded(
     let mut t_us = 0u64;
     let limit_us = (p.steps as u64 + 20) * 1_000_000;
     let mut reported = 0;
+    let mut held = Vec::new();
     while sim.records().len() < p.steps && t_us < limit_us {
         t_us += 1000;
         if stop.is_some_and(|s| s.load(std::sync::atomic::Ordering::Relaxed)) {
@@ -288,11 +339,16 @@ pub fn run_recorded(
             bus.start(2, &mut c, &mut sent)?;
             ctrl = Some(c);
         }
+        let mut stalled = bridge.as_mut().map(|b| Stalled {
+            inner: b,
+            window: p.leg_stall,
+            held: &mut held,
+        });
         let mut parts: [Option<&mut dyn Component>; 4] = [
             Some(&mut sim),
             node.as_mut().map(|n| n as &mut dyn Component),
             ctrl.as_mut().map(|c| c as &mut dyn Component),
-            bridge.as_mut().map(|b| b as &mut dyn Component),
+            stalled.as_mut().map(|s| s as &mut dyn Component),
         ];
         bus.step(t_us, &mut parts, &mut sent)?;
         if let Some(e) = log_error.take() {

@@ -40,8 +40,9 @@ alone=(
 )
 # Alone too, and with the robot's clock at PRESRS_SLOW_SPEED where set (run.sh sets it where
 # the kernel is emulated), the tests whose robot-time bounds hold wall-clock work: the leg's
-# motors, commanded at 500 Hz with a 50 ms command timeout (in User-mode Linux at 0.5 the MIT
-# leg fell, its bridge starved of commands; at 0.35 none of the three fell), and the fault
+# motors, commanded at 500 Hz with a 50 ms command timeout (its bridge and controller at
+# real-time priority, as on a robot: at normal priority in User-mode Linux at 0.35 with a build
+# on the other core, 1 of 3 runs fell; at real-time priority 0 of 2 there, 0 of 3 at 0.5), and the fault
 # drill, whose recoveries include reopening sockets and restarting processes (in a lane under
 # TCG its link came back 1.02 robot s after the fault, past its 0.8 s; in User-mode Linux at
 # 0.5 the node's restart took 1.38 robot s of its 1.5).
