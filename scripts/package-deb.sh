@@ -7,7 +7,8 @@
 # (installed by scripts/install-deps.sh --cross arm64, with the rustup target). On an arm64
 # machine, --arch arm64 builds natively. The package holds:
 #   /usr/bin/presrs
-#   /lib/systemd/system/presrs-node.service, presrs-controller.service (not enabled on install)
+#   /lib/systemd/system/presrs-node.service, presrs-controller.service, presrs-leg.service
+#   (not enabled on install)
 #   /etc/presrs/node.toml, controller.toml (conffiles: an edited one survives upgrade and remove)
 #   /usr/share/doc/presrs/ (the DBC, README, protocol, deploy and real-robot docs)
 # Depends are read off the binary (its NEEDED libraries and the newest glibc symbol version it
@@ -66,6 +67,7 @@ install -D -m 755 "$bin" "$stage/usr/bin/presrs"
 "$strip" --strip-debug "$stage/usr/bin/presrs"
 install -D -m 644 packaging/systemd/presrs-node.service "$stage/lib/systemd/system/presrs-node.service"
 install -D -m 644 packaging/systemd/presrs-controller.service "$stage/lib/systemd/system/presrs-controller.service"
+install -D -m 644 packaging/systemd/presrs-leg.service "$stage/lib/systemd/system/presrs-leg.service"
 install -D -m 644 examples/node.toml "$stage/etc/presrs/node.toml"
 install -D -m 644 examples/controller.toml "$stage/etc/presrs/controller.toml"
 doc="$stage/usr/share/doc/presrs"

@@ -44,11 +44,12 @@ cp "$amd" "$r/tmp/presrs.deb"
 in_root "$r" dpkg -i /tmp/presrs.deb >/dev/null || fail "dpkg -i $(basename "$amd") into a fresh root"
 in_root "$r" presrs --help >/dev/null || fail "the installed presrs does not run in the fresh root"
 for f in /usr/bin/presrs /etc/presrs/node.toml /etc/presrs/controller.toml \
-         /lib/systemd/system/presrs-node.service /usr/share/doc/presrs/presrs.dbc; do
+         /lib/systemd/system/presrs-node.service /lib/systemd/system/presrs-leg.service \
+         /usr/share/doc/presrs/presrs.dbc; do
   [ -e "$r$f" ] || fail "$f not installed"
 done
 # verify resolves ExecStart= and the units' dependencies inside the root.
-systemd-analyze verify --root="$r" presrs-node.service presrs-controller.service ||
+systemd-analyze verify --root="$r" presrs-node.service presrs-controller.service presrs-leg.service ||
   fail "systemd-analyze verify rejects the units"
 echo "# edited on the robot" >> "$r/etc/presrs/node.toml"
 echo '{"user": "model"}' > "$r/etc/presrs/model.json"
