@@ -38,6 +38,8 @@ if [ "$package" = 1 ]; then
 fi
 if [ "$uml" = 1 ]; then
   command -v linux.uml >/dev/null || need_apt+=(user-mode-linux)
+  # Its init loads vcan with insmod, which a fresh Debian without a kernel image lacks.
+  command -v insmod >/dev/null || need_apt+=(kmod)
 fi
 if [ "$vm" = 1 ]; then
   command -v qemu-system-x86_64 >/dev/null || need_apt+=(qemu-system-x86)

@@ -119,6 +119,12 @@ mods=/usr/lib/uml/modules/\$(uname -r)/kernel
 for m in net/can/can net/can/can-raw drivers/net/can/dev/can-dev drivers/net/can/vcan; do
   insmod "\$mods/\$m.ko" || echo "uml: could not load \$m.ko from \$mods"
 done
+if ! grep -q '^vcan ' /proc/modules; then
+  # Nothing can run without it: say why at once rather than let every test wait for a bus.
+  echo "uml: vcan is not loaded (insmod: \$(command -v insmod || echo 'not found: install kmod'); scripts/install-deps.sh --uml installs it)"
+  echo "VCAN_SUMMARY passed=0 failed=0 expected=0 exit=1"
+  halt -f
+fi
 $guest_env
 # The robot's clock at half the wall clock, the leg and the fault drill at 0.35, the bench
 # with one foot: what this kernel carries (tests/vcan/lanes.sh and tests/vcan.rs say what was
