@@ -71,6 +71,9 @@ pub struct LegService {
     /// A command must have arrived after this time to run (set by every stop).
     fresh_after_us: Option<u64>,
     enabled: bool,
+    /// A driver went silent: it may come back from power-up (MIT out of motor mode, ODrive
+    /// idle without its gains), so the next run enables every driver again.
+    reenable: bool,
     check: bool,
     joints: [Joint; 2],
     mode: LegMode,
@@ -100,6 +103,7 @@ impl LegService {
             last_cmd: None,
             fresh_after_us: None,
             enabled: false,
+            reenable: false,
             check,
             joints: [Joint::default(); 2],
             mode: if check {
@@ -203,17 +207,24 @@ impl LegService {
         if mode.is_stopped() && mode != LegMode::Waiting && mode != LegMode::Check {
             self.fresh_after_us = Some(now_us);
         }
+        // Measured on vcan: a bridge commanded before its simulated drivers were up sent the
+        // MIT enter-motor-mode frame to nobody; the motors answered later but ignored every
+        // command (out of motor mode) while the bridge reported Running.
+        if mode == LegMode::DriverSilent {
+            self.reenable = true;
+        }
         self.mode = mode;
         self.fault = fault;
     }
 
     /// The impedance commands for a fresh LegCommand.
     fn run(&mut self, c: LegCommand, out: &mut Outbox) {
-        if !self.enabled {
+        if !self.enabled || self.reenable {
             for d in &mut self.drivers {
                 d.enable(out);
             }
             self.enabled = true;
+            self.reenable = false;
         }
         let imp = &self.cfg.impedance;
         let stance = c.phase == Phase::Stance;
@@ -833,6 +844,34 @@ mod tests {
             motors.set_fault(0, 0);
             run(&mut leg, &mut motors, 280_000, 150, true, (0.1, 0.15));
             assert_eq!(leg.mode(), LegMode::Running, "{driver}");
+        }
+    }
+
+    /// A driver that browns out comes back from power-up: MIT out of motor mode, ODrive idle
+    /// without its gains. The bridge enables it again before commanding it; before it did,
+    /// the MIT and ODrive joints stayed unpowered while the bridge said Running.
+    #[test]
+    fn a_driver_back_from_a_power_cut_is_enabled_again() {
+        for driver in ["mit", "moteus", "odrive"] {
+            let cfg = config(driver, "prismatic");
+            let mut leg = LegService::new(cfg.clone(), false);
+            let mut motors = SimulatedLeg::new(&cfg, 5);
+            let mut o = Outbox::default();
+            leg.start(0, &mut o);
+            run(&mut leg, &mut motors, 0, 50, true, (0.1, 0.15));
+            assert_eq!(leg.mode(), LegMode::Running, "{driver}");
+            motors.power(1, false);
+            run(&mut leg, &mut motors, 50_000, 80, true, (0.1, 0.15));
+            assert_eq!(leg.mode(), LegMode::DriverSilent, "{driver}");
+            motors.power(1, true);
+            run(&mut leg, &mut motors, 130_000, 150, true, (0.1, 0.15));
+            assert_eq!(leg.mode(), LegMode::Running, "{driver}");
+            let a = motors.applied();
+            assert!(
+                a.iter().all(|c| c.is_some_and(|c| c.kd > 0.0)),
+                "{driver}: a joint unpowered after the power came back: {a:?}"
+            );
+            assert!(a[1].is_some_and(|c| c.kp > 0.0), "{driver}: {a:?}");
         }
     }
 

@@ -127,6 +127,21 @@ impl SimulatedLeg {
         }
     }
 
+    /// Switches a joint's driver off (0 hip, 1 length): it stops answering and, on again,
+    /// comes back as from power-up (unpowered; ODrive idle with no gains, MIT out of motor
+    /// mode), as a driver whose supply browned out.
+    pub fn power(&mut self, joint: usize, on: bool) {
+        if let Some(m) = self.motors.get_mut(joint) {
+            m.silenced = !on;
+            if !on {
+                m.applied = None;
+                m.odrive = (0.0, 0.0, odrive::state::IDLE, 0.0);
+                m.mit_on = false;
+                m.owed = 0;
+            }
+        }
+    }
+
     /// Makes a joint's driver report fault `code` (0 clears it).
     pub fn set_fault(&mut self, joint: usize, code: u32) {
         if let Some(m) = self.motors.get_mut(joint) {
