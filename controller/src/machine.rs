@@ -16,7 +16,9 @@
 use std::collections::BTreeMap;
 
 use protocol::config::{ConfigFileError, Invalid};
-use protocol::messages::{GaitReason, GaitStatus, LegCommand, Message, Phase, TERRAIN_UNKNOWN};
+use protocol::messages::{
+    GaitReason, GaitStatus, LegCommand, LegMode, Message, Phase, TERRAIN_UNKNOWN,
+};
 use protocol::terrain::{CatalogError, TerrainCatalog};
 use serde::{Deserialize, Serialize};
 
@@ -47,7 +49,8 @@ pub struct ControllerConfig {
     /// Bumpless start: how long the controller listens before it commands, ms (0: command at
     /// once). A controller (re)started on a bus where the leg already hops takes over at the
     /// next touchdown it hears, from what the bus says (see [`Controller`]); when no
-    /// touchdown comes within this time it starts as on a fresh robot.
+    /// touchdown comes within this time it starts as on a fresh robot. A leg of motors whose
+    /// bridge says nobody commands it is taken at once.
     pub takeover_ms: u64,
     /// LegCommand rate, Hz.
     pub command_hz: f64,
@@ -305,7 +308,10 @@ pub struct Takeover {
 /// **A leg of motors** (its bridge, `presrs leg`, says its mode in LegStatus) has no laws of
 /// its own: without commands it holds its damped stop, so after a gap this controller does
 /// not listen but commands on, and only the foot's reports judge the phase (a bridge that
-/// stalled lost no FootContact). See `lab/tests/faults.rs` for what each costs in falls.
+/// stalled lost no FootContact). Nor does a starting controller listen to a leg whose bridge
+/// says nobody commands it (waiting for a first command, or in its damped stop): it would
+/// only leave the leg limp, and the simulated hopper fell 1-10 times after a restart (0-1
+/// once it took the leg at once). See `lab/tests/faults.rs` for what each costs in falls.
 pub struct Controller {
     cfg: ControllerConfig,
     /// `terrain_gaits` by terrain id (the catalog's), resolved once.
@@ -535,7 +541,17 @@ impl Controller {
                     l.gait = Some((gs.gait, gs.reason, gs.terrain));
                 }
             }
-            Message::LegStatus(_) if foot == self.cfg.foot => self.leg_needs_commands = true,
+            Message::LegStatus(s) if foot == self.cfg.foot => {
+                self.leg_needs_commands = true;
+                // A bridge waiting for its first command, or in its damped stop for want of
+                // them, is commanded by nobody: there is no step to listen to, and listening
+                // leaves the leg limp for `takeover_ms` (see [`Controller`]).
+                if self.listen.is_some()
+                    && matches!(s.mode, LegMode::Waiting | LegMode::CommandTimeout)
+                {
+                    self.take_over(false, now_us, out);
+                }
+            }
             Message::LegState(ls) if foot == self.cfg.foot => {
                 self.leg_state(ls.timestamp_us, now_us);
                 self.leg_angle = ls.leg_angle_rad;
@@ -1177,6 +1193,50 @@ mod tests {
         // 20 ms lost (shorter than any stance): one edge at most, taken at the next report.
         lose(&mut c, 2_700_000, 20_000, 1);
         assert_eq!(phase_at(&mut c, 2_730_000), Some(Phase::Stance));
+    }
+
+    /// A controller started beside a leg of motors that nobody commands (its bridge waits for
+    /// a first command or holds its damped stop) takes the leg at once; beside one that runs
+    /// another controller's commands it listens as always.
+    #[test]
+    fn a_restarted_controller_commands_a_leg_of_motors_nobody_commands_at_once() {
+        let status = |mode| {
+            Message::LegStatus(protocol::messages::LegStatus {
+                mode,
+                joint: 0,
+                command_age_ms: 60,
+                fault_code: 0,
+            })
+        };
+        let commands = |out: &[Message]| {
+            out.iter()
+                .filter(|m| matches!(m, Message::LegCommand(_)))
+                .count()
+        };
+        for (mode, at_once) in [
+            (LegMode::CommandTimeout, true),
+            (LegMode::Waiting, true),
+            (LegMode::Running, false),
+            (LegMode::DriverFault, false),
+        ] {
+            let mut c = Controller::new(ControllerConfig::default(), &TerrainCatalog::paper());
+            let mut out = Vec::new();
+            c.tick(0, &mut |m| out.push(m));
+            c.on_message(0, &status(mode), 100_000, &mut |m| out.push(m));
+            c.tick(101_000, &mut |m| out.push(m));
+            assert_eq!(commands(&out) > 0, at_once, "{mode:?}: {out:?}");
+            let t = c.takeover;
+            assert_eq!(
+                t.map(|t| (t.at_us, t.gait_from)),
+                at_once.then_some((100_000, "initial"))
+            );
+            // Another foot's bridge says nothing of ours.
+            let mut c = Controller::new(ControllerConfig::default(), &TerrainCatalog::paper());
+            out.clear();
+            c.on_message(1, &status(mode), 100_000, &mut |m| out.push(m));
+            c.tick(101_000, &mut |m| out.push(m));
+            assert_eq!(commands(&out), 0, "{mode:?} of foot 1: {out:?}");
+        }
     }
 
     #[test]
