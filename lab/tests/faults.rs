@@ -99,11 +99,7 @@ fn a_stalled_bridge_or_a_short_silence_costs_a_leg_of_motors_no_cascade_of_falls
     let model = presrs_lab::model::sim_model(1).unwrap();
     let cfg = ControllerConfig::default();
     let mut total = 0;
-    for kind in [
-        leg::DriverKind::Mit,
-        leg::DriverKind::Moteus,
-        leg::DriverKind::Odrive,
-    ] {
+    for kind in leg::DriverKind::ALL {
         for at in [5_000_000, 5_270_000, 6_050_000] {
             let stall = LoopParams {
                 leg_stall: Some((at, 100_000)),
@@ -146,11 +142,7 @@ fn a_restarted_controller_takes_a_limp_leg_of_motors_back_at_once() {
     let model = presrs_lab::model::sim_model(1).unwrap();
     let cfg = ControllerConfig::default();
     let mut after_total = 0;
-    for kind in [
-        leg::DriverKind::Mit,
-        leg::DriverKind::Moteus,
-        leg::DriverKind::Odrive,
-    ] {
+    for kind in leg::DriverKind::ALL {
         for (at, len) in [
             (6_000_000, 1_000_000),
             (6_000_000, 200_000),

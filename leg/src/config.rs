@@ -920,7 +920,7 @@ mit_model = "AK80-6-V1.1"
 
     #[test]
     fn the_built_in_examples_are_valid() {
-        for k in [DriverKind::Mit, DriverKind::Moteus, DriverKind::Odrive] {
+        for k in DriverKind::ALL {
             let c = LegConfig::example(k);
             assert!(c.speaks(k));
             c.validate().unwrap();
