@@ -69,6 +69,11 @@ pub struct DemoArgs {
     /// replays it, `presrs mcap` and python-can read it.
     #[arg(long, value_name = "FILE", conflicts_with = "realtime")]
     pub candump: Option<PathBuf>,
+    /// With --candump: the true terrain of every step as a labels CSV in the log's timestamps
+    /// (`start_s,end_s,terrain,foot`, as `presrs sim --truth` writes it), for `presrs capture
+    /// --labels` and `presrs energy --labels`.
+    #[arg(long, value_name = "FILE", requires = "candump")]
+    pub truth: Option<PathBuf>,
 }
 
 pub fn run(a: DemoArgs) -> Result<ExitCode> {
@@ -77,6 +82,15 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
     let track =
         sim::runner::Track::load_or_default(a.track.as_deref(), &catalog).context("--track")?;
     let mut model = lab::model::load_or_train_logged(a.model.as_deref()).context("--model")?;
+    let leg = a
+        .leg
+        .map(|k| leg::LegConfig::for_driver(k, a.leg_config.as_deref()))
+        .transpose()
+        .context("--leg-config")?;
+    if let (None, Some(l), Some(k)) = (&a.model, &leg, a.leg) {
+        // The demo model's energy check was fitted on the direct leg: fit it on this one.
+        model = lab::model::with_leg_energy(model, l.clone(), k.name(), a.leg_config.is_none())?;
+    }
     if a.check_load {
         anyhow::ensure!(
             node::classifier::train::add_load_check(&mut model),
@@ -106,11 +120,7 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
         controller_restart: None,
         node_restart: None,
         link_down: None,
-        leg: a
-            .leg
-            .map(|k| leg::LegConfig::for_driver(k, a.leg_config.as_deref()))
-            .transpose()
-            .context("--leg-config")?,
+        leg,
         leg_stall: None,
     };
     let show = !a.json;
@@ -182,6 +192,12 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
             use std::io::Write;
             w.flush()
                 .with_context(|| format!("--candump {}: writing the log", p.display()))?;
+        }
+        if let Some(p) = &a.truth {
+            // The last step's range to a second after its touchdown (the log's clock).
+            let end = run.truth.last().map_or(0, |s| s.touchdown_us) + 1_000_000;
+            std::fs::write(p, sim::runner::truth_labels(&run.truth, end))
+                .with_context(|| format!("writing --truth {}", p.display()))?;
         }
         let falls = run.falls();
         leg_report = run.leg_state.zip(run.leg_counters);

@@ -11,6 +11,7 @@ mod capture_cmd;
 mod cli;
 mod controller_cmd;
 mod demo;
+mod energy_cmd;
 mod experiment;
 mod leg_cmd;
 mod mcap_cmd;
@@ -52,6 +53,9 @@ enum Cmd {
     /// A training set from the robot's own runs: one image per step (the node's stance logic),
     /// labelled, into DIR/<terrain>/ with a manifest.
     Capture(capture_cmd::CaptureArgs),
+    /// Fit a model's energy check on the robot's closed-loop runs on known ground: ground that
+    /// looks like a known terrain but takes a different share of the hop's energy is unknown.
+    Energy(energy_cmd::EnergyArgs),
     /// The simulated hopper and foot on a CAN interface, in real time.
     Sim(sim_cmd::SimArgs),
     /// A candump log to an MCAP file (Foxglove, PlotJuggler, rosbag2): each message on its
@@ -137,6 +141,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Cmd::Leg(a) => leg_cmd::run(a),
         Cmd::Sim(a) => sim_cmd::run(a),
         Cmd::Capture(a) => capture_cmd::run(a),
+        Cmd::Energy(a) => energy_cmd::run(a),
         Cmd::Mcap(a) => mcap_cmd::run(a),
         Cmd::View(a) => mcap_cmd::view(a),
         Cmd::Demo(args) => demo::run(args),

@@ -75,32 +75,25 @@ fn realtime_and_fixed_gait(dir: &std::path::Path) {
     assert!(gaits.iter().all(|&g| g == 3), "{gaits:?}");
 }
 
-/// Issue 17 §2: sand on the track, which the demo model was not trained on. With the load check
-/// the node calls most sand steps unknown and the controller puts the hopper in the safe gait
-/// within 3 steps of each time it comes onto sand; the summary says so.
+/// Issue 17 §2 and issue 25 §5: sand on the track, which the demo model was not trained on and
+/// whose texture is clay's. The energy check (on by default: the demo model's is fitted on a
+/// closed-loop run of the default track) calls most sand steps unknown, the controller puts
+/// the hopper in the safe gait within 3 steps of each time it comes onto sand, and at most 3%
+/// of the known steps are unknown; the summary says so.
 #[test]
 fn sand_the_model_never_saw_is_unknown_and_gets_the_safe_gait() {
     let dir = std::env::temp_dir().join(format!("presrs-demo-sand-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let track = dir.join("sand.toml");
-    let mut text = String::from("diameter_m = 2.8\n");
-    for t in ["wood", "sand", "clay", "grass"] {
-        text += &format!("[[segments]]\nterrain = \"{t}\"\nlength_m = 2.2\n");
-    }
-    std::fs::write(&track, text).unwrap();
+    let csv = dir.join("steps.csv");
     let out = common::output_ok(
         Command::new(env!("CARGO_BIN_EXE_presrs"))
-            .args([
-                "demo",
-                "--steps",
-                "160",
-                "--json",
-                "--check-load",
-                "--track",
-            ])
-            .arg(&track)
+            .args(["demo", "--steps", "200", "--seed", "9", "--json", "--track"])
+            .arg(concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/examples/sand-track.toml"
+            ))
             .arg("--csv")
-            .arg(dir.join("steps.csv")),
+            .arg(&csv),
     );
     let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let u = &j["unknown_terrains"][0];
@@ -109,8 +102,9 @@ fn sand_the_model_never_saw_is_unknown_and_gets_the_safe_gait() {
         u["steps"].as_u64().unwrap(),
         u["called_unknown"].as_u64().unwrap(),
     );
+    // Measured (seeds 1-5, 300 steps): 73-75 of 80-81 sand steps unknown.
     assert!(
-        n >= 30 && unknown * 2 >= n,
+        n >= 40 && unknown * 4 >= n * 3,
         "{unknown}/{n} sand steps unknown: {j}"
     );
     let entries = u["steps_to_safe_gait"].as_array().unwrap();
@@ -121,6 +115,21 @@ fn sand_the_model_never_saw_is_unknown_and_gets_the_safe_gait() {
             "safe gait after {e} steps: {j}"
         );
     }
+    // Known steps called unknown (measured 0.9-2.3%, seeds 1-5).
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let (mut known, mut known_unknown) = (0, 0);
+    for l in text.lines().skip(1) {
+        let f: Vec<&str> = l.split(',').collect();
+        if f[2] != "sand" {
+            known += 1;
+            known_unknown += usize::from(f[3] == "unknown");
+        }
+    }
+    assert!(known >= 100, "{known} known steps");
+    assert!(
+        known_unknown * 100 <= known * 3,
+        "{known_unknown}/{known} known steps unknown"
+    );
     assert_eq!(j["falls"], 0, "{j}");
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -199,5 +208,129 @@ fn demo_candump_where_no_file_can_be_made_names_it() {
         "{err}"
     );
     assert!(!err.contains("panicked"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Issue 25 §5, the lab's path: a closed-loop run recorded with its truth (`presrs demo
+/// --candump --truth`), `presrs energy` fits a model's energy check on it, and that model meets
+/// sand. Bad inputs are refused naming the input: labels for another number of logs, a label
+/// the model does not know, a model file whose energy check is broken.
+#[test]
+fn energy_is_fitted_from_a_recorded_run_and_bad_inputs_are_named() {
+    let dir = std::env::temp_dir().join(format!("presrs-energy-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let presrs = || Command::new(env!("CARGO_BIN_EXE_presrs"));
+    let (log, truth) = (dir.join("run.log"), dir.join("run.csv"));
+    common::output_ok(
+        presrs()
+            .args(["demo", "--steps", "300", "--seed", "21", "--json", "--csv"])
+            .arg(dir.join("steps.csv"))
+            .arg("--candump")
+            .arg(&log)
+            .arg("--truth")
+            .arg(&truth),
+    );
+    let labels = std::fs::read_to_string(&truth).unwrap();
+    assert!(labels.starts_with("start_s,end_s,terrain,foot\n") && labels.contains(",clay,0"));
+    // The cached demo model (where the demo above put it), its energy check removed: the fit
+    // below puts one back.
+    let cached = lab::model::cache_path();
+    let mut m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&cached).unwrap()).unwrap();
+    m.as_object_mut().unwrap().remove("energy");
+    let plain = dir.join("plain.json");
+    std::fs::write(&plain, m.to_string()).unwrap();
+    let fitted = dir.join("fitted.json");
+    let out = common::output_ok(
+        presrs()
+            .args(["energy", "--json", "--model"])
+            .arg(&plain)
+            .arg("--replay")
+            .arg(&log)
+            .arg("--labels")
+            .arg(&truth)
+            .arg("--out")
+            .arg(&fitted),
+    );
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let maps = j["maps"].as_array().unwrap();
+    assert_eq!(maps.len(), 4, "one per class: {j}");
+    for (k, map) in maps.iter().enumerate() {
+        assert!(map["stances"].as_u64().unwrap() >= 40, "class {k}: {j}");
+        let r = map["residual_s"].as_array().unwrap();
+        assert!(
+            r[0].as_f64().unwrap() < 0.0 && r[1].as_f64().unwrap() > 0.0,
+            "{j}"
+        );
+    }
+    // The fitted model on sand: most sand steps unknown.
+    let run = common::output_ok(
+        presrs()
+            .args(["demo", "--steps", "120", "--seed", "4", "--json", "--model"])
+            .arg(&fitted)
+            .arg("--track")
+            .arg(concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/examples/sand-track.toml"
+            ))
+            .arg("--csv")
+            .arg(dir.join("steps.csv")),
+    );
+    let r: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
+    let u = &r["unknown_terrains"][0];
+    let (n, unknown) = (
+        u["steps"].as_u64().unwrap(),
+        u["called_unknown"].as_u64().unwrap(),
+    );
+    assert!(
+        n >= 20 && unknown * 2 >= n,
+        "{unknown}/{n} sand steps unknown: {r}"
+    );
+
+    let fails = |args: &[&str]| -> String {
+        let o = presrs().args(args).output().unwrap();
+        assert!(!o.status.success(), "{args:?} should fail");
+        String::from_utf8_lossy(&o.stderr).to_string()
+    };
+    let s = |p: &std::path::Path| p.to_str().unwrap().to_string();
+    let (p_plain, p_log, p_out) = (s(&plain), s(&log), s(&dir.join("x.json")));
+    let energy = [
+        "energy", "--model", &p_plain, "--replay", &p_log, "--out", &p_out,
+    ];
+    let e = fails(&[&energy[..], &["--replay", &p_log, "--labels", &s(&truth)]].concat());
+    assert!(e.contains("1 --labels for 2 --replay"), "{e}");
+    let e = fails(&[&energy[..], &["--label", "sand"]].concat());
+    assert!(
+        e.contains("sand") && e.contains("run.log") && e.contains("does not know"),
+        "{e}"
+    );
+    // A run too short to fit anything: refused naming it and the fix.
+    let short = dir.join("short.log");
+    let text = std::fs::read_to_string(&log).unwrap();
+    let head: Vec<&str> = text.lines().take(3000).collect();
+    std::fs::write(&short, head.join("\n") + "\n").unwrap();
+    let e = fails(&[
+        "energy",
+        "--model",
+        &p_plain,
+        "--replay",
+        &s(&short),
+        "--label",
+        "wood",
+        "--out",
+        &p_out,
+    ]);
+    assert!(
+        e.contains("short.log") && e.contains("record longer"),
+        "{e}"
+    );
+    assert!(!dir.join("x.json").exists(), "nothing written on a refusal");
+    let mut broken: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&fitted).unwrap()).unwrap();
+    broken["energy"][0]["residual_s"] = serde_json::json!([0.01, -0.01]);
+    let bad = dir.join("broken.json");
+    std::fs::write(&bad, broken.to_string()).unwrap();
+    let e = fails(&["demo", "--steps", "5", "--model", &s(&bad)]);
+    assert!(e.contains("energy") && e.contains("presrs energy"), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -86,6 +86,9 @@ pub struct LoopRun {
     pub leg_state: Option<sim::service::LegStateCheck>,
     /// With a leg of motors: the bridge's counters.
     pub leg_counters: Option<leg::LegCounters>,
+    /// Every touchdown's truth, on the recording's clock (its `epoch_us` added; simulated time
+    /// without a recording). Empty from the real-time loop.
+    pub truth: Vec<sim::runner::StepTruth>,
 }
 
 impl LoopRun {
@@ -359,7 +362,17 @@ pub fn run_recorded(
         }
         reported = sim.records().len();
     }
+    let truth = sim
+        .robot()
+        .steps
+        .iter()
+        .map(|s| sim::runner::StepTruth {
+            touchdown_us: epoch_us + s.touchdown_us,
+            ..*s
+        })
+        .collect();
     Ok(LoopRun {
+        truth,
         fall_times_us: sim.robot().falls.clone(),
         leg_state: sim.leg_state_check(),
         leg_counters: bridge.map(|b| b.counters()),
@@ -444,6 +457,7 @@ pub fn run_realtime(
                 .collect(),
             leg_state: None,
             leg_counters: None,
+            truth: Vec::new(),
         },
         switches,
     ))

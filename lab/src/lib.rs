@@ -79,6 +79,12 @@ pub enum LabError {
     /// A model file.
     #[error(transparent)]
     Model(#[from] node::classifier::model::ModelError),
+    /// A labels file.
+    #[error(transparent)]
+    Capture(#[from] node::capture::CaptureError),
+    /// Fitting a model's energy check.
+    #[error("fitting the energy check: {0}")]
+    Energy(#[from] node::energy_fit::EnergyFitError),
     /// A thread could not be started.
     #[error("starting a thread: {0}")]
     Thread(std::io::Error),

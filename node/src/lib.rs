@@ -37,6 +37,7 @@
 pub mod capture;
 pub mod classifier;
 pub mod config;
+pub mod energy_fit;
 pub mod health;
 pub mod replay;
 pub mod service;

@@ -995,3 +995,68 @@ fn error_frames_set_the_node_state_until_the_controller_restarts() {
     let stats = running.stop();
     assert_eq!(stats.bus_errors, 3, "{stats:?}");
 }
+
+/// Issue 25 §5: the energy check. A stance whose flight after is not what its class's return
+/// map gives for its flight before makes the next stance of that class unknown (flag ENERGY);
+/// a stance of another class, or one after a stance the map allows, is the texture's.
+#[test]
+fn a_stance_that_took_energy_its_terrain_does_not_makes_the_next_of_its_kind_unknown() {
+    use presrs_node::stance::energy::ReturnMap;
+    let mut m = model();
+    // Wood: the flight after a stance as long as the one before, within 10 ms.
+    let wood = ReturnMap {
+        intercept_s: 0.0,
+        slope: 1.0,
+        residual_s: [-0.010, 0.010],
+        stances: 50,
+    };
+    m.energy = Some(vec![Some(wood), None, None]);
+    let run = |m: Model| {
+        let mut node = NodeService::new(NodeConfig::default(), m).unwrap();
+        let mut foot = FakeFoot::new();
+        let mut frames = Vec::new();
+        // Stances of 200 ms; flights (liftoff to the next touchdown) 200, 200, 150, 150, 200 ms.
+        let touchdowns = [
+            1_000_000u64,
+            1_400_000,
+            1_800_000,
+            2_150_000,
+            2_500_000,
+            2_900_000,
+        ];
+        let terrains = [0, 0, 0, 0, 0, 1];
+        for (&td, &k) in touchdowns.iter().zip(&terrains) {
+            frames.extend(foot.stance(k, td, 200, |_| true));
+        }
+        let said = lock_step(&mut node, &frames, 3_400_000);
+        let catalog = TerrainCatalog::paper();
+        classes(&said)
+            .into_iter()
+            .map(|(_, tc)| (catalog.describe(tc.terrain), tc.flags & flags::ENERGY != 0))
+            .collect::<Vec<_>>()
+    };
+    let got = run(m.clone());
+    let want = [
+        ("wood", false),
+        ("wood", false),
+        ("wood", false),
+        // Stance 3 flew 150 ms after a 200 ms flight: wood does not take that much.
+        ("unknown", true),
+        // Stance 4: 150 ms after 150 ms, as wood does.
+        ("wood", false),
+        // Stance 5 flew 200 after 150 (outside wood's map), but stance 6 is carpet.
+        ("carpet", false),
+    ];
+    let got_s: Vec<(String, bool)> = got.iter().map(|(n, e)| (n.clone(), *e)).collect();
+    let want_s: Vec<(String, bool)> = want.iter().map(|(n, e)| (n.to_string(), *e)).collect();
+    assert_eq!(got_s, want_s);
+    // Without the energy check the texture decides every stance.
+    m.energy = None;
+    let plain = run(m);
+    assert!(plain.iter().all(|(n, e)| n != "unknown" && !e), "{plain:?}");
+    // A model file whose map list does not match its classes is refused, naming the key.
+    let mut bad = model();
+    bad.energy = Some(vec![Some(wood)]);
+    let e = bad.validate().err().map(|e| e.to_string());
+    assert!(e.as_deref().is_some_and(|e| e.contains("energy")), "{e:?}");
+}

@@ -172,6 +172,7 @@ pub fn signals(kind: MessageKind) -> Vec<Signal> {
             sig("FlagNoSample", 42, 1, false, 1.0, ""),
             sig("FlagMultiFrame", 43, 1, false, 1.0, ""),
             sig("FlagNoContact", 44, 1, false, 1.0, ""),
+            sig("FlagEnergy", 45, 1, false, 1.0, ""),
             sig("LatencyUs", 48, 16, false, 1.0, "us"),
         ],
         MessageKind::NodeStatus => vec![

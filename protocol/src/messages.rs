@@ -133,6 +133,10 @@ pub mod flags {
     /// The stance's sampled image showed no foot on the ground (too little load or pressed
     /// area for the model's training images): the terrain is unknown.
     pub const NO_CONTACT: u8 = 1 << 4;
+    /// The texture's terrain took energy out of the foot's last hop (the flight after that
+    /// stance, given the flight before) that the terrain does not: other ground that looks
+    /// like it. The terrain is unknown.
+    pub const ENERGY: u8 = 1 << 5;
 }
 
 /// Largest value of `TerrainClass::latency_us` (its 16-bit CAN field): longer latencies read as

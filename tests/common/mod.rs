@@ -43,6 +43,7 @@ pub fn signals(m: &Message) -> BTreeMap<&'static str, f64> {
                 ("FlagNoSample", flags::NO_SAMPLE),
                 ("FlagMultiFrame", flags::MULTI_FRAME),
                 ("FlagNoContact", flags::NO_CONTACT),
+                ("FlagEnergy", flags::ENERGY),
             ] {
                 s.insert(name, (c.flags & bit != 0) as u8 as f64);
             }

@@ -175,6 +175,11 @@ pub struct Model {
     /// (`unknown_thresholds`) decide, as they did.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub novelty: Option<super::novelty::Novelty>,
+    /// Per class: the return map of the stance's energy balance (see
+    /// [`crate::stance::energy`]), `null` for a class without one. Absent in older model
+    /// files, and in models not fitted on closed-loop runs (`presrs energy`): no energy check.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub energy: Option<Vec<Option<crate::stance::energy::ReturnMap>>>,
 }
 
 /// The working images of the stored samples, in the order of `Model::samples`: the training
@@ -412,6 +417,17 @@ impl Model {
                 "load_ranges",
                 format!(
                     "want one [low, high] pair per class ({}), low <= high",
+                    self.classes.len()
+                ),
+            ));
+        }
+        if let Some(e) = &self.energy
+            && (e.len() != self.classes.len() || e.iter().flatten().any(|m| !m.is_valid()))
+        {
+            return Err(Invalid::new(
+                "energy",
+                format!(
+                    "want one return map (or null) per class ({}), finite, residual_s low <=                      high; fit it again with `presrs energy`",
                     self.classes.len()
                 ),
             ));

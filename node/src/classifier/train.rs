@@ -297,6 +297,7 @@ pub fn train(
             pixels: work,
         }),
         novelty: None,
+        energy: None,
     };
     fitted?.install(&mut model);
     if o.check_load {

@@ -10,8 +10,11 @@ pub(super) enum Edge {
         /// Foot time of the edge.
         at_us: u32,
     },
-    /// The foot left the ground.
-    Liftoff,
+    /// The foot left the ground at `at_us` (foot clock: when the switch first read open).
+    Liftoff {
+        /// Foot time of the edge.
+        at_us: u32,
+    },
 }
 
 /// One foot's switch: what it last read, since when, and the debounced state.
@@ -52,7 +55,9 @@ impl Switch {
                 at_us: self.raw_since,
             }
         } else {
-            Edge::Liftoff
+            Edge::Liftoff {
+                at_us: self.raw_since,
+            }
         })
     }
 
@@ -100,7 +105,10 @@ mod tests {
         assert!(s.stance);
         // A real liftoff.
         s.read(false, 200_000);
-        assert_eq!(s.settle(205_000, DEBOUNCE), Some(Edge::Liftoff));
+        assert_eq!(
+            s.settle(205_000, DEBOUNCE),
+            Some(Edge::Liftoff { at_us: 200_000 })
+        );
     }
 
     #[test]

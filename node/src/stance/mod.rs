@@ -1,5 +1,6 @@
 //! Per-step terrain classification: micro-switch debounce, the stance, the sampled frame, the
-//! repair, the decision, and exactly one `TerrainClass` per step.
+//! repair, the decision, the hop's energy balance ([`energy`]), and exactly one `TerrainClass`
+//! per step.
 //!
 //! [`StancePipeline::on_frame`] and [`StancePipeline::tick`] are the whole decision on one
 //! thread; [`crate::NodeService`] drives them live, in a replay and in the demo. All times in the decision are the foot's own timestamps (FootContact and the
@@ -9,6 +10,7 @@
 mod adapt;
 mod debounce;
 mod decision;
+pub mod energy;
 mod sample;
 
 use protocol::clock::Clock;
@@ -23,6 +25,7 @@ use crate::config::NodeConfig;
 use crate::health::LineHealth;
 use adapt::{Adaptation, Adapted, Refitter, classify};
 use debounce::{Edge, Switch};
+use energy::{Balance, EnergyObservation};
 
 /// Counters per stage, for NodeStatus and the logs.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -80,6 +83,8 @@ struct Foot {
     /// The last frame heard from this foot: its receive time and the foot's timestamp in it,
     /// so [`StancePipeline::tick`] can tell the foot's time from the receiver's.
     heard: Option<(u64, u32)>,
+    /// The hop's energy balance over this foot's stances.
+    balance: Balance,
 }
 
 impl Foot {
@@ -115,6 +120,7 @@ impl Foot {
             last_image_us: None,
             period_us: None,
             heard: None,
+            balance: Balance::default(),
         }
     }
 }
@@ -199,6 +205,12 @@ impl StancePipeline {
         p
     }
 
+    /// What the foot's latest judged stance did to the hop (the flights either side of it and
+    /// its texture class); a stance is judged at the touchdown after it.
+    pub fn energy_observation(&self, foot: u8) -> Option<EnergyObservation> {
+        self.feet.get(foot as usize)?.balance.last
+    }
+
     /// The image the foot's latest decided step was sampled from; `None` before its first
     /// decision, while a step is open, or when the step had no image inside its stance. Valid
     /// from the step's TerrainClass until the foot's next touchdown.
@@ -261,6 +273,8 @@ impl StancePipeline {
             }
             f.adapted = None;
             f.asked = None;
+            // Class indices are the old model's.
+            f.balance.forget_classes();
         }
     }
 
@@ -346,7 +360,13 @@ impl StancePipeline {
             return;
         };
         if let Edge::Touchdown { at_us } = edge {
-            // A new step.
+            // A new step; the one before it is judged by the flight between them.
+            let maps = self
+                .classifier
+                .as_ref()
+                .and_then(|c| c.model().energy.as_deref());
+            f.balance
+                .touchdown(foot, f.step, at_us, self.now_rx_us, maps);
             f.touchdown_us = at_us;
             f.decided = false;
             f.best_err = None;
@@ -356,9 +376,12 @@ impl StancePipeline {
             f.repaired = false;
             f.step = f.step.wrapping_add(1);
             self.counters.steps += 1;
-        } else if !f.decided {
-            // Liftoff before the decision: decide with what the stance gave.
-            self.decide(foot, out);
+        } else if let Edge::Liftoff { at_us } = edge {
+            f.balance.liftoff(at_us, self.now_rx_us);
+            if !f.decided {
+                // Liftoff before the decision: decide with what the stance gave.
+                self.decide(foot, out);
+            }
         }
     }
 
@@ -531,6 +554,7 @@ impl StancePipeline {
                 tc.terrain = m.classes[best].terrain_id;
                 tc.confidence_pct = pct;
                 tc.flags |= flags::MULTI_FRAME;
+                f.balance.class = Some(best);
             }
             Some(cls) if !cfg.multi_frame && f.best_err.is_some() => {
                 let m = cls.model();
@@ -549,6 +573,7 @@ impl StancePipeline {
                         if d.class.is_none() {
                             tc.flags |= flags::LOW_CONFIDENCE;
                         }
+                        f.balance.class = d.class;
                     }
                     None => {}
                 }
@@ -563,6 +588,14 @@ impl StancePipeline {
             decision::Outcome::Classified => self.counters.classified += 1,
         }
         decision::set_flags(&mut tc, outcome, cfg.low_confidence, f.repaired);
+        if outcome == decision::Outcome::Classified
+            && f.balance.class.is_some_and(|k| f.balance.rejects(k))
+        {
+            // The texture's terrain took energy out of the last hop that it does not: other
+            // ground that looks like it (see `energy`).
+            tc.terrain = messages::TERRAIN_UNKNOWN;
+            tc.flags |= flags::ENERGY;
+        }
         tc.damage_pct = f.health.damage_pct();
         // From the receipt of the sampled frame to now (the decision made, handed to the
         // send queue), saturated as the CAN field is; 0 when no frame was sampled (flag

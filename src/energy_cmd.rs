@@ -1,0 +1,120 @@
+//! `presrs energy`: fits a model's energy check on the robot's closed-loop runs on known
+//! ground. The work is [`node::energy_fit`]; this module reads the arguments and the logs and
+//! prints what was fitted.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::{Context, Result, bail};
+use node::capture::{Labelling, parse_labels};
+use node::classifier::Model;
+use node::energy_fit::{EnergyRun, describe, fit_energy};
+
+#[derive(clap::Args)]
+pub struct EnergyArgs {
+    /// The trained model (`presrs train`) whose energy check is fitted.
+    #[arg(long)]
+    pub model: PathBuf,
+    /// A candump log (`candump -L`) of a closed-loop run (the controller switching gaits) on
+    /// known ground; repeat for several runs.
+    #[arg(long, required = true)]
+    pub replay: Vec<PathBuf>,
+    /// Every step of every run is this terrain (a name from the catalog).
+    #[arg(long, conflicts_with = "labels")]
+    pub label: Option<String>,
+    /// A CSV of `start_s,end_s,terrain[,foot]` in the log's timestamps (as `presrs capture`
+    /// reads it); one per `--replay`, in the same order.
+    #[arg(long)]
+    pub labels: Vec<PathBuf>,
+    /// Where the model with its energy check goes (may be `--model` itself).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Node config (TOML): debounce, sample time, feet, CAN ids, terrains.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Print what was fitted as one JSON object.
+    #[arg(long)]
+    pub json: bool,
+    /// Overrides the config's `terrains` key.
+    #[command(flatten)]
+    pub terrains: protocol::TerrainsArg,
+}
+
+pub fn run(a: EnergyArgs) -> Result<ExitCode> {
+    let cfg =
+        node::NodeConfig::load_or_default(a.config.as_deref(), &a.terrains).context("--config")?;
+    let catalog = cfg.catalog()?;
+    let mut model = Model::load(&a.model)?;
+    let labellings: Vec<Labelling> = match (&a.label, a.labels.len()) {
+        (Some(name), _) => {
+            let t = catalog
+                .known(name)
+                .map_err(|e| anyhow::anyhow!("--label {name}: {e}"))?;
+            vec![Labelling::All(t); a.replay.len()]
+        }
+        (None, n) if n == a.replay.len() => a
+            .labels
+            .iter()
+            .map(|p| {
+                let text = std::fs::read_to_string(p)
+                    .with_context(|| format!("--labels {}: cannot read it", p.display()))?;
+                Ok(Labelling::Ranges(parse_labels(
+                    &text,
+                    &p.display().to_string(),
+                    &catalog,
+                )?))
+            })
+            .collect::<Result<_>>()?,
+        (None, 0) => bail!("give --label TERRAIN, or one --labels FILE.csv per --replay"),
+        (None, n) => bail!(
+            "{n} --labels for {} --replay: give one labels file per log, in the same order",
+            a.replay.len()
+        ),
+    };
+    let logs = a
+        .replay
+        .iter()
+        .map(|p| {
+            protocol::candump::read_log_file(p).with_context(|| format!("--replay {}", p.display()))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let labels: Vec<_> = labellings
+        .iter()
+        .map(|l| move |foot: u8, t0: u64, t1: u64| l.label(foot, t0, t1))
+        .collect();
+    let runs: Vec<EnergyRun> = a
+        .replay
+        .iter()
+        .zip(&logs)
+        .zip(&labels)
+        .map(|((p, records), label)| EnergyRun {
+            name: p.display().to_string(),
+            records,
+            label,
+        })
+        .collect();
+    let rep = fit_energy(&cfg, &mut model, &runs)?;
+    model
+        .save(&a.out)
+        .with_context(|| format!("--out {}", a.out.display()))?;
+    if a.json {
+        println!(
+            "{}",
+            serde_json::json!({ "out": a.out, "report": rep, "maps": model.energy })
+        );
+    } else {
+        for l in describe(&model, &rep) {
+            eprintln!("{l}");
+        }
+        eprintln!(
+            "{} stances judged: {} fitted, {} without two plausible flights, {} unlabelled, {} where the texture said another terrain; wrote {}",
+            rep.stances,
+            rep.used.iter().sum::<usize>(),
+            rep.no_flights,
+            rep.unlabelled,
+            rep.texture_disagrees,
+            a.out.display()
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}
