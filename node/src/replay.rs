@@ -33,12 +33,14 @@ impl fmt::Display for ReplaySummary {
         let (c, r) = (&self.counters, &self.reassembly);
         write!(
             f,
-            "replayed {} frames ({:.1} s): {} steps, {} classified, {} without a sample; {} \
-             images, {} CRC failures, {} incomplete, {} undecodable frames",
+            "replayed {} frames ({:.1} s): {} steps, {} classified ({} unknown by the energy \
+             check), {} without a sample; {} images, {} CRC failures, {} incomplete, {} \
+             undecodable frames",
             self.frames,
             self.span_us as f64 * 1e-6,
             c.steps,
             c.classified,
+            c.energy_unknown,
             c.no_sample,
             r.delivered,
             r.crc_failures,

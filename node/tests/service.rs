@@ -1030,10 +1030,13 @@ fn a_stance_that_took_energy_its_terrain_does_not_makes_the_next_of_its_kind_unk
         }
         let said = lock_step(&mut node, &frames, 3_400_000);
         let catalog = TerrainCatalog::paper();
-        classes(&said)
+        let got = classes(&said)
             .into_iter()
             .map(|(_, tc)| (catalog.describe(tc.terrain), tc.flags & flags::ENERGY != 0))
-            .collect::<Vec<_>>()
+            .collect::<Vec<_>>();
+        let flagged = got.iter().filter(|(_, e)| *e).count() as u64;
+        assert_eq!(node.counters().energy_unknown, flagged, "counted as sent");
+        got
     };
     let got = run(m.clone());
     let want = [

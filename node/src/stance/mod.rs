@@ -44,6 +44,8 @@ pub struct Counters {
     pub classified: u64,
     /// Steps whose sampled image showed no foot on the ground (flag NO_CONTACT).
     pub no_contact: u64,
+    /// Steps the texture gave a terrain that the energy check called unknown (flag ENERGY).
+    pub energy_unknown: u64,
     /// Images skipped because their size is not the model's (said once per size in the log).
     pub wrong_size: u64,
     /// Models refitted to a foot's dead lines.
@@ -595,6 +597,7 @@ impl StancePipeline {
             // ground that looks like it (see `energy`).
             tc.terrain = messages::TERRAIN_UNKNOWN;
             tc.flags |= flags::ENERGY;
+            self.counters.energy_unknown += 1;
         }
         tc.damage_pct = f.health.damage_pct();
         // From the receipt of the sampled frame to now (the decision made, handed to the
