@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 use anyhow::{Context, Result, bail};
-use node::capture::{Capture, CaptureService, CaptureSet, Labelling, parse_labels};
+use node::capture::{Capture, CaptureService, CaptureSet, Labelling};
 use protocol::bus::{BusSource, CanBus};
 use protocol::component::{self, RunOptions};
 
@@ -50,19 +50,7 @@ pub fn run(a: CaptureArgs) -> Result<ExitCode> {
     let cfg =
         node::NodeConfig::load_or_default(a.config.as_deref(), &a.terrains).context("--config")?;
     let catalog = cfg.catalog()?;
-    let labelling = match (&a.label, &a.labels) {
-        (Some(name), _) => Labelling::All(
-            catalog
-                .known(name)
-                .map_err(|e| anyhow::anyhow!("--label {name}: {e}"))?,
-        ),
-        (None, Some(p)) => {
-            let text = std::fs::read_to_string(p)
-                .with_context(|| format!("--labels {}: cannot read it", p.display()))?;
-            Labelling::Ranges(parse_labels(&text, &p.display().to_string(), &catalog)?)
-        }
-        (None, None) => bail!("give --label TERRAIN or --labels FILE.csv"),
-    };
+    let labelling = Labelling::from_args(a.label.as_deref(), a.labels.as_deref(), &catalog)?;
     let mut service = CaptureService::new(
         Capture::new(cfg, labelling),
         CaptureSet::open(&a.out)?,

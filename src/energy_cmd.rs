@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
-use node::capture::{Labelling, parse_labels};
+use node::capture::Labelling;
 use node::classifier::Model;
 use node::energy_fit::{EnergyRun, describe, fit_energy};
 
@@ -45,29 +45,19 @@ pub fn run(a: EnergyArgs) -> Result<ExitCode> {
         node::NodeConfig::load_or_default(a.config.as_deref(), &a.terrains).context("--config")?;
     let catalog = cfg.catalog()?;
     let mut model = Model::load(&a.model)?;
+    // One --label for every log, or one --labels file per log.
     let labellings: Vec<Labelling> = match (&a.label, a.labels.len()) {
-        (Some(name), _) => {
-            let t = catalog
-                .known(name)
-                .map_err(|e| anyhow::anyhow!("--label {name}: {e}"))?;
-            vec![Labelling::All(t); a.replay.len()]
+        (Some(_), _) => {
+            let l = Labelling::from_args(a.label.as_deref(), None, &catalog)?;
+            vec![l; a.replay.len()]
         }
         (None, n) if n == a.replay.len() => a
             .labels
             .iter()
-            .map(|p| {
-                let text = std::fs::read_to_string(p)
-                    .with_context(|| format!("--labels {}: cannot read it", p.display()))?;
-                Ok(Labelling::Ranges(parse_labels(
-                    &text,
-                    &p.display().to_string(),
-                    &catalog,
-                )?))
-            })
-            .collect::<Result<_>>()?,
-        (None, 0) => bail!("give --label TERRAIN, or one --labels FILE.csv per --replay"),
+            .map(|p| Labelling::from_args(None, Some(p), &catalog))
+            .collect::<Result<_, _>>()?,
         (None, n) => bail!(
-            "{n} --labels for {} --replay: give one labels file per log, in the same order",
+            "{n} --labels for {} --replay: give --label TERRAIN, or one --labels FILE.csv per log, in the same order",
             a.replay.len()
         ),
     };
@@ -106,15 +96,7 @@ pub fn run(a: EnergyArgs) -> Result<ExitCode> {
         for l in describe(&model, &rep) {
             eprintln!("{l}");
         }
-        eprintln!(
-            "{} stances judged: {} fitted, {} without two plausible flights, {} unlabelled, {} where the texture said another terrain; wrote {}",
-            rep.stances,
-            rep.used.iter().sum::<usize>(),
-            rep.no_flights,
-            rep.unlabelled,
-            rep.texture_disagrees,
-            a.out.display()
-        );
+        eprintln!("{}; wrote {}", rep.summary(), a.out.display());
     }
     Ok(ExitCode::SUCCESS)
 }

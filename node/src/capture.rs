@@ -35,6 +35,17 @@ pub enum CaptureError {
         /// What is wrong and the fix.
         reason: String,
     },
+    /// `--label` names no terrain of the catalog.
+    #[error("--label {name}: {reason}")]
+    Label {
+        /// The name given.
+        name: String,
+        /// What the catalog said.
+        reason: String,
+    },
+    /// Neither `--label` nor `--labels` was given.
+    #[error("give --label TERRAIN or --labels FILE.csv")]
+    NoLabels,
     /// A file of the capture cannot be read or written.
     #[error("cannot {what} {}: {source}{hint}", path.display())]
     Io {
@@ -235,6 +246,35 @@ pub fn parse_labels(
 }
 
 impl Labelling {
+    /// A command's `--label NAME` (every step that terrain) or else `--labels FILE` (a CSV of
+    /// time ranges, [`parse_labels`]); errors name the option and the fix.
+    pub fn from_args(
+        label: Option<&str>,
+        labels: Option<&Path>,
+        catalog: &TerrainCatalog,
+    ) -> Result<Self, CaptureError> {
+        match (label, labels) {
+            (Some(name), _) => {
+                catalog
+                    .known(name)
+                    .map(Labelling::All)
+                    .map_err(|reason| CaptureError::Label {
+                        name: name.to_string(),
+                        reason,
+                    })
+            }
+            (None, Some(p)) => {
+                let text = std::fs::read_to_string(p).map_err(|e| io("read", p, e))?;
+                Ok(Labelling::Ranges(parse_labels(
+                    &text,
+                    &p.display().to_string(),
+                    catalog,
+                )?))
+            }
+            (None, None) => Err(CaptureError::NoLabels),
+        }
+    }
+
     /// The terrain of a step on `foot` from `t0` (touchdown) to `t1` (sample), log clock.
     pub fn label(&self, foot: u8, t0: u64, t1: u64) -> Result<Terrain, Skip> {
         let ranges = match self {
@@ -698,5 +738,27 @@ mod tests {
                 .to_string();
             assert!(e.contains(want) && e.starts_with("labels.csv"), "{e}");
         }
+    }
+
+    #[test]
+    fn label_options_name_what_is_wrong() {
+        let cat = TerrainCatalog::paper();
+        assert!(matches!(
+            Labelling::from_args(Some("clay"), None, &cat),
+            Ok(Labelling::All(t)) if t == Terrain::CLAY
+        ));
+        let e = Labelling::from_args(Some("moon"), None, &cat)
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("--label moon: "), "{e}");
+        let e = Labelling::from_args(None, None, &cat)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("--label TERRAIN or --labels"), "{e}");
+        let missing = Path::new("/nonexistent/labels.csv");
+        let e = Labelling::from_args(None, Some(missing), &cat)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("cannot read /nonexistent/labels.csv"), "{e}");
     }
 }

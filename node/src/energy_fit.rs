@@ -81,6 +81,16 @@ pub struct EnergyFitReport {
 }
 
 impl EnergyFitReport {
+    /// One line for a person: what was judged, fitted and skipped.
+    pub fn summary(&self) -> String {
+        format!(
+            "{} stances judged: {} fitted, {}",
+            self.stances,
+            self.used.iter().sum::<usize>(),
+            self.skipped()
+        )
+    }
+
     fn skipped(&self) -> String {
         format!(
             "{} without two plausible flights, {} unlabelled, {} where the texture said otherwise",
