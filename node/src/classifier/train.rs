@@ -1156,12 +1156,19 @@ fn load_ranges(work: &[Vec<u16>], labels: &[usize], rate: f64) -> Vec<[f64; 2]> 
                 return [f64::NEG_INFINITY, f64::INFINITY];
             }
             v.sort_by(f64::total_cmp);
-            let tail = ((rate / 2.0 * v.len() as f64).floor() as usize).min(v.len() - 1);
-            let (lo, hi) = (v[tail], v[v.len() - 1 - tail]);
-            let margin = 0.25 * (hi - lo);
-            [lo - margin, hi + margin]
+            widened_band(v, rate)
         })
         .collect()
+}
+
+/// The band of sorted, non-empty `v` that lets `rate` of it out (half each side), widened by
+/// a quarter of its width each side: the next run is not the one the band was drawn on. The
+/// load check's ranges and the energy check's residual bands.
+pub fn widened_band(v: &[f64], rate: f64) -> [f64; 2] {
+    let tail = ((rate / 2.0 * v.len() as f64).floor() as usize).min(v.len() - 1);
+    let (lo, hi) = (v[tail], v[v.len() - 1 - tail]);
+    let margin = 0.25 * (hi - lo);
+    [lo - margin, hi + margin]
 }
 
 /// Moves a class's calibrated threshold `q` so that images DISTANCE_MARGIN farther from the

@@ -137,13 +137,10 @@ pub fn fit(stances: &[(usize, f64, f64)], n_classes: usize, rate: f64) -> Vec<Op
                 .map(|(a, b)| b - intercept - slope * a)
                 .collect();
             r.sort_by(f64::total_cmp);
-            let tail = ((rate / 2.0 * n as f64).floor() as usize).min(n - 1);
-            let (lo, hi) = (r[tail], r[n - 1 - tail]);
-            let margin = 0.25 * (hi - lo);
             Some(ReturnMap {
                 intercept_s: intercept,
                 slope,
-                residual_s: [lo - margin, hi + margin],
+                residual_s: crate::classifier::train::widened_band(&r, rate),
                 stances: n,
             })
         })
