@@ -771,8 +771,9 @@ fn damage(ctx: &Report) -> Result<(String, Curves), ReportError> {
          random order. Every stance is classified four ways on the same damaged image: without \
          repair, with the paper's per-image repair filter (section 8), with the node's \
          history-based repair (`node::health::LineHealth`: a line is dead after reading zero \
-         inside the footprint for {DEAD_AFTER_STANCES} stances in a row; it starts each sensor \
-         knowing nothing, so a sensor's first stances go unrepaired), and with the history-based \
+         inside the footprint, the image's and the model's training images', for \
+         {DEAD_AFTER_STANCES} stances in a row; it starts each sensor knowing no dead line, so \
+         a sensor's first stances go unrepaired), and with the history-based \
          repair and the model refitted to the dead lines learned so far (`train::refit`: the \
          stored training images get the same dead lines and repair, and PCA and kernel are \
          fitted again; the node does this when a foot's dead lines change). Percentages are of \

@@ -110,10 +110,12 @@ pub fn damage(
             }
             let mut order = test.to_vec();
             order.shuffle(&mut rng);
-            let mut health = node::health::LineHealth::new(wr, wc);
+            // The healthy sensor's footprint (the model's training images), as the node has it.
+            let footprint = || node::health::LineHealth::for_model(model);
+            let mut health = footprint();
             // The refit arm: its own history (the same images, so the same dead lines) and
             // the model refitted to the dead lines it has learned, as the node does.
-            let mut health_r = node::health::LineHealth::new(wr, wc);
+            let mut health_r = footprint();
             let mut adapted: Option<(Classifier, Vec<bool>, Vec<bool>)> = None;
             for &i in &order {
                 let img = &set.images[i];

@@ -10,7 +10,7 @@
 #   tests/vcan/run.sh              build, then run
 #   tests/vcan/run.sh --prepare    only the host's builds (the test binary, the release binary,
 #                                  the system tests' model); what the run needs goes to a file
-#   tests/vcan/run.sh --prepared   only the run, from that file: it calls no cargo, so
+#   tests/vcan/run.sh --prepared   only the run, from that file: it builds nothing, so
 #                                  ./test-all.sh builds the arm64 part beside it
 set -euo pipefail
 root=$(cd "$(dirname "$0")/../.." && pwd)
@@ -22,7 +22,12 @@ case "${1:-}" in
   --prepared) mode=prepared ;;
   *) echo "vcan suite: unknown argument \`$1\` (use --prepare, --prepared, or none)" >&2; exit 2 ;;
 esac
-target_dir=${CARGO_TARGET_DIR:-$root/target}
+# Wherever cargo puts its output (CARGO_TARGET_DIR, a config's build.target-dir, or ./target):
+# a stale binary must not run, and --prepared must find what --prepare wrote. `cargo metadata
+# --no-deps` only reads the manifests: it builds nothing and waits for no build beside it
+# (measured: 0.3 s while the arm64 build ran).
+target_dir=$(cargo metadata --no-deps --offline --format-version 1 |
+  python3 -c 'import json, sys; print(json.load(sys.stdin)["target_directory"])')
 work="$target_dir/vcan-system"
 prepared="$work/prepared.env"
 
@@ -36,12 +41,7 @@ prepare() {
   echo "vcan suite: building presrs (release) and training the system tests' G2 model (at $SECONDS s)"
   cargo build --release --quiet
   cargo build --release --quiet -p presrs-protocol --example foot_firmware
-  # Wherever cargo puts its output (CARGO_TARGET_DIR or ./target): a stale binary must not run.
-  target_dir=$(cargo metadata --no-deps --format-version 1 |
-    python3 -c 'import json, sys; print(json.load(sys.stdin)["target_directory"])')
   PRESRS_BIN="$target_dir/release/presrs"
-  work="$target_dir/vcan-system"
-  prepared="$work/prepared.env"
   if [ ! -s "$work/g2-model.json" ] || [ "$PRESRS_BIN" -nt "$work/g2-model.json" ]; then
     rm -rf "$work" && mkdir -p "$work"
     "$PRESRS_BIN" dataset dynamic --gait G2 --n 60 --seed 21 --out "$work/g2" >/dev/null

@@ -254,9 +254,17 @@ impl StancePipeline {
         });
         self.refitter.generation += 1;
         self.refitter.unavailable = false;
-        self.refitter.model = model;
+        self.refitter.model = model.clone();
+        // A foot's dead lines are judged against the footprint of the model's training images
+        // (see `crate::health`); a model file without them keeps the rule it had.
+        let health = || match model.as_deref() {
+            Some(m) => LineHealth::for_model(m),
+            None => LineHealth::new(rows, cols),
+        };
         self.feet.resize_with(self.cfg.feet as usize, || {
-            Foot::new(input, rows, cols, classes)
+            let mut f = Foot::new(input, rows, cols, classes);
+            f.health = health();
+            f
         });
         self.wrong_size_now = vec![false; self.feet.len()];
         self.said_size = None;
@@ -271,7 +279,7 @@ impl StancePipeline {
                 f.best_err = None;
             }
             if f.health.size() != (rows, cols) {
-                f.health = LineHealth::new(rows, cols);
+                f.health = health();
             }
             f.adapted = None;
             f.asked = None;
