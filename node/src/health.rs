@@ -127,10 +127,10 @@ impl LineHealth {
     /// Counts the summed image into the footprint.
     fn tally(&mut self) {
         for (n, &s) in self.row_loaded.iter_mut().zip(&self.row_sums) {
-            *n += u32::from(s > 0);
+            *n = n.saturating_add(u32::from(s > 0));
         }
         for (n, &s) in self.col_loaded.iter_mut().zip(&self.col_sums) {
-            *n += u32::from(s > 0);
+            *n = n.saturating_add(u32::from(s > 0));
         }
         self.stances = self.stances.saturating_add(1);
     }
