@@ -20,8 +20,9 @@
 //! dead. Measured on real plantar-pressure time series (the `jiku-data` package's SpeedPP2DS,
 //! 10 people, 600 stances, sent as a foot's CAN traffic by `scripts/speedpp2d_stream.py` and
 //! read by `presrs capture` and `presrs node --replay`): without it a healthy sensor showed dead
-//! lines in 523-585 of 600 stances (up to 25% damage) and the node refitted its model 53 times
-//! in 150 stances; with it, 0 (share 0.8; 0.5 left 1-29 stances with a dead line). On the
+//! lines in 451-570 of 600 captured stances (up to 25% damage) and the node refitted its model
+//! 53 times in 150 stances; with it, 0 (share 0.8; 0.5 left 1-29 stances with a dead line, in a
+//! replica of the rule over the captured images). On the
 //! simulator's foot, whose footprint fills the working image, every line carries load in
 //! 99.4-100% of the training images, so nothing there changes. The cost: a line dead since
 //! before the model was trained, or (without a model, as in `presrs capture`) since the first
