@@ -143,17 +143,7 @@ fn dynamic_stances_tell_clay_and_grass_but_not_wood_from_carpet() {
 fn speedpp2d_a_left_out_subject_is_unknown_more_often_than_not_and_known_ones_rarely() {
     let dir = std::env::temp_dir().join(format!("presrs-pp2d-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
-    let out = std::process::Command::new("python3")
-        .arg(common::root().join("scripts/speedpp2d.py"))
-        .arg("--out")
-        .arg(&dir)
-        .output()
-        .expect("python3");
-    assert!(
-        out.status.success(),
-        "scripts/speedpp2d.py failed (run scripts/install-deps.sh, which installs jiku-data): {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    common::jiku_script("speedpp2d.py", &[], &dir);
     let catalog = protocol::TerrainCatalog::load(Some(&dir.join("terrains.toml"))).unwrap();
     let (set, bad) = TrainingSet::load(&dir, &catalog, false).unwrap();
     assert!(bad.is_empty());

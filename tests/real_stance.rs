@@ -16,6 +16,8 @@ mod common;
 
 use std::process::Command;
 
+use node::capture::Labelling;
+
 fn presrs() -> Command {
     Command::new(env!("CARGO_BIN_EXE_presrs"))
 }
@@ -25,16 +27,10 @@ fn real_walking_stances_through_capture_train_and_the_node() {
     let dir = std::env::temp_dir().join(format!("presrs-pp2ds-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     // Images until 200 ms after touchdown (sampled at 150 ms): a tenth of the full logs.
-    let out = Command::new("python3")
-        .arg(common::root().join("scripts/speedpp2d_stream.py"))
-        .args(["--subjects", "0,1,2,3", "--image-ms", "200", "--out"])
-        .arg(&dir)
-        .output()
-        .expect("python3");
-    assert!(
-        out.status.success(),
-        "scripts/speedpp2d_stream.py failed (run scripts/install-deps.sh, which installs jiku-data): {}",
-        String::from_utf8_lossy(&out.stderr)
+    common::jiku_script(
+        "speedpp2d_stream.py",
+        &["--subjects", "0,1,2,3", "--image-ms", "200"],
+        &dir,
     );
     // Mid-stance: 70 ms after a walking foot's first contact only the heel is down.
     let config = dir.join("node.toml");
@@ -97,19 +93,9 @@ fn real_walking_stances_through_capture_train_and_the_node() {
     );
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!stderr.contains("refitted"), "{stderr}");
-    let labels: Vec<(f64, f64, String)> = std::fs::read_to_string(dir.join("trials15-19.csv"))
-        .unwrap()
-        .lines()
-        .skip(1)
-        .map(|l| {
-            let f: Vec<&str> = l.split(',').collect();
-            (
-                f[0].parse().unwrap(),
-                f[1].parse().unwrap(),
-                f[2].to_string(),
-            )
-        })
-        .collect();
+    // The labels as `presrs capture` reads them.
+    let catalog = protocol::TerrainCatalog::load(Some(&dir.join("terrains.toml"))).unwrap();
+    let labels = Labelling::from_args(None, Some(&dir.join("trials15-19.csv")), &catalog).unwrap();
     let (mut right, mut unknown, mut wrong) = (0, 0, 0);
     let steps: Vec<serde_json::Value> = String::from_utf8_lossy(&out.stdout)
         .lines()
@@ -120,14 +106,14 @@ fn real_walking_stances_through_capture_train_and_the_node() {
         assert_eq!(s["damage_pct"].as_f64(), Some(0.0), "{s}");
         // No FlagNoSample, no FlagNoContact: every stance had its image.
         assert_eq!(s["flags"].as_u64().unwrap() & (4 | 16), 0, "{s}");
-        let t = s["t_us"].as_u64().unwrap() as f64 * 1e-6;
+        let t = s["t_us"].as_u64().unwrap();
         let truth = labels
-            .iter()
-            .find(|(a, b, _)| (*a..=*b).contains(&t))
-            .map(|l| l.2.as_str());
+            .label(0, t, t)
+            .ok()
+            .map(|terrain| terrain.name().to_string());
         match s["terrain"].as_str() {
             Some("unknown") => unknown += 1,
-            name if name == truth => right += 1,
+            name if name == truth.as_deref() => right += 1,
             _ => wrong += 1,
         }
     }

@@ -179,6 +179,23 @@ pub fn root() -> std::path::PathBuf {
     std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
+/// Runs `scripts/<script>` (one that reads the `jiku-data` package) with `args` and `--out
+/// out`; its failure fails the test (never a skip).
+pub fn jiku_script(script: &str, args: &[&str], out: &std::path::Path) {
+    let o = std::process::Command::new("python3")
+        .arg(root().join("scripts").join(script))
+        .args(args)
+        .arg("--out")
+        .arg(out)
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run python3 scripts/{script}: {e}"));
+    assert!(
+        o.status.success(),
+        "scripts/{script} failed (run scripts/install-deps.sh, which installs jiku-data): {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
 /// Runs the Python interop client; its failure fails the test (never a skip).
 pub fn python(args: &[&str]) -> String {
     let script = root().join("tests/interop/cantools_check.py");

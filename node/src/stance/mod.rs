@@ -100,7 +100,7 @@ impl Foot {
         self.best_rx_us = rx_us;
     }
 
-    fn new(input: usize, rows: usize, cols: usize, classes: usize) -> Self {
+    fn new(input: usize, classes: usize, health: LineHealth) -> Self {
         Self {
             switch: Switch::default(),
             touchdown_us: 0,
@@ -116,7 +116,7 @@ impl Foot {
             used: 0,
             no_contact: false,
             repaired: false,
-            health: LineHealth::new(rows, cols),
+            health,
             adapted: None,
             asked: None,
             last_image_us: None,
@@ -262,9 +262,7 @@ impl StancePipeline {
             None => LineHealth::new(rows, cols),
         };
         self.feet.resize_with(self.cfg.feet as usize, || {
-            let mut f = Foot::new(input, rows, cols, classes);
-            f.health = health();
-            f
+            Foot::new(input, classes, health())
         });
         self.wrong_size_now = vec![false; self.feet.len()];
         self.said_size = None;
