@@ -51,17 +51,27 @@ pub fn run(a: CaptureArgs) -> Result<ExitCode> {
         node::NodeConfig::load_or_default(a.config.as_deref(), &a.terrains).context("--config")?;
     let catalog = cfg.catalog()?;
     let labelling = Labelling::from_args(a.label.as_deref(), a.labels.as_deref(), &catalog)?;
+    // A log is checked to its end before the set is opened: a bad line fails the capture with
+    // nothing created, and the records then stream (a long log is not held in memory).
+    let log = a
+        .replay
+        .as_deref()
+        .map(protocol::candump::LogFile::check)
+        .transpose()?;
     let mut service = CaptureService::new(
         Capture::new(cfg, labelling),
         CaptureSet::open(&a.out)?,
         String::new(),
     );
-    if let Some(log) = &a.replay {
+    if let Some(file) = &log {
         service.source = a.source.clone().unwrap_or_else(|| {
-            log.file_name()
+            file.path()
+                .file_name()
                 .map_or("log".into(), |n| n.to_string_lossy().to_string())
         });
-        service.replay(&protocol::candump::read_log_file(log)?);
+        let mut records = file.records()?;
+        service.replay(&mut records);
+        records.finish()?;
     } else if let Some(iface) = &a.iface {
         let signals = Signals::install()?;
         let start = std::time::SystemTime::now()

@@ -61,21 +61,27 @@ pub fn run(a: EnergyArgs) -> Result<ExitCode> {
             a.replay.len()
         ),
     };
+    // Every log checked to its end before the fit, then each streamed in turn.
     let logs = a
         .replay
         .iter()
         .map(|p| {
-            protocol::candump::read_log_file(p).with_context(|| format!("--replay {}", p.display()))
+            protocol::candump::LogFile::check(p)
+                .with_context(|| format!("--replay {}", p.display()))
         })
         .collect::<Result<Vec<_>>>()?;
+    let mut streams = logs
+        .iter()
+        .map(|l| l.records())
+        .collect::<Result<Vec<_>, _>>()?;
     let labels: Vec<_> = labellings
         .iter()
         .map(|l| move |foot: u8, t0: u64, t1: u64| l.label(foot, t0, t1))
         .collect();
-    let runs: Vec<EnergyRun> = a
+    let mut runs: Vec<EnergyRun> = a
         .replay
         .iter()
-        .zip(&logs)
+        .zip(&mut streams)
         .zip(&labels)
         .map(|((p, records), label)| EnergyRun {
             name: p.display().to_string(),
@@ -83,7 +89,11 @@ pub fn run(a: EnergyArgs) -> Result<ExitCode> {
             label,
         })
         .collect();
-    let rep = fit_energy(&cfg, &mut model, &runs)?;
+    let rep = fit_energy(&cfg, &mut model, &mut runs)?;
+    drop(runs);
+    for s in streams {
+        s.finish()?;
+    }
     model
         .save(&a.out)
         .with_context(|| format!("--out {}", a.out.display()))?;

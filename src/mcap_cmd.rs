@@ -45,19 +45,23 @@ pub fn run(a: McapArgs) -> Result<ExitCode> {
         }
         None => None,
     };
-    let records = protocol::candump::read_log_file(&a.log)?;
+    // Checked to its end before the recording is created, then streamed.
+    let file = protocol::candump::LogFile::check(&a.log)?;
+    let mut records = file.records()?;
     let mut out = McapFile::create(&a.out).context("--out")?;
     let mut rec = Recorder::new(ids, catalog);
-    lab::replay::log_to_recording(&records, node.as_mut(), &mut rec, &mut out).context("--out")?;
+    lab::replay::log_to_recording(&mut records, node.as_mut(), &mut rec, &mut out)
+        .context("--out")?;
+    records.finish()?;
     out.finish().context("--out")?;
     let s = rec.stats();
     if a.json {
         println!(
             "{}",
-            serde_json::json!({ "frames": records.len(), "out": a.out, "stats": s })
+            serde_json::json!({ "frames": file.records, "out": a.out, "stats": s })
         );
     }
-    eprintln!("{} frames -> {}: {s}", records.len(), a.out.display());
+    eprintln!("{} frames -> {}: {s}", file.records, a.out.display());
     Ok(ExitCode::SUCCESS)
 }
 

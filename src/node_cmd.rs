@@ -99,15 +99,18 @@ pub fn run(a: NodeArgs) -> Result<ExitCode> {
 
 /// The log through the node on the log's own clock ([`node::replay`]), each decision printed.
 fn replay(mut node: NodeService, log: &Path, json: bool) -> Result<ExitCode> {
-    let records = protocol::candump::read_log_file(log)?;
+    // Checked to its end before the first decision is printed, then streamed.
+    let file = protocol::candump::LogFile::check(log)?;
+    let mut records = file.records()?;
     let catalog = node.catalog().clone();
-    let summary = node::replay::replay_log(&mut node, &records, &mut |t_us, foot, tc| {
+    let summary = node::replay::replay_log(&mut node, &mut records, &mut |t_us, foot, tc| {
         if json {
             println!("{}", node::replay::class_json(t_us, foot, tc, &catalog));
         } else {
             println!("{}", node::replay::class_line(t_us, foot, tc, &catalog));
         }
     });
+    records.finish()?;
     eprintln!("{summary}");
     Ok(ExitCode::SUCCESS)
 }

@@ -236,3 +236,34 @@ fn capture_fails(log: &Path, terrain: &str, out: &Path) -> String {
     assert!(!o.status.success());
     String::from_utf8_lossy(&o.stderr).to_string()
 }
+
+/// Logs are streamed (an hours-long log is not held in memory), yet a line that is bad only at
+/// the end of a long log still stops the capture before it starts: no set created, no image
+/// written; the error names the file and the line. (`node --replay` and `mcap`: their tests.)
+#[test]
+fn a_log_bad_at_its_end_writes_nothing() {
+    let dir = tmp("capture-bad-end");
+    let log = sim_log(&dir, "wood", Some(&track(&dir, "wood")), 8, 3);
+    let good = std::fs::read_to_string(&log).unwrap();
+    let n = good.lines().count();
+    assert!(n > 5_000, "{n} lines");
+    let bad = dir.join("bad-end.log");
+    std::fs::write(&bad, format!("{good}(1700009999.000000) can0 123#0\n")).unwrap();
+
+    let out = dir.join("set");
+    let err = capture_fails(&bad, "wood", &out);
+    assert!(
+        err.contains("bad-end.log") && err.contains(&format!("line {}", n + 1)),
+        "{err}"
+    );
+    assert!(!out.exists(), "nothing written from a bad log");
+
+    // The same log without its bad line is captured.
+    let o = common::output_ok(
+        presrs()
+            .args(["capture", "--replay", s(&log), "--label", "wood"])
+            .args(["--out", s(&out), "--json"]),
+    );
+    assert!(json(&o)["written"].as_u64().unwrap() >= 10);
+    let _ = std::fs::remove_dir_all(&dir);
+}

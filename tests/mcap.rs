@@ -236,6 +236,7 @@ fn bad_paths_and_logs_are_named_and_a_live_run_goes_on_without_its_recording() {
     );
     assert!(!ok);
     assert!(err.contains("bad.log") && err.contains("line 2"), "{err}");
+    assert!(!dir.join("x.mcap").exists(), "no recording from a bad log");
 
     // Live: the run goes on and ends well; the log names the path and why.
     for (out, says) in [

@@ -82,19 +82,29 @@ fn replay_prints_the_pipelines_decisions_with_the_logs_timestamps() {
         }
     }
 
-    // A damaged log: the error names the line and the expected format, nothing is printed.
+    // A damaged log, at its start or only at its end (the log streams, but is checked to its
+    // end first): the error names the line and the expected format, nothing is printed.
+    let text = std::fs::read_to_string(&log).unwrap();
+    let n = text.lines().count();
     let bad = dir.join("bad.log");
-    let mut text = std::fs::read_to_string(&log).unwrap();
-    text.insert_str(0, "(1.0) vcan0 12Z#00\n");
-    std::fs::write(&bad, text).unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_presrs"))
-        .args(["node", "--replay", bad.to_str().unwrap()])
-        .args(["--model", model_path.to_str().unwrap()])
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("line 1") && err.contains("bad.log"), "{err}");
+    for (damaged, line) in [
+        (format!("(1.0) vcan0 12Z#00\n{text}"), 1),
+        (format!("{text}(1.0) vcan0 12Z#00\n"), n + 1),
+    ] {
+        std::fs::write(&bad, damaged).unwrap();
+        let out = Command::new(env!("CARGO_BIN_EXE_presrs"))
+            .args(["node", "--replay", bad.to_str().unwrap(), "--json"])
+            .args(["--model", model_path.to_str().unwrap()])
+            .output()
+            .unwrap();
+        assert!(!out.status.success());
+        assert!(out.stdout.is_empty(), "decisions printed from a bad log");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            err.contains(&format!("line {line}")) && err.contains("bad.log"),
+            "{err}"
+        );
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 

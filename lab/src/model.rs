@@ -125,15 +125,16 @@ pub fn fit_energy_on_sim(
         &protocol::TerrainCatalog::paper(),
     )?);
     let label = |foot: u8, t0: u64, t1: u64| labelling.label(foot, t0, t1);
-    let runs = [node::energy_fit::EnergyRun {
+    let mut records = records.into_iter();
+    let mut runs = [node::energy_fit::EnergyRun {
         name: format!("closed-loop simulator run, seed {seed}"),
-        records: &records,
+        records: &mut records,
         label: &label,
     }];
     Ok(node::energy_fit::fit_energy(
         &NodeConfig::default(),
         m,
-        &runs,
+        &mut runs,
     )?)
 }
 

@@ -478,9 +478,12 @@ impl CaptureService {
 
 impl CaptureService {
     /// Feeds a log's records until the capture is done (a `--replay`).
-    pub fn replay(&mut self, records: &[protocol::candump::LogRecord]) {
+    pub fn replay<R: std::borrow::Borrow<protocol::candump::LogRecord>>(
+        &mut self,
+        records: impl IntoIterator<Item = R>,
+    ) {
         for r in records {
-            self.feed(&r.stamped);
+            self.feed(&r.borrow().stamped);
             if self.failed.is_some() {
                 break;
             }

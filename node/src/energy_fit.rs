@@ -54,8 +54,8 @@ pub enum EnergyFitError {
 pub struct EnergyRun<'a> {
     /// The run's name (its log's path), for messages.
     pub name: String,
-    /// The log's records.
-    pub records: &'a [LogRecord],
+    /// The log's records, streamed (a [`protocol::candump::LogFile`]'s, or a slice's).
+    pub records: &'a mut dyn Iterator<Item = LogRecord>,
     /// The terrain of each stance from its foot and its span in the log's time (touchdown to
     /// the next touchdown): a capture's [`Labelling::label`], or a simulator's truth.
     pub label: &'a dyn Fn(u8, u64, u64) -> Result<Terrain, Skip>,
@@ -104,7 +104,7 @@ impl EnergyFitReport {
 pub fn fit_energy(
     cfg: &NodeConfig,
     model: &mut Model,
-    runs: &[EnergyRun],
+    runs: &mut [EnergyRun],
 ) -> Result<EnergyFitReport, EnergyFitError> {
     if runs.is_empty() {
         return Err(EnergyFitError::NoRuns);
@@ -119,10 +119,10 @@ pub fn fit_energy(
     plain.energy = None;
     let mut cfg = cfg.clone();
     cfg.refit = cfg.refit.reproducible();
-    for run in runs {
+    for run in runs.iter_mut() {
         let mut p = StancePipeline::new(cfg.clone(), Some(plain.clone()));
         let mut last = vec![None; cfg.feet as usize];
-        for r in run.records {
+        for r in &mut *run.records {
             p.tick(r.stamped.t_us, &mut |_, _| {});
             p.on_frame(&r.stamped, &mut |_, _| {});
             for foot in 0..cfg.feet {

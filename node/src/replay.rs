@@ -8,6 +8,8 @@
 use std::fmt;
 
 use protocol::TerrainCatalog;
+use std::borrow::Borrow;
+
 use protocol::candump::LogRecord;
 use protocol::messages::TerrainClass;
 use protocol::tactile::ReassemblyStats;
@@ -51,21 +53,26 @@ impl fmt::Display for ReplaySummary {
 }
 
 /// Replays `records` through `node`, handing each TerrainClass (log time, foot, decision) to
-/// `on_class`.
-pub fn replay_log(
+/// `on_class`. The records stream: a [`protocol::candump::LogFile`]'s or a slice's.
+pub fn replay_log<R: Borrow<LogRecord>>(
     node: &mut NodeService,
-    records: &[LogRecord],
+    records: impl IntoIterator<Item = R>,
     on_class: &mut impl FnMut(u64, u8, &TerrainClass),
 ) -> ReplaySummary {
-    node.replay(records.iter().map(|r| &r.stamped), &mut |t_us, o| {
-        if let Output::Class { foot, class } = o {
-            on_class(t_us, foot, &class);
-        }
-    });
-    let t = |r: Option<&LogRecord>| r.map_or(0, |r| r.stamped.t_us);
+    let (mut frames, mut span) = (0, None::<(u64, u64)>);
+    for r in records {
+        let st = &r.borrow().stamped;
+        frames += 1;
+        span = Some(span.map_or((st.t_us, st.t_us), |(a, _)| (a, st.t_us)));
+        node.replay(std::iter::once(st), &mut |t_us, o| {
+            if let Output::Class { foot, class } = o {
+                on_class(t_us, foot, &class);
+            }
+        });
+    }
     ReplaySummary {
-        frames: records.len(),
-        span_us: t(records.last()).saturating_sub(t(records.first())),
+        frames,
+        span_us: span.map_or(0, |(a, b)| b.saturating_sub(a)),
         counters: node.counters(),
         reassembly: node.reassembly_stats(),
     }
