@@ -69,6 +69,10 @@ pub struct DemoArgs {
     /// replays it, `presrs mcap` and python-can read it.
     #[arg(long, value_name = "FILE", conflicts_with = "realtime")]
     pub candump: Option<PathBuf>,
+    /// Mass the hopper carries, kg (0 to 2; its body is 2 kg): a load the demo model and its
+    /// energy maps were not made with (the controller is not told either).
+    #[arg(long, value_name = "KG", default_value_t = 0.0)]
+    pub payload: f64,
     /// With --candump: the true terrain of every step as a labels CSV in the log's timestamps
     /// (`start_s,end_s,terrain,foot`, as `presrs sim --truth` writes it), for `presrs capture
     /// --labels` and `presrs energy --labels`.
@@ -78,6 +82,7 @@ pub struct DemoArgs {
 
 pub fn run(a: DemoArgs) -> Result<ExitCode> {
     sim::check_damage(a.damage)?;
+    let payload_kg = sim::check_payload(a.payload)?;
     let catalog = a.terrains.catalog()?;
     let track =
         sim::runner::Track::load_or_default(a.track.as_deref(), &catalog).context("--track")?;
@@ -122,6 +127,7 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
         link_down: None,
         leg,
         leg_stall: None,
+        payload_kg,
     };
     let show = !a.json;
     let live_recording = a.live.mcap.is_some() || a.live.foxglove.is_some();

@@ -66,6 +66,10 @@ pub struct SimArgs {
     /// built-in prismatic leg on that protocol's motors.
     #[arg(long, value_name = "FILE", requires = "leg")]
     pub leg_config: Option<PathBuf>,
+    /// Mass the hopper carries, kg (0 to 2; its body is 2 kg): the robot's run with a load its
+    /// model and energy maps were not made with.
+    #[arg(long, value_name = "KG", default_value_t = 0.0)]
+    pub payload: f64,
     /// Fault drill for `--leg`: the length joint's driver goes silent at this robot time (s).
     #[arg(long, value_name = "SECONDS", requires = "leg")]
     pub leg_silent_at: Option<f64>,
@@ -103,6 +107,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
             .transpose()
             .context("--leg-config")?,
         leg_silent_at_s: a.leg_silent_at,
+        payload_kg: sim::check_payload(a.payload)?,
         ..Default::default()
     };
     let ids = cfg.ids.clone();

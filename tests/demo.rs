@@ -332,5 +332,20 @@ fn energy_is_fitted_from_a_recorded_run_and_bad_inputs_are_named() {
     std::fs::write(&bad, broken.to_string()).unwrap();
     let e = fails(&["demo", "--steps", "5", "--model", &s(&bad)]);
     assert!(e.contains("energy") && e.contains("presrs energy"), "{e}");
+    // A payload the hopper cannot carry is refused naming the option and the range.
+    for args in [
+        &["demo", "--steps", "5", "--payload", "3"][..],
+        &[
+            "sim",
+            "--duration",
+            "1",
+            "--log",
+            "/dev/null",
+            "--payload=-0.5",
+        ][..],
+    ] {
+        let e = fails(args);
+        assert!(e.contains("--payload") && e.contains("0..=2"), "{e}");
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }

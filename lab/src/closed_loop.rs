@@ -54,6 +54,9 @@ pub struct LoopParams<'a> {
     /// stalls a process for 100 ms and more); the frames that come meanwhile wait in its
     /// socket and are read when it runs again.
     pub leg_stall: Option<(u64, u64)>,
+    /// Mass the simulated hopper carries, kg (`presrs demo --payload`): a load the model and
+    /// its energy maps were not made with.
+    pub payload_kg: f64,
 }
 
 impl<'a> LoopParams<'a> {
@@ -71,6 +74,7 @@ impl<'a> LoopParams<'a> {
             link_down: None,
             leg: None,
             leg_stall: None,
+            payload_kg: 0.0,
         }
     }
 }
@@ -243,6 +247,7 @@ pub fn run_recorded(
         sim_cfg.gait = g;
     }
     sim_cfg.faults.initial_damage_pct = p.damage_pct;
+    sim_cfg.payload_kg = p.payload_kg;
     sim_cfg.leg = p.leg.clone();
     let mut bridge = p.leg.clone().map(|l| leg::LegService::new(l, false));
     let mut node_cfg = p.node.clone();
@@ -432,6 +437,7 @@ pub fn run_realtime(
         ..Default::default()
     };
     sim_cfg.faults.initial_damage_pct = p.damage_pct;
+    sim_cfg.payload_kg = p.payload_kg;
     let catalog = node.catalog().clone();
     let report = sim::service::run(
         sim_cfg,

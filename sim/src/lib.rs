@@ -56,6 +56,24 @@ pub enum FootError {
     /// Not a percentage.
     #[error("--damage {0}: expected a percentage in 0..=100")]
     Damage(f64),
+    /// Not a payload the hopper can carry.
+    #[error(
+        "--payload {0}: expected kilograms in 0..={MAX_PAYLOAD_KG} (the body is 2.0 kg; 0 carries nothing)"
+    )]
+    Payload(f64),
+}
+
+/// The most payload a simulated hopper carries, kg: as much again as its body. At that its
+/// stance lasts sqrt(2) times as long (the spring's period), far past the sample time.
+pub const MAX_PAYLOAD_KG: f64 = 2.0;
+
+/// A payload (`--payload KG`) checked to lie in 0..=[`MAX_PAYLOAD_KG`].
+pub fn check_payload(kg: f64) -> Result<f64, FootError> {
+    if (0.0..=MAX_PAYLOAD_KG).contains(&kg) {
+        Ok(kg)
+    } else {
+        Err(FootError::Payload(kg))
+    }
 }
 
 impl FootOptions {
