@@ -16,9 +16,10 @@ use protocol::tactile::ReassemblyStats;
 
 use crate::service::{NodeService, Output};
 use crate::stance::Counters;
+use crate::stance::energy::EnergyObservation;
 
 /// What a replay did: the records read and what the node made of them.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct ReplaySummary {
     /// Records replayed.
     pub frames: usize,
@@ -28,6 +29,26 @@ pub struct ReplaySummary {
     pub counters: Counters,
     /// Its tactile reassembly's.
     pub reassembly: ReassemblyStats,
+    /// Per terrain of the model that has a return map: its stances judged by the energy check
+    /// and those outside the map. Empty for a model without maps.
+    pub energy: Vec<EnergyTally>,
+}
+
+/// One terrain's stances against its return map over a replay.
+///
+/// On a run over ground known to be the model's terrains, a terrain with more stances outside
+/// than the model's unknown rate has a map that no longer fits the robot: fit the maps again
+/// (`presrs energy`). What moved them on the simulator: a payload put clay's stances outside
+/// and left the others' in (docs/real-robot.md), as sand does; so a run over unknown ground
+/// cannot tell the two apart.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct EnergyTally {
+    /// The terrain's name.
+    pub terrain: String,
+    /// Stances the texture gave this terrain with both flights hops (judged against the map).
+    pub judged: u32,
+    /// Of them, those whose flight after lay outside the map's band.
+    pub outside: u32,
 }
 
 impl fmt::Display for ReplaySummary {
@@ -48,7 +69,15 @@ impl fmt::Display for ReplaySummary {
             r.crc_failures,
             r.incomplete,
             c.decode_errors
-        )
+        )?;
+        if !self.energy.is_empty() {
+            write!(f, "; energy check, stances outside their terrain's map:")?;
+            for (i, t) in self.energy.iter().enumerate() {
+                let sep = if i == 0 { " " } else { ", " };
+                write!(f, "{sep}{} {}/{}", t.terrain, t.outside, t.judged)?;
+            }
+        }
+        Ok(())
     }
 }
 
@@ -60,6 +89,7 @@ pub fn replay_log<R: Borrow<LogRecord>>(
     on_class: &mut impl FnMut(u64, u8, &TerrainClass),
 ) -> ReplaySummary {
     let (mut frames, mut span) = (0, None::<(u64, u64)>);
+    let mut energy = EnergyCount::new(node);
     for r in records {
         let st = &r.borrow().stamped;
         frames += 1;
@@ -69,12 +99,74 @@ pub fn replay_log<R: Borrow<LogRecord>>(
                 on_class(t_us, foot, &class);
             }
         });
+        energy.look(node);
     }
     ReplaySummary {
         frames,
         span_us: span.map_or(0, |(a, b)| b.saturating_sub(a)),
         counters: node.counters(),
         reassembly: node.reassembly_stats(),
+        energy: energy.tally(node),
+    }
+}
+
+/// Each foot's judged stances against the model's maps, as the replay goes by.
+struct EnergyCount {
+    last: Vec<Option<EnergyObservation>>,
+    judged: Vec<u32>,
+    outside: Vec<u32>,
+}
+
+impl EnergyCount {
+    fn new(node: &NodeService) -> Self {
+        let n = node.model().map_or(0, |m| m.classes.len());
+        Self {
+            last: vec![None; node.feet() as usize],
+            judged: vec![0; n],
+            outside: vec![0; n],
+        }
+    }
+
+    fn look(&mut self, node: &NodeService) {
+        let Some(maps) = node.model().and_then(|m| m.energy.as_deref()) else {
+            return;
+        };
+        for (foot, last) in self.last.iter_mut().enumerate() {
+            let o = node.energy_observation(foot as u8);
+            if o.is_none() || o == *last {
+                continue;
+            }
+            *last = o;
+            let Some((k, (b, a))) = o.and_then(|o| Some((o.class?, o.flights_s()?))) else {
+                continue;
+            };
+            let (Some(Some(map)), Some(j)) = (maps.get(k), self.judged.get_mut(k)) else {
+                continue;
+            };
+            *j += 1;
+            if !map.passes(b, a) {
+                self.outside[k] += 1;
+            }
+        }
+    }
+
+    fn tally(self, node: &NodeService) -> Vec<EnergyTally> {
+        let Some(m) = node.model() else {
+            return Vec::new();
+        };
+        let Some(maps) = m.energy.as_deref() else {
+            return Vec::new();
+        };
+        m.classes
+            .iter()
+            .enumerate()
+            .filter(|&(k, _)| maps.get(k).is_some_and(Option::is_some))
+            .map(|(k, c)| EnergyTally {
+                terrain: c.name.clone(),
+                judged: self.judged[k],
+                outside: self.outside[k],
+            })
+            .collect()
     }
 }
 

@@ -359,6 +359,17 @@ impl NodeService {
         self.pipeline.model()
     }
 
+    /// What the foot's latest judged stance did to the hop (see
+    /// [`crate::stance::StancePipeline::energy_observation`]); `None` for a foot it does not have.
+    pub fn energy_observation(&self, foot: u8) -> Option<crate::stance::energy::EnergyObservation> {
+        self.pipeline.energy_observation(foot)
+    }
+
+    /// Feet the node serves.
+    pub fn feet(&self) -> u8 {
+        self.pipeline.feet()
+    }
+
     /// The counters of the runner it runs under, which NodeStatus reports (its state, bus
     /// errors): pass them as [`RunOptions::link`].
     pub fn link_stats(&self) -> Arc<LinkStats> {

@@ -207,6 +207,11 @@ impl StancePipeline {
         p
     }
 
+    /// Feet served (the config's `feet`).
+    pub fn feet(&self) -> u8 {
+        self.cfg.feet
+    }
+
     /// What the foot's latest judged stance did to the hop (the flights either side of it and
     /// its texture class); a stance is judged at the touchdown after it.
     pub fn energy_observation(&self, foot: u8) -> Option<EnergyObservation> {
