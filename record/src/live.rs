@@ -162,6 +162,9 @@ pub fn listen(
             let opts = RunOptions {
                 tick: Duration::from_millis(50),
                 tap: Some(tap),
+                // The process stops this listener when it is done: its last frames are in
+                // the socket by then, not yet read.
+                drain_on_stop: Some(Duration::from_millis(500)),
                 ..RunOptions::default()
             };
             component::run_opened(&mut Listener, bus, &source, &opts, &stop);
