@@ -891,7 +891,7 @@ fn node_bench_on_vcan_reports_latency_cpu_and_memory() {
     );
     assert!(
         answered * 10 >= steps * 9,
-        "{answered} TerrainClass for {steps} steps"
+        "{answered} TerrainClass for {steps} steps: {j}"
     );
     for k in ["median", "p99"] {
         assert!(j["latency_us"][k].as_f64().is_some(), "latency {k}: {j}");
