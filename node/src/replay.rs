@@ -16,7 +16,6 @@ use protocol::tactile::ReassemblyStats;
 
 use crate::service::{NodeService, Output};
 use crate::stance::Counters;
-use crate::stance::energy::EnergyObservation;
 
 /// What a replay did: the records read and what the node made of them.
 #[derive(Clone, Debug, PartialEq)]
@@ -89,7 +88,6 @@ pub fn replay_log<R: Borrow<LogRecord>>(
     on_class: &mut impl FnMut(u64, u8, &TerrainClass),
 ) -> ReplaySummary {
     let (mut frames, mut span) = (0, None::<(u64, u64)>);
-    let mut energy = EnergyCount::new(node);
     for r in records {
         let st = &r.borrow().stamped;
         frames += 1;
@@ -99,74 +97,13 @@ pub fn replay_log<R: Borrow<LogRecord>>(
                 on_class(t_us, foot, &class);
             }
         });
-        energy.look(node);
     }
     ReplaySummary {
         frames,
         span_us: span.map_or(0, |(a, b)| b.saturating_sub(a)),
         counters: node.counters(),
         reassembly: node.reassembly_stats(),
-        energy: energy.tally(node),
-    }
-}
-
-/// Each foot's judged stances against the model's maps, as the replay goes by.
-struct EnergyCount {
-    last: Vec<Option<EnergyObservation>>,
-    judged: Vec<u32>,
-    outside: Vec<u32>,
-}
-
-impl EnergyCount {
-    fn new(node: &NodeService) -> Self {
-        let n = node.model().map_or(0, |m| m.classes.len());
-        Self {
-            last: vec![None; node.feet() as usize],
-            judged: vec![0; n],
-            outside: vec![0; n],
-        }
-    }
-
-    fn look(&mut self, node: &NodeService) {
-        let Some(maps) = node.model().and_then(|m| m.energy.as_deref()) else {
-            return;
-        };
-        for (foot, last) in self.last.iter_mut().enumerate() {
-            let o = node.energy_observation(foot as u8);
-            if o.is_none() || o == *last {
-                continue;
-            }
-            *last = o;
-            let Some((k, (b, a))) = o.and_then(|o| Some((o.class?, o.flights_s()?))) else {
-                continue;
-            };
-            let (Some(Some(map)), Some(j)) = (maps.get(k), self.judged.get_mut(k)) else {
-                continue;
-            };
-            *j += 1;
-            if !map.passes(b, a) {
-                self.outside[k] += 1;
-            }
-        }
-    }
-
-    fn tally(self, node: &NodeService) -> Vec<EnergyTally> {
-        let Some(m) = node.model() else {
-            return Vec::new();
-        };
-        let Some(maps) = m.energy.as_deref() else {
-            return Vec::new();
-        };
-        m.classes
-            .iter()
-            .enumerate()
-            .filter(|&(k, _)| maps.get(k).is_some_and(Option::is_some))
-            .map(|(k, c)| EnergyTally {
-                terrain: c.name.clone(),
-                judged: self.judged[k],
-                outside: self.outside[k],
-            })
-            .collect()
+        energy: node.energy_tally(),
     }
 }
 

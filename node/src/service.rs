@@ -38,6 +38,7 @@ use thiserror::Error;
 use crate::classifier::Model;
 use crate::classifier::model::{CatalogMismatch, ModelError};
 use crate::config::NodeConfig;
+use crate::replay::EnergyTally;
 use crate::stance::{Counters, StancePipeline};
 
 /// Why the node cannot start, or cannot take a model.
@@ -359,15 +360,24 @@ impl NodeService {
         self.pipeline.model()
     }
 
-    /// What the foot's latest judged stance did to the hop (see
-    /// [`crate::stance::StancePipeline::energy_observation`]); `None` for a foot it does not have.
-    pub fn energy_observation(&self, foot: u8) -> Option<crate::stance::energy::EnergyObservation> {
-        self.pipeline.energy_observation(foot)
-    }
-
-    /// Feet the node serves.
-    pub fn feet(&self) -> u8 {
-        self.pipeline.feet()
+    /// Per terrain of the model that has a return map: its stances judged by the energy check
+    /// and those outside the map, since the model's classes were installed.
+    pub fn energy_tally(&self) -> Vec<EnergyTally> {
+        let Some(m) = self.model() else {
+            return Vec::new();
+        };
+        let maps = m.energy.as_deref().unwrap_or(&[]);
+        m.classes
+            .iter()
+            .zip(self.pipeline.energy_tally())
+            .enumerate()
+            .filter(|&(k, _)| maps.get(k).is_some_and(Option::is_some))
+            .map(|(_, (c, t))| EnergyTally {
+                terrain: c.name.clone(),
+                judged: t[0],
+                outside: t[1],
+            })
+            .collect()
     }
 
     /// The counters of the runner it runs under, which NodeStatus reports (its state, bus

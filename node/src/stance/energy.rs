@@ -173,7 +173,8 @@ impl Balance {
     }
 
     /// A touchdown at `at_us` (foot clock), received at `rx_us`: the stance before it (step
-    /// `step`) is judged against `maps`, and a new stance begins.
+    /// `step`) is judged against `maps`, and a new stance begins. Returns the judgement, when
+    /// there was one: the stance's class and whether it lay outside that class's map.
     pub fn touchdown(
         &mut self,
         foot: u8,
@@ -181,8 +182,9 @@ impl Balance {
         at_us: u32,
         rx_us: u64,
         maps: Option<&[Option<ReturnMap>]>,
-    ) {
+    ) -> Option<(usize, bool)> {
         let after = self.liftoff_us.map(|l| at_us.wrapping_sub(l));
+        let mut judged = None;
         if self.started {
             let o = EnergyObservation {
                 foot,
@@ -199,13 +201,13 @@ impl Balance {
                     },
                 ),
             };
-            self.suspect = match (o.class, o.flights_s()) {
+            judged = match (o.class, o.flights_s()) {
                 (Some(k), Some((b, a))) => maps
                     .and_then(|m| m.get(k).copied().flatten())
-                    .filter(|m| !m.passes(b, a))
-                    .map(|_| k),
+                    .map(|m| (k, !m.passes(b, a))),
                 _ => None,
             };
+            self.suspect = judged.filter(|&(_, outside)| outside).map(|(k, _)| k);
             self.last = Some(o);
         }
         self.started = true;
@@ -213,6 +215,7 @@ impl Balance {
         self.flight_before_us = after;
         self.liftoff_us = None;
         self.class = None;
+        judged
     }
 
     /// Another model was installed: its class indices are not the ones held here.

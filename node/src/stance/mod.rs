@@ -148,6 +148,9 @@ pub struct StancePipeline {
     pub counters: Counters,
     /// Capture mode: no model; every stance's sampled image is kept for [`Self::sample`].
     capture: bool,
+    /// Per class of the model: stances the energy check judged, and of them those outside
+    /// the class's map (sized when a model with another class count is installed).
+    energy_tally: Vec<[u32; 2]>,
 }
 
 /// The image a step was decided on, as the node picked it: see [`StancePipeline::sample`].
@@ -187,6 +190,7 @@ impl StancePipeline {
             wrong_size_now: Vec::new(),
             counters: Counters::default(),
             capture: false,
+            energy_tally: Vec::new(),
             cfg,
         };
         p.set_model(model);
@@ -207,9 +211,10 @@ impl StancePipeline {
         p
     }
 
-    /// Feet served (the config's `feet`).
-    pub fn feet(&self) -> u8 {
-        self.cfg.feet
+    /// Per class of the model: the stances its energy check judged and, of them, those outside
+    /// the class's return map (judged when the next touchdown gives the flight after).
+    pub fn energy_tally(&self) -> &[[u32; 2]] {
+        &self.energy_tally
     }
 
     /// What the foot's latest judged stance did to the hop (the flights either side of it and
@@ -271,6 +276,9 @@ impl StancePipeline {
         });
         self.wrong_size_now = vec![false; self.feet.len()];
         self.said_size = None;
+        if self.energy_tally.len() != classes {
+            self.energy_tally = vec![[0; 2]; classes];
+        }
         for f in &mut self.feet {
             if f.sum_lp.len() != classes {
                 f.sum_lp = vec![0.0; classes];
@@ -378,8 +386,15 @@ impl StancePipeline {
                 .classifier
                 .as_ref()
                 .and_then(|c| c.model().energy.as_deref());
-            f.balance
+            let judged = f
+                .balance
                 .touchdown(foot, f.step, at_us, self.now_rx_us, maps);
+            if let Some((k, outside)) = judged
+                && let Some(t) = self.energy_tally.get_mut(k)
+            {
+                t[0] = t[0].saturating_add(1);
+                t[1] = t[1].saturating_add(u32::from(outside));
+            }
             f.touchdown_us = at_us;
             f.decided = false;
             f.best_err = None;
