@@ -28,6 +28,15 @@ pub struct ExperimentArgs {
     #[arg(long, value_name = "N", default_value_t = 1,
           value_parser = clap::value_parser!(u64).range(1..=100))]
     pub seeds: u64,
+    /// With open-set: images per class drawn from each training run for the model (default
+    /// the paper's 20). A lab that stores every image of its training run leaves none of it
+    /// to the calibration: this shows what that does to the next run's false unknowns.
+    #[arg(long, value_name = "N", requires = "train")]
+    pub per_class: Option<usize>,
+    /// With open-set and --per-class: of those, images trained on; the rest validate the
+    /// kernel width (the paper: 13 of 20).
+    #[arg(long, value_name = "N", requires = "per_class")]
+    pub train: Option<usize>,
     /// Your own dataset (DIR/<class>/<images>, as `presrs train` reads it) for Table 1,
     /// Figure 5, Figure 16 and Table 6. The other experiments need several sets (sandpaper,
     /// one per gait, a closed loop) and run on the simulator.
@@ -55,6 +64,12 @@ pub struct ExperimentArgs {
 }
 
 pub fn run(a: ExperimentArgs) -> Result<ExitCode> {
+    // Refused before any section runs (the split is only used by the last one).
+    if let Some((per_class, train)) = a.per_class.zip(a.train)
+        && (train == 0 || train >= per_class)
+    {
+        return Err(node::classifier::train::TrainError::BadSplit { train, per_class }.into());
+    }
     // One dataset folder (`--data` or an `--extra-source`), named by its flag in errors.
     let load = |flag: &str, dir: &PathBuf, crop: Crop| -> Result<UserData> {
         let (set, _) = TrainingSet::load(dir, &a.terrains.catalog()?, a.skip_bad)
@@ -78,6 +93,7 @@ pub fn run(a: ExperimentArgs) -> Result<ExitCode> {
     let mut ctx = Report::new(a.out.join("figures"), a.quick, a.seed, user)?;
     ctx.extra = extra;
     ctx.open_set_seeds = a.seeds;
+    ctx.open_set_split = a.per_class.zip(a.train);
     let t0 = std::time::Instant::now();
     let md = ctx.markdown(
         &a.which.0,

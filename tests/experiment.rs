@@ -142,3 +142,51 @@ fn experiment_runs_on_a_user_dataset_given_with_data() {
     assert!(err.contains("nope") && err.contains("--data"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `--per-class` / `--train` set the open-set section's models (a lab storing its whole
+/// training run can see what that costs); a split that leaves nothing to validate is refused
+/// before anything is written.
+#[test]
+fn open_set_takes_the_models_split_and_refuses_one_without_validation_images() {
+    let dir = std::env::temp_dir().join(format!("presrs-exp-split-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let run = |extra: &[&str], out: &std::path::Path| {
+        Command::new(env!("CARGO_BIN_EXE_presrs"))
+            .args(["experiment", "open-set", "--quick", "--out"])
+            .arg(out)
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let bad = run(&["--per-class", "12", "--train", "12"], &dir.join("bad"));
+    assert!(!bad.status.success());
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(
+        err.contains("--train 12 must be at least 1 and below --per-class 12"),
+        "{err}"
+    );
+    assert!(!dir.join("bad").join("open-set.md").exists());
+    let read = |extra: &[&str], name: &str| {
+        let out = dir.join(name);
+        common::output_ok(
+            Command::new(env!("CARGO_BIN_EXE_presrs"))
+                .args(["experiment", "open-set", "--quick", "--out"])
+                .arg(&out)
+                .args(extra),
+        );
+        std::fs::read_to_string(out.join("open-set.md")).unwrap()
+    };
+    let paper = read(&[], "paper");
+    assert!(paper.contains("the model (paper's split,"), "{paper}");
+    let split = read(&["--per-class", "12", "--train", "8"], "split");
+    assert!(split.contains("`--per-class 12 --train 8`"), "{split}");
+    // Other models, other figures: the per-class table differs from the paper split's.
+    let table = |md: &str| {
+        md.split("Per left-out class:")
+            .nth(1)
+            .unwrap_or("")
+            .to_string()
+    };
+    assert_ne!(table(&paper), table(&split));
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -183,6 +183,11 @@ pub struct Report {
     /// Seeds the open-set section runs, from `seed` on: more than one adds the spread of its
     /// figures over them.
     pub open_set_seeds: u64,
+    /// The open-set section's models: images drawn per class and, of them, trained on (the
+    /// rest validate); `None` is the paper's 20 and 13. More than a run's images per class
+    /// stores the whole training run and leaves none of it to the calibration: see
+    /// `node::classifier::novelty`, "How many images to store".
+    pub open_set_split: Option<(usize, usize)>,
 }
 
 /// The command that regenerates a report: `presrs` and the `args` given after the binary's
@@ -262,6 +267,7 @@ impl Report {
             user,
             extra: Vec::new(),
             open_set_seeds: 1,
+            open_set_split: None,
         })
     }
 
@@ -1047,11 +1053,17 @@ fn open_set_sources(ctx: &Report, seed: u64) -> Vec<crate::open_set::OpenSetSour
     use crate::study::dataset_on;
     use node::classifier::train::TrainOptions;
     let n = open_set_images(ctx);
+    let defaults = TrainOptions::default();
+    let (per_class, train) = ctx
+        .open_set_split
+        .unwrap_or((defaults.per_class, defaults.train));
     let opts = |crop: Crop, normalize_load: bool| TrainOptions {
         crop,
         normalize_load,
         seed,
-        ..Default::default()
+        per_class,
+        train,
+        ..defaults.clone()
     };
     let mut sources: Vec<OpenSetSource> = Vec::new();
     for u in ctx.user.iter().chain(&ctx.extra) {
@@ -1147,7 +1159,7 @@ fn open_set(ctx: &Report) -> Result<String, ReportError> {
     let mut md = String::from("## Unknown terrain: leave one class out, judged on a fresh run\n\n");
     let _ = writeln!(
         md,
-        "Per source, each class in turn is left out of training; the model (paper's split, \
+        "Per source, each class in turn is left out of training; the model ({split}, \
          rejection calibrated to `--unknown-rate {DEFAULT_UNKNOWN_RATE}`) then classifies every \
          image of the left-out class and the known classes' images of a **fresh run** (one the \
          model was neither trained nor calibrated on). The simulated sources are three runs on \
@@ -1179,6 +1191,13 @@ fn open_set(ctx: &Report) -> Result<String, ReportError> {
         s0 = ctx.seed + 40,
         s2 = ctx.seed + 42,
         h = n / 2,
+        split = match ctx.open_set_split {
+            None => "paper's split".to_string(),
+            Some((p, t)) => format!(
+                "{p} images per class drawn from the training run, {t} of them trained on, \
+                 `--per-class {p} --train {t}`"
+            ),
+        },
     );
     let _ = writeln!(
         md,

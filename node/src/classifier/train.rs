@@ -343,7 +343,7 @@ pub const MAX_CALIBRATION_PER_CLASS: usize = 40;
 
 /// Fewest unused images of the training run per class for `SameRun` calibration; below, the
 /// stored samples calibrate, each left out of its own neighbours.
-const MIN_SAME_RUN_PER_CLASS: usize = 5;
+pub const MIN_SAME_RUN_PER_CLASS: usize = 5;
 
 /// Why calibration images cannot calibrate a model.
 #[derive(Debug, thiserror::Error, PartialEq, Eq)]
