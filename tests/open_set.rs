@@ -18,6 +18,25 @@ fn means(rows: &[OpenSetRow]) -> OpenSetRow {
     OpenSetMeans::of(rows).row
 }
 
+/// One run on sensor `sensor`: `per_gait` images per terrain in each of `gaits`, the j-th
+/// gait's seeded `seed + 10 j`.
+fn gait_run(
+    kind: Kind,
+    gaits: &[controller::Gait],
+    per_gait: usize,
+    seed: u64,
+    sensor: u64,
+) -> TrainingSet {
+    let mut t = dataset_on(kind, per_gait, gaits[0].clone(), seed, sensor);
+    for (j, g) in gaits.iter().enumerate().skip(1) {
+        let u = dataset_on(kind, per_gait, g.clone(), seed + 10 * j as u64, sensor);
+        t.images.extend(u.images);
+        t.labels.extend(u.labels);
+        t.runs.extend(u.runs);
+    }
+    t
+}
+
 /// Three runs of a simulated set on sensor serials 1, 2 and 3 (train, calibrate, fresh), as the
 /// experiment makes them.
 fn sim_source(kind: Kind, crop: Crop, normalize_load: bool, n: usize) -> OpenSetSource {
@@ -26,27 +45,7 @@ fn sim_source(kind: Kind, crop: Crop, normalize_load: bool, n: usize) -> OpenSet
     } else {
         vec![controller::Gait::g2()]
     };
-    let run = |i: u64, m: usize| {
-        let mut t: Option<TrainingSet> = None;
-        for (j, g) in gaits.iter().enumerate() {
-            let u = dataset_on(
-                kind,
-                m / gaits.len(),
-                g.clone(),
-                41 + i + 10 * j as u64,
-                1 + i,
-            );
-            match t.as_mut() {
-                None => t = Some(u),
-                Some(t) => {
-                    t.images.extend(u.images);
-                    t.labels.extend(u.labels);
-                    t.runs.extend(u.runs);
-                }
-            }
-        }
-        t.expect("at least one gait")
-    };
+    let run = |i: u64, m: usize| gait_run(kind, &gaits, m / gaits.len(), 41 + i, 1 + i);
     OpenSetSource {
         name: format!("{kind:?}"),
         train: run(0, n),
@@ -221,25 +220,7 @@ fn a_gait_the_model_never_saw_is_not_unknown_ground() {
         right: 0,
     };
     let run = |gaits: &[Gait], sensor: u64, n: usize| {
-        let mut t: Option<TrainingSet> = None;
-        for (j, g) in gaits.iter().enumerate() {
-            let u = dataset_on(
-                Kind::Dynamic,
-                n,
-                g.clone(),
-                70 + 10 * sensor + j as u64,
-                sensor,
-            );
-            match t.as_mut() {
-                None => t = Some(u),
-                Some(t) => {
-                    t.images.extend(u.images);
-                    t.labels.extend(u.labels);
-                    t.runs.extend(u.runs);
-                }
-            }
-        }
-        t.expect("at least one gait")
+        gait_run(Kind::Dynamic, gaits, n, 70 + 10 * sensor, sensor)
     };
     // (trained gaits, the unseen one): between the two, and beyond the faster one.
     for (trained, unseen) in [
@@ -282,11 +263,12 @@ fn a_gait_the_model_never_saw_is_not_unknown_ground() {
              unknown {own_unknown:.3} right {own_right:.3}",
             unseen.id
         );
-        // Measured: G2 unseen 0.4% unknown, 99.2% right; G3 unseen 0.8%, 93.8% (the trained
-        // gaits' fresh runs 0% unknown, 100% and 93.3% right). Without load normalisation the
-        // unseen G2 was 15.0% unknown (its own gaits' fresh run 2.5%). With the CLI on other
-        // seeds (scripts/unseen_gait.sh, seeds 1-3): unseen G2 0.4-2.5%, G3 2.9-3.8%, G1
-        // 0-2.5%, against 0.2-3.8% on the trained gaits' fresh runs.
+        // Measured: G2 unseen 3.3% unknown, 96.7% right; G3 unseen 4.2%, 95.8% (the trained
+        // gaits' fresh runs 2.5% unknown, 97.5% right). Without load normalisation the unseen
+        // G2 was 6.7% unknown (its trained gaits' fresh run 2.9%). With the CLI on other seeds
+        // (scripts/unseen_gait.sh, seeds 1-3): unseen G2 0.4-2.5%, G3 2.9-3.8%, G1 0-2.5%,
+        // against 0.2-3.8% on the trained gaits' fresh runs; without load normalisation
+        // unseen G2 5.8-16.2%.
         assert!(new_unknown <= 0.05, "{new_unknown}");
         assert!(
             new_unknown <= own_unknown + 0.03,
