@@ -14,6 +14,7 @@ into this repository):
     OUT/terrains.toml               a terrains file naming the subjects (ids 100-109)
 
     python3 scripts/speedpp2d.py --out DIR
+    python3 scripts/speedpp2d.py --out DIR --runs speed-blocks   # source = speedS/trialsXX-YY
     presrs experiment open-set --normalize-load --extra-source DIR --terrains DIR/terrains.toml
 
 Load-normalise (`--normalize-load`, also for `presrs train`): the three speeds load the foot
@@ -36,6 +37,13 @@ def run(trial):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", required=True, help="dataset folder to write")
+    ap.add_argument(
+        "--runs",
+        choices=["blocks", "speed-blocks"],
+        default="blocks",
+        help="the manifest's `source`: the block of trials (default), or the speed and the "
+        "block (`speed2/trials10-14`), to hold out a walking speed as a gait the model never saw",
+    )
     a = ap.parse_args()
     try:
         import jikudata
@@ -67,7 +75,8 @@ def main():
         step = c * 100 + t
         lines.append(
             f"{cls}/{name},{cls},0,{step},{step}.000000,{step}.070000,"
-            f"{int(y[i].sum())},0.0,{run(t)}"
+            f"{int(y[i].sum())},0.0,"
+            + (run(t) if a.runs == "blocks" else f"speed{c}/{run(t)}")
         )
     with open(os.path.join(a.out, "manifest.csv"), "w") as f:
         f.write("\n".join(lines) + "\n")
