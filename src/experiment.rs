@@ -37,6 +37,10 @@ pub struct ExperimentArgs {
     /// kernel width (the paper: 13 of 20).
     #[arg(long, value_name = "N", requires = "per_class")]
     pub train: Option<usize>,
+    /// With open-set: the share of known images the models may call unknown, as `train
+    /// --unknown-rate` (default 0.02): to see what a lower or higher rate trades on your set.
+    #[arg(long, value_name = "R")]
+    pub unknown_rate: Option<f64>,
     /// Your own dataset (DIR/<class>/<images>, as `presrs train` reads it) for Table 1,
     /// Figure 5, Figure 16 and Table 6. The other experiments need several sets (sandpaper,
     /// one per gait, a closed loop) and run on the simulator.
@@ -70,6 +74,15 @@ pub fn run(a: ExperimentArgs) -> Result<ExitCode> {
     {
         return Err(node::classifier::train::TrainError::BadSplit { train, per_class }.into());
     }
+    if let Some(r) = a.unknown_rate
+        && !(r > 0.0 && r <= node::classifier::model::MAX_UNKNOWN_RATE)
+    {
+        anyhow::bail!(
+            "--unknown-rate {r}: the open-set experiment needs a share above 0 and at most {} \
+             (0.02 is 2%; 0 turns the rejection it measures off)",
+            node::classifier::model::MAX_UNKNOWN_RATE
+        );
+    }
     // One dataset folder (`--data` or an `--extra-source`), named by its flag in errors.
     let load = |flag: &str, dir: &PathBuf, crop: Crop| -> Result<UserData> {
         let (set, _) = TrainingSet::load(dir, &a.terrains.catalog()?, a.skip_bad)
@@ -94,6 +107,7 @@ pub fn run(a: ExperimentArgs) -> Result<ExitCode> {
     ctx.extra = extra;
     ctx.open_set_seeds = a.seeds;
     ctx.open_set_split = a.per_class.zip(a.train);
+    ctx.open_set_unknown_rate = a.unknown_rate;
     let t0 = std::time::Instant::now();
     let md = ctx.markdown(
         &a.which.0,

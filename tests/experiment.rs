@@ -143,29 +143,35 @@ fn experiment_runs_on_a_user_dataset_given_with_data() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// `--per-class` / `--train` set the open-set section's models (a lab storing its whole
-/// training run can see what that costs); a split that leaves nothing to validate is refused
-/// before anything is written.
+/// `--per-class` / `--train` / `--unknown-rate` set the open-set section's models (a lab can
+/// see what storing its whole training run, or another rate, costs); a split that leaves
+/// nothing to validate, or a rate that turns the rejection off, is refused before anything is
+/// written.
 #[test]
-fn open_set_takes_the_models_split_and_refuses_one_without_validation_images() {
+fn open_set_takes_the_models_split_and_rate_and_refuses_ones_that_cannot_work() {
     let dir = std::env::temp_dir().join(format!("presrs-exp-split-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
-    let run = |extra: &[&str], out: &std::path::Path| {
-        Command::new(env!("CARGO_BIN_EXE_presrs"))
+    // Refused, saying `why`, and nothing written.
+    let refused = |extra: &[&str], why: &str| {
+        let out = dir.join("bad");
+        let o = Command::new(env!("CARGO_BIN_EXE_presrs"))
             .args(["experiment", "open-set", "--quick", "--out"])
-            .arg(out)
+            .arg(&out)
             .args(extra)
             .output()
-            .unwrap()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && err.contains(why), "{err}");
+        assert!(!out.join("open-set.md").exists());
     };
-    let bad = run(&["--per-class", "12", "--train", "12"], &dir.join("bad"));
-    assert!(!bad.status.success());
-    let err = String::from_utf8_lossy(&bad.stderr);
-    assert!(
-        err.contains("--train 12 must be at least 1 and below --per-class 12"),
-        "{err}"
+    refused(
+        &["--per-class", "12", "--train", "12"],
+        "--train 12 must be at least 1 and below --per-class 12",
     );
-    assert!(!dir.join("bad").join("open-set.md").exists());
+    refused(
+        &["--unknown-rate", "0"],
+        "--unknown-rate 0: the open-set experiment needs a share above 0",
+    );
     let read = |extra: &[&str], name: &str| {
         let out = dir.join(name);
         common::output_ok(
@@ -178,8 +184,20 @@ fn open_set_takes_the_models_split_and_refuses_one_without_validation_images() {
     };
     let paper = read(&[], "paper");
     assert!(paper.contains("the model (paper's split,"), "{paper}");
-    let split = read(&["--per-class", "12", "--train", "8"], "split");
+    assert!(paper.contains("`--unknown-rate 0.02`"), "{paper}");
+    let split = read(
+        &[
+            "--per-class",
+            "12",
+            "--train",
+            "8",
+            "--unknown-rate",
+            "0.05",
+        ],
+        "split",
+    );
     assert!(split.contains("`--per-class 12 --train 8`"), "{split}");
+    assert!(split.contains("`--unknown-rate 0.05`"), "{split}");
     // Other models, other figures: the per-class table differs from the paper split's.
     let table = |md: &str| {
         md.split("Per left-out class:")
@@ -188,5 +206,9 @@ fn open_set_takes_the_models_split_and_refuses_one_without_validation_images() {
             .to_string()
     };
     assert_ne!(table(&paper), table(&split));
+    // The rate alone moves the thresholds, and with them the figures.
+    let rate = read(&["--unknown-rate", "0.3"], "rate");
+    assert!(rate.contains("the model (paper's split,"), "{rate}");
+    assert_ne!(table(&paper), table(&rate));
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -188,6 +188,8 @@ pub struct Report {
     /// stores the whole training run and leaves none of it to the calibration: see
     /// `node::classifier::novelty`, "How many images to store".
     pub open_set_split: Option<(usize, usize)>,
+    /// The open-set section's `--unknown-rate` (`None`: the default, 0.02).
+    pub open_set_unknown_rate: Option<f64>,
 }
 
 /// The command that regenerates a report: `presrs` and the `args` given after the binary's
@@ -268,6 +270,7 @@ impl Report {
             extra: Vec::new(),
             open_set_seeds: 1,
             open_set_split: None,
+            open_set_unknown_rate: None,
         })
     }
 
@@ -1063,6 +1066,7 @@ fn open_set_sources(ctx: &Report, seed: u64) -> Vec<crate::open_set::OpenSetSour
         seed,
         per_class,
         train,
+        unknown_rate: ctx.open_set_unknown_rate.unwrap_or(defaults.unknown_rate),
         ..defaults.clone()
     };
     let mut sources: Vec<OpenSetSource> = Vec::new();
@@ -1153,6 +1157,7 @@ fn open_set_images(ctx: &Report) -> usize {
 fn open_set(ctx: &Report) -> Result<String, ReportError> {
     use crate::open_set::{OpenSetMeans, SeedSpread, leave_one_class_out};
     use node::classifier::train::DEFAULT_UNKNOWN_RATE;
+    let rate = ctx.open_set_unknown_rate.unwrap_or(DEFAULT_UNKNOWN_RATE);
     let n = open_set_images(ctx);
     let sources = open_set_sources(ctx, ctx.seed);
     let mut spreads: Vec<SeedSpread> = vec![SeedSpread::default(); sources.len()];
@@ -1160,7 +1165,7 @@ fn open_set(ctx: &Report) -> Result<String, ReportError> {
     let _ = writeln!(
         md,
         "Per source, each class in turn is left out of training; the model ({split}, \
-         rejection calibrated to `--unknown-rate {DEFAULT_UNKNOWN_RATE}`) then classifies every \
+         rejection calibrated to `--unknown-rate {rate}`) then classifies every \
          image of the left-out class and the known classes' images of a **fresh run** (one the \
          model was neither trained nor calibrated on). The simulated sources are three runs on \
          three sensors (serials 1, 2, 3; seeds {s0}-{s2}; {n} images per terrain to train on, \

@@ -86,13 +86,14 @@
 //! | 30 / 20 | 0 | 95% (93-96) | 5.9% (5.1-6.4) | 5.3 (4.2-5.7) | 2.5% |
 //!
 //! The score separates better with more stored images (AUROC 0.986, 0.990, 0.991); the
-//! thresholds stop transferring. Measured at 30 / 20 with prototypes, not kept:
-//! - the stored samples, each left out of its own neighbours, standing in for the training
-//!   run's unused images: fresh known 3.0% (2.2-3.2), but a left-out person 87% and the
-//!   accuracy gap 3.0 points;
-//! - thresholds at the rate itself instead of 1.5 times it: fresh known 4.3% (3.6-5.1); a
-//!   rate of 0.01: 4.3% (3.6-4.8). The fresh run's known images lie beyond the calibration
-//!   run's largest scores, where no quantile of that run reaches.
+//! thresholds stop transferring. Measured at 30 / 20, not kept:
+//! - (a prototype) the stored samples, each left out of its own neighbours, standing in for
+//!   the training run's unused images: fresh known 3.0% (2.2-3.2), but a left-out person 87%
+//!   and the accuracy gap 3.0 points;
+//! - (a prototype) thresholds at the rate itself instead of 1.5 times it: fresh known 4.3%
+//!   (3.6-5.1); and `--unknown-rate 0.01` (the same command): 4.3% (3.6-4.8). The fresh
+//!   run's known images lie beyond the calibration run's largest scores, where no quantile of
+//!   that run reaches.
 //!
 //! `presrs train` says so when a model stores its whole training run
 //! (`lab::simdata::no_training_run_images_note`). The simulated sources' training runs hold
