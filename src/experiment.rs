@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::{Context, Result};
-use lab::report::{Report, Selection, UserData};
+use lab::report::{OpenSetModels, Report, Selection, UserData};
 use lab::simdata::TrainingSet;
 use node::classifier::image::Crop;
 
@@ -68,21 +68,8 @@ pub struct ExperimentArgs {
 }
 
 pub fn run(a: ExperimentArgs) -> Result<ExitCode> {
-    // Refused before any section runs (the split is only used by the last one).
-    if let Some((per_class, train)) = a.per_class.zip(a.train)
-        && (train == 0 || train >= per_class)
-    {
-        return Err(node::classifier::train::TrainError::BadSplit { train, per_class }.into());
-    }
-    if let Some(r) = a.unknown_rate
-        && !(r > 0.0 && r <= node::classifier::model::MAX_UNKNOWN_RATE)
-    {
-        anyhow::bail!(
-            "--unknown-rate {r}: the open-set experiment needs a share above 0 and at most {} \
-             (0.02 is 2%; 0 turns the rejection it measures off)",
-            node::classifier::model::MAX_UNKNOWN_RATE
-        );
-    }
+    // Refused before any section runs (the open-set section, which uses them, is the last).
+    let open_set_models = OpenSetModels::new(a.per_class.zip(a.train), a.unknown_rate)?;
     // One dataset folder (`--data` or an `--extra-source`), named by its flag in errors.
     let load = |flag: &str, dir: &PathBuf, crop: Crop| -> Result<UserData> {
         let (set, _) = TrainingSet::load(dir, &a.terrains.catalog()?, a.skip_bad)
@@ -106,8 +93,7 @@ pub fn run(a: ExperimentArgs) -> Result<ExitCode> {
     let mut ctx = Report::new(a.out.join("figures"), a.quick, a.seed, user)?;
     ctx.extra = extra;
     ctx.open_set_seeds = a.seeds;
-    ctx.open_set_split = a.per_class.zip(a.train);
-    ctx.open_set_unknown_rate = a.unknown_rate;
+    ctx.open_set_models = open_set_models;
     let t0 = std::time::Instant::now();
     let md = ctx.markdown(
         &a.which.0,

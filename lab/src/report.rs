@@ -149,6 +149,13 @@ pub enum ReportError {
     /// The simulated hopper fell while measuring its cadence.
     #[error("the G2 hopper fell")]
     Fell,
+    /// An open-set `--unknown-rate` out of range, or 0 (the rejection off).
+    #[error(
+        "--unknown-rate {0}: the open-set experiment needs a share above 0 and at most {max} \
+         (0.02 is 2%; 0 turns the rejection it measures off)",
+        max = node::classifier::model::MAX_UNKNOWN_RATE
+    )]
+    OpenSetRate(f64),
     /// The demo model for the adaptation section.
     #[error("the demo model: {0}")]
     DemoModel(#[source] Box<dyn std::error::Error + Send + Sync>),
@@ -183,13 +190,64 @@ pub struct Report {
     /// Seeds the open-set section runs, from `seed` on: more than one adds the spread of its
     /// figures over them.
     pub open_set_seeds: u64,
-    /// The open-set section's models: images drawn per class and, of them, trained on (the
-    /// rest validate); `None` is the paper's 20 and 13. More than a run's images per class
-    /// stores the whole training run and leaves none of it to the calibration: see
-    /// `node::classifier::novelty`, "How many images to store".
-    pub open_set_split: Option<(usize, usize)>,
-    /// The open-set section's `--unknown-rate` (`None`: the default, 0.02).
-    pub open_set_unknown_rate: Option<f64>,
+    /// How the open-set section trains its models.
+    pub open_set_models: OpenSetModels,
+}
+
+/// How the open-set section trains its models, where they may differ from `train`'s defaults
+/// (checked when made, so that a bad value is refused before any section runs).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct OpenSetModels {
+    /// Images drawn per class and, of them, trained on (the rest validate); `None` is the
+    /// paper's 20 and 13. More than a run's images per class stores the whole training run
+    /// and leaves none of it to the calibration: see `node::classifier::novelty`, "How many
+    /// images to store".
+    split: Option<(usize, usize)>,
+    /// `--unknown-rate` (`None`: the default, 0.02).
+    unknown_rate: Option<f64>,
+}
+
+impl OpenSetModels {
+    /// `split` as (per class, trained on) and `unknown_rate`, refused where no model could be
+    /// trained with them, or where the rate turns off the rejection the section measures.
+    pub fn new(
+        split: Option<(usize, usize)>,
+        unknown_rate: Option<f64>,
+    ) -> Result<Self, ReportError> {
+        let m = Self {
+            split,
+            unknown_rate,
+        };
+        let o = m.options();
+        if !(o.unknown_rate > 0.0 && o.unknown_rate <= node::classifier::model::MAX_UNKNOWN_RATE) {
+            return Err(ReportError::OpenSetRate(o.unknown_rate));
+        }
+        o.check().map_err(LabError::from)?;
+        Ok(m)
+    }
+
+    /// `train`'s defaults with these models' split and rate.
+    pub fn options(&self) -> node::classifier::train::TrainOptions {
+        let mut o = node::classifier::train::TrainOptions::default();
+        if let Some((per_class, train)) = self.split {
+            (o.per_class, o.train) = (per_class, train);
+        }
+        if let Some(r) = self.unknown_rate {
+            o.unknown_rate = r;
+        }
+        o
+    }
+
+    /// The split, as the section's text names it.
+    fn describe_split(&self) -> String {
+        match self.split {
+            None => "paper's split".to_string(),
+            Some((p, t)) => format!(
+                "{p} images per class drawn from the training run, {t} of them trained on, \
+                 `--per-class {p} --train {t}`"
+            ),
+        }
+    }
 }
 
 /// The command that regenerates a report: `presrs` and the `args` given after the binary's
@@ -269,8 +327,7 @@ impl Report {
             user,
             extra: Vec::new(),
             open_set_seeds: 1,
-            open_set_split: None,
-            open_set_unknown_rate: None,
+            open_set_models: OpenSetModels::default(),
         })
     }
 
@@ -1056,18 +1113,12 @@ fn open_set_sources(ctx: &Report, seed: u64) -> Vec<crate::open_set::OpenSetSour
     use crate::study::dataset_on;
     use node::classifier::train::TrainOptions;
     let n = open_set_images(ctx);
-    let defaults = TrainOptions::default();
-    let (per_class, train) = ctx
-        .open_set_split
-        .unwrap_or((defaults.per_class, defaults.train));
+    let models = ctx.open_set_models.options();
     let opts = |crop: Crop, normalize_load: bool| TrainOptions {
         crop,
         normalize_load,
         seed,
-        per_class,
-        train,
-        unknown_rate: ctx.open_set_unknown_rate.unwrap_or(defaults.unknown_rate),
-        ..defaults.clone()
+        ..models.clone()
     };
     let mut sources: Vec<OpenSetSource> = Vec::new();
     for u in ctx.user.iter().chain(&ctx.extra) {
@@ -1156,8 +1207,7 @@ fn open_set_images(ctx: &Report) -> usize {
 /// that many seeds.
 fn open_set(ctx: &Report) -> Result<String, ReportError> {
     use crate::open_set::{OpenSetMeans, SeedSpread, leave_one_class_out};
-    use node::classifier::train::DEFAULT_UNKNOWN_RATE;
-    let rate = ctx.open_set_unknown_rate.unwrap_or(DEFAULT_UNKNOWN_RATE);
+    let rate = ctx.open_set_models.options().unknown_rate;
     let n = open_set_images(ctx);
     let sources = open_set_sources(ctx, ctx.seed);
     let mut spreads: Vec<SeedSpread> = vec![SeedSpread::default(); sources.len()];
@@ -1196,13 +1246,7 @@ fn open_set(ctx: &Report) -> Result<String, ReportError> {
         s0 = ctx.seed + 40,
         s2 = ctx.seed + 42,
         h = n / 2,
-        split = match ctx.open_set_split {
-            None => "paper's split".to_string(),
-            Some((p, t)) => format!(
-                "{p} images per class drawn from the training run, {t} of them trained on, \
-                 `--per-class {p} --train {t}`"
-            ),
-        },
+        split = ctx.open_set_models.describe_split(),
     );
     let _ = writeln!(
         md,

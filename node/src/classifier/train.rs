@@ -104,6 +104,27 @@ impl Default for TrainOptions {
     }
 }
 
+impl TrainOptions {
+    /// The options that no data can make work: a downsampling factor, an unknown rate or a
+    /// split out of range. [`train`] checks them too; a caller that trains later (an
+    /// experiment's last section) checks them before it starts.
+    pub fn check(&self) -> Result<(), TrainError> {
+        if !(1..=MAX_DOWNSAMPLE).contains(&self.downsample) {
+            return Err(TrainError::Downsample(self.downsample));
+        }
+        if !(0.0..=MAX_UNKNOWN_RATE).contains(&self.unknown_rate) {
+            return Err(TrainError::UnknownRate(self.unknown_rate));
+        }
+        if self.train == 0 || self.train >= self.per_class {
+            return Err(TrainError::BadSplit {
+                train: self.train,
+                per_class: self.per_class,
+            });
+        }
+        Ok(())
+    }
+}
+
 /// Why a training request cannot be met.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum TrainError {
@@ -199,18 +220,7 @@ pub fn train(
     if classes.len() < 2 || classes.len() > MAX_CLASSES {
         return Err(TrainError::Classes(classes.len()));
     }
-    if !(1..=MAX_DOWNSAMPLE).contains(&o.downsample) {
-        return Err(TrainError::Downsample(o.downsample));
-    }
-    if !(0.0..=MAX_UNKNOWN_RATE).contains(&o.unknown_rate) {
-        return Err(TrainError::UnknownRate(o.unknown_rate));
-    }
-    if o.train == 0 || o.train >= o.per_class {
-        return Err(TrainError::BadSplit {
-            train: o.train,
-            per_class: o.per_class,
-        });
-    }
+    o.check()?;
     let (rows, cols, bits) = (data[0].image.rows, data[0].image.cols, data[0].image.bits);
     for d in data {
         if (d.image.rows, d.image.cols, d.image.bits) != (rows, cols, bits) {
