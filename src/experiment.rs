@@ -24,7 +24,8 @@ pub struct ExperimentArgs {
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// With open-set: run it on N seeds from --seed on and add each figure's median and range
-    /// over them, with the seeds that miss a target (one seed can be a kind one)
+    /// over them, with the seeds that miss a target (one seed can be a kind one), and the
+    /// mean with its 95% interval: the rate to expect over runs
     #[arg(long, value_name = "N", default_value_t = 1,
           value_parser = clap::value_parser!(u64).range(1..=100))]
     pub seeds: u64,

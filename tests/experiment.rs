@@ -207,8 +207,31 @@ fn open_set_takes_the_models_split_and_rate_and_refuses_ones_that_cannot_work() 
     };
     assert_ne!(table(&paper), table(&split));
     // The rate alone moves the thresholds, and with them the figures.
-    let rate = read(&["--unknown-rate", "0.3"], "rate");
+    let rate = read(&["--unknown-rate", "0.3", "--seeds", "2"], "rate");
     assert!(rate.contains("the model (paper's split,"), "{rate}");
     assert_ne!(table(&paper), table(&rate));
+    // Two seeds: the spread, then each source's mean with its interval and its verdict.
+    assert!(!paper.contains("Over seeds"), "{paper}");
+    let means = rate
+        .split("The same seeds' mean, with its 95% interval")
+        .nth(1)
+        .unwrap_or_default();
+    assert!(rate.contains("Over seeds 1-2"), "{rate}");
+    let rows: Vec<&str> = means
+        .lines()
+        .filter(|l| l.starts_with("| simulator"))
+        .collect();
+    assert_eq!(rows.len(), 3, "{means}");
+    for r in rows {
+        let verdict = r
+            .trim_end_matches(" |")
+            .rsplit(" | ")
+            .next()
+            .unwrap_or_default();
+        assert!(
+            verdict == "all met" || verdict.contains("missed") || verdict.contains("reaches"),
+            "{r}"
+        );
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
