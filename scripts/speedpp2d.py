@@ -11,6 +11,8 @@ into this repository):
                                     out later trials as the "next run". (Not the speeds: a
                                     subject's walk changes more between speeds than between
                                     subjects, measured: 38% of subjects right across speeds.)
+                                    `gait` = the walking speed (1-3): the gait a walking foot
+                                    touched down in, as `presrs capture` records GaitStatus.
     OUT/terrains.toml               a terrains file naming the subjects (ids 100-109)
 
     python3 scripts/speedpp2d.py --out DIR
@@ -55,10 +57,12 @@ def main():
     subj, cond = np.asarray(d.x["subj"]), np.asarray(d.x["cond"])
     if y.ndim != 3 or len(y) != len(subj):
         sys.exit(f"speedpp2d: unexpected SpeedPP2D shape {y.shape}")
+    if not set(np.unique(cond).tolist()) <= {1, 2, 3}:
+        sys.exit(f"speedpp2d: speeds {sorted(set(cond.tolist()))}, want 1-3 (the gait column)")
     if y.min() < 0 or y.max() > 65535:
         sys.exit("speedpp2d: pressures outside 0..65535 cannot be a 16-bit image")
     os.makedirs(a.out, exist_ok=True)
-    lines = ["file,terrain,foot,step,touchdown_s,sample_s,load_sum,damage_pct,source"]
+    lines = ["file,terrain,foot,step,touchdown_s,sample_s,load_sum,damage_pct,source,gait"]
     trial = {}
     for i in range(len(y)):
         s, c = int(subj[i]), int(cond[i])
@@ -77,6 +81,7 @@ def main():
             f"{cls}/{name},{cls},0,{step},{step}.000000,{step}.070000,"
             f"{int(y[i].sum())},0.0,"
             + (run(t) if a.runs == "blocks" else f"speed{c}/{run(t)}")
+            + f",{c}"
         )
     with open(os.path.join(a.out, "manifest.csv"), "w") as f:
         f.write("\n".join(lines) + "\n")

@@ -38,6 +38,9 @@ pub fn train(a: &TrainArgs) -> Result<ExitCode> {
     let (data, out, opts) = (&a.data, &a.out, &a.opts);
     let catalog = a.terrains.catalog()?;
     let (set, _) = TrainingSet::load(data, &catalog, a.skip_bad)?;
+    if let Some(note) = set.gait_note() {
+        println!("{note}");
+    }
     let cal = match &a.calibrate {
         Some(dir) if opts.unknown_rate > 0.0 => {
             let (s, _) = TrainingSet::load(dir, &catalog, a.skip_bad)

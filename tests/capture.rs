@@ -92,7 +92,8 @@ fn a_lab_records_captures_trains_and_classifies_a_fresh_run() {
     assert_eq!(rows.len() as u64, total);
     for r in &rows {
         let f: Vec<&str> = r.split(',').collect();
-        assert_eq!(f.len(), 9, "{r}");
+        // `presrs sim --log` is the foot's traffic only: no controller, no GaitStatus, no gait.
+        assert_eq!((f.len(), f[9]), (10, ""), "{r}");
         assert!(f[0].starts_with(&format!("{}/", f[1])), "{r}");
         assert!(set.join(f[0]).is_file(), "{r}");
         assert!(f[6].parse::<u64>().unwrap() > 0, "load sum: {r}");
@@ -156,6 +157,104 @@ fn a_lab_records_captures_trains_and_classifies_a_fresh_run() {
         100.0 * acc
     );
     assert!(acc >= 0.95, "{right}/{n} steps right");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A whole robot bus (the demo's, controller included) carries GaitStatus: each captured step
+/// gets the gait its stance touched down in, `train` lists them, and a manifest line that is
+/// not one stops `train` naming it rather than dropping the runs it holds.
+#[test]
+fn a_capture_of_the_whole_bus_records_each_stances_gait_and_train_lists_them() {
+    let dir = tmp("capture-gait");
+    let (log, truth, steps) = (
+        dir.join("bus.log"),
+        dir.join("truth.csv"),
+        dir.join("steps.csv"),
+    );
+    common::output_ok(
+        presrs()
+            .args([
+                "demo",
+                "--steps",
+                "120",
+                "--candump",
+                s(&log),
+                "--truth",
+                s(&truth),
+            ])
+            .args(["--csv", s(&steps)]),
+    );
+    let set = dir.join("set");
+    let j = json(&common::output_ok(
+        presrs()
+            .args(["capture", "--replay", s(&log), "--labels", s(&truth)])
+            .args(["--out", s(&set), "--json"]),
+    ));
+    // The demo's own step log says which gait ran each step.
+    let ran: BTreeMap<u64, String> = std::fs::read_to_string(&steps)
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            (f[1].parse().unwrap(), f[5].to_string())
+        })
+        .collect();
+    let manifest = std::fs::read_to_string(set.join("manifest.csv")).unwrap();
+    let (mut same, mut unknown, mut n) = (0, 0, 0);
+    for r in manifest.lines().skip(1) {
+        let f: Vec<&str> = r.split(',').collect();
+        n += 1;
+        match f[9] {
+            // Before the controller's first GaitStatus.
+            "" => unknown += 1,
+            g => same += (ran.get(&f[3].parse().unwrap()).map(String::as_str) == Some(g)) as u32,
+        }
+    }
+    // Measured: 119 of 120, the first step touching down before the first GaitStatus.
+    assert!(
+        n >= 100 && unknown <= 2 && same == n - unknown,
+        "{same} of {n}, {unknown} without"
+    );
+    let per_gait = j["per_gait"].as_object().unwrap();
+    assert!(per_gait.len() >= 3, "the demo's track runs every gait: {j}");
+
+    let model = dir.join("model.json");
+    let train = |data: &Path| {
+        presrs()
+            .args(["train", "--data", s(data), "--out", s(&model)])
+            .args(["--per-class", "12", "--train", "8", "--normalize-load"])
+            .args(["--crop", "0,3,6,0"])
+            .output()
+            .unwrap()
+    };
+    let out = train(&set);
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{said}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        said.contains("gaits at touchdown (capture manifest): G1 "),
+        "{said}"
+    );
+    assert_eq!(said.contains("without a GaitStatus"), unknown > 0, "{said}");
+
+    std::fs::write(
+        set.join("manifest.csv"),
+        format!("{manifest}wood/x.pgm,wood,0,7,1.0,1.07,5,0.0,bus.log,fast\n"),
+    )
+    .unwrap();
+    let out = train(&set);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    let line = manifest.lines().count() + 1;
+    assert!(
+        err.contains(&format!("manifest.csv line {line}")) && err.contains("gait `fast`"),
+        "{err}"
+    );
+    assert!(err.contains("delete the manifest"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

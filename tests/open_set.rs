@@ -33,6 +33,7 @@ fn gait_run(
         t.images.extend(u.images);
         t.labels.extend(u.labels);
         t.runs.extend(u.runs);
+        t.gaits.extend(u.gaits);
     }
     t
 }
@@ -303,12 +304,7 @@ fn speedpp2d_a_speed_between_the_trained_ones_is_known_and_one_beyond_is_often_u
                     && run.ends_with(block)
             })
             .collect();
-        TrainingSet {
-            classes: set.classes.clone(),
-            images: keep.iter().map(|&i| set.images[i].clone()).collect(),
-            labels: keep.iter().map(|&i| set.labels[i]).collect(),
-            runs: keep.iter().map(|&i| set.runs[i].clone()).collect(),
-        }
+        set.subset(&keep)
     };
     let opts = TrainOptions {
         normalize_load: true,

@@ -1180,6 +1180,7 @@ fn open_set_sources(ctx: &Report, seed: u64) -> Vec<crate::open_set::OpenSetSour
                     t.images.extend(u.images);
                     t.labels.extend(u.labels);
                     t.runs.extend(u.runs);
+                    t.gaits.extend(u.gaits);
                 }
                 t
             };

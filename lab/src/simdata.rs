@@ -36,6 +36,10 @@ pub enum LoadError {
          `presrs capture` writes them"
     )]
     Empty(String),
+    /// The folder's capture manifest cannot be read: its runs would be lost, and with them the
+    /// calibration on the next run.
+    #[error("{0} (or delete the manifest to train without its runs and gaits)")]
+    Manifest(#[from] node::capture::CaptureError),
 }
 
 /// Images, each one's class (an index into `classes`), and the classes in the order of the
@@ -51,6 +55,9 @@ pub struct TrainingSet {
     /// Each image's run (the recording it came from: the capture manifest's `source`), or
     /// `None` when not known (no manifest; simulated sets are one run each).
     pub runs: Vec<Option<String>>,
+    /// Each image's gait at touchdown (the capture manifest's `gait`; a simulated set's gait),
+    /// or `None` when not known.
+    pub gaits: Vec<Option<u8>>,
 }
 
 /// A model from [`TrainingSet::train_calibrated`].
@@ -208,11 +215,13 @@ impl TrainingSet {
             })
             .unzip();
         let runs = vec![None; labels.len()];
+        let gaits = vec![None; labels.len()];
         Self {
             classes,
             images,
             labels,
             runs,
+            gaits,
         }
     }
 
@@ -239,7 +248,7 @@ impl TrainingSet {
 
     /// A user's dataset (`DIR/<class>/<images>`): every class folder must be named after a
     /// terrain in `catalog`, whose id the model then sends; no id is ever made up.
-    pub fn from_dataset(ds: Dataset, catalog: &TerrainCatalog) -> Result<Self, NotInCatalog> {
+    pub fn from_dataset(ds: Dataset, catalog: &TerrainCatalog) -> Result<Self, LoadError> {
         let classes = ds
             .classes
             .iter()
@@ -254,22 +263,84 @@ impl TrainingSet {
                 }),
             })
             .collect::<Result<_, _>>()?;
-        let runs_of = node::capture::read_runs(&ds.root).ok().flatten();
-        let runs = ds
+        let manifest = node::capture::read_manifest(&ds.root)?;
+        let entries: Vec<Option<&node::capture::ManifestEntry>> = ds
             .samples
             .iter()
-            .map(|s| {
-                let rel = s.path.strip_prefix(&ds.root).ok()?;
-                runs_of.as_ref()?.get(rel).cloned()
-            })
+            .map(|s| manifest.as_ref()?.get(s.path.strip_prefix(&ds.root).ok()?))
             .collect();
+        let runs = entries
+            .iter()
+            .map(|e| e.map(|e| e.source.clone()))
+            .collect();
+        let gaits = entries.iter().map(|e| e.and_then(|e| e.gait)).collect();
         let (images, labels) = ds.samples.into_iter().map(|s| (s.image, s.class)).unzip();
         Ok(Self {
             classes,
             images,
             labels,
             runs,
+            gaits,
         })
+    }
+
+    /// `presrs train`'s account of the gaits the set's stances touched down in (the capture
+    /// manifest's `gait`), and the terrains that lack one of them; `None` when no image has a
+    /// gait (a folder not captured from a bus that carried GaitStatus).
+    ///
+    /// Why it matters, measured (docs/real-robot.md, "A gait the model never saw"): a gait
+    /// between trained ones is known ground (real SpeedPP2D, a speed between two trained ones,
+    /// 2.5% unknown), one beyond them is not (a faster speed 34.5% unknown, a slower 19.5%).
+    pub fn gait_note(&self) -> Option<String> {
+        use std::collections::{BTreeMap, BTreeSet};
+        use std::fmt::Write;
+        if self.gaits.iter().all(Option::is_none) {
+            return None;
+        }
+        let mut all: BTreeMap<u8, usize> = BTreeMap::new();
+        let mut per_class: Vec<BTreeSet<u8>> = vec![BTreeSet::new(); self.classes.len()];
+        for (g, &k) in self.gaits.iter().zip(&self.labels) {
+            if let Some(g) = *g {
+                *all.entry(g).or_default() += 1;
+                if let Some(c) = per_class.get_mut(k) {
+                    c.insert(g);
+                }
+            }
+        }
+        let mut o = String::from("gaits at touchdown (capture manifest): ");
+        let counts: Vec<String> = all.iter().map(|(g, n)| format!("G{g} {n}")).collect();
+        o.push_str(&counts.join(", "));
+        let without = self.gaits.iter().filter(|g| g.is_none()).count();
+        if without > 0 {
+            let _ = write!(o, ", {without} without a GaitStatus");
+        }
+        let lacking: Vec<String> = self
+            .classes
+            .iter()
+            .zip(&per_class)
+            .flat_map(|(c, have)| {
+                all.keys()
+                    .filter(|g| !have.contains(g))
+                    .map(move |g| format!("{} in G{g}", c.name))
+            })
+            .collect();
+        if lacking.is_empty() {
+            o.push_str("; every terrain in each");
+        } else {
+            let _ = write!(o, "; not captured: {}", lacking.join(", "));
+        }
+        // The controller runs a terrain in its own gait, so a set captured from the robot's
+        // runs lacks gaits per terrain; the robot still meets them (the last terrain's gait at
+        // a crossing, the safe gait after an unknown step).
+        o.push_str(
+            ". A stance meets its terrain in the gait the robot is running (the last terrain's \
+             at a crossing, the safe gait after an unknown step), and a gait beyond those a \
+             terrain was captured in makes it look new: on real walking, a speed beyond the \
+             trained ones was 19.5-34.5% unknown, one between them 2.5% (docs/real-robot.md, \
+             \"A gait the model never saw\"). Capture each terrain in the slowest and the \
+             fastest gait the robot will run.",
+        );
+        Some(o)
     }
 
     /// The images at `idx`, with the same classes.
@@ -279,6 +350,7 @@ impl TrainingSet {
             images: idx.iter().map(|&i| self.images[i].clone()).collect(),
             labels: idx.iter().map(|&i| self.labels[i]).collect(),
             runs: idx.iter().map(|&i| self.runs[i].clone()).collect(),
+            gaits: idx.iter().map(|&i| self.gaits[i]).collect(),
         }
     }
 
@@ -505,6 +577,54 @@ mod tests {
         let (c, report) = trained(14, 9);
         assert_eq!((c.held_out_images, c.training_run_images()), (40, 24));
         assert!(!report.contains(&note), "{report}");
+    }
+
+    /// `train` lists the gaits a set's stances touched down in and the terrains lacking one;
+    /// a set without gaits (no manifest, or a bus without GaitStatus) gets no note.
+    #[test]
+    fn the_gait_note_names_each_gait_and_the_terrains_that_lack_one() {
+        let kind = sim::dataset::Kind::Static;
+        let mut set = crate::study::dataset_on(kind, 4, controller::Gait::g2(), 41, 1);
+        let g3 = crate::study::dataset_on(kind, 4, controller::Gait::g3(), 42, 1);
+        let n = set.images.len();
+        assert_eq!(
+            set.gaits,
+            vec![Some(2); n],
+            "a simulated set knows its gait"
+        );
+        let note = set.gait_note().unwrap();
+        assert!(
+            note.starts_with(&format!(
+                "gaits at touchdown (capture manifest): G2 {n}; every"
+            )),
+            "{note}"
+        );
+        // G3 on every terrain but the first, and one stance of unknown gait.
+        let keep: Vec<usize> = (0..g3.images.len())
+            .filter(|&i| g3.labels[i] != 0)
+            .collect();
+        let g3 = g3.subset(&keep);
+        set.images.extend(g3.images);
+        set.labels.extend(g3.labels);
+        set.runs.extend(g3.runs);
+        set.gaits.extend(g3.gaits);
+        set.gaits[0] = None;
+        let note = set.gait_note().unwrap();
+        let first = &set.classes[0].name;
+        assert!(
+            note.contains(&format!(
+                "G2 {}, G3 {}, 1 without a GaitStatus",
+                n - 1,
+                keep.len()
+            )),
+            "{note}"
+        );
+        assert!(
+            note.contains(&format!("; not captured: {first} in G3. ")),
+            "{note}"
+        );
+        set.gaits.iter_mut().for_each(|g| *g = None);
+        assert_eq!(set.gait_note(), None);
     }
 
     #[test]

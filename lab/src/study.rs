@@ -36,7 +36,11 @@ pub fn dataset_on(
     seed: u64,
     sensor: u64,
 ) -> TrainingSet {
-    TrainingSet::from_samples(samples_on(kind, n, gait, seed, sensor), &kind.terrains())
+    let id = gait.id;
+    let mut set =
+        TrainingSet::from_samples(samples_on(kind, n, gait, seed, sensor), &kind.terrains());
+    set.gaits = vec![Some(id); set.images.len()];
+    set
 }
 
 fn samples(kind: Kind, n: usize, gait: controller::Gait, seed: u64) -> Vec<Sample> {

@@ -157,6 +157,9 @@ pub struct CapturedStep {
     pub damage_pct: f64,
     /// Lines the repair filter filled in this image.
     pub repaired_lines: usize,
+    /// The gait in force at touchdown (the controller's last GaitStatus before it: 1..=3 for
+    /// G1..G3); `None` when the bus carried no GaitStatus (a lab's own controller).
+    pub gait: Option<u8>,
     /// The image (repaired unless the config's `repair = "none"`).
     pub image: PressureImage,
 }
@@ -294,6 +297,42 @@ impl Labelling {
     }
 }
 
+/// The gaits the controller announced (GaitStatus, at every switch and at 10 Hz), kept as
+/// their last switches so that a step decided after a switch still gets the gait it touched
+/// down in.
+#[derive(Clone, Debug, Default)]
+pub struct GaitTrack {
+    /// (receive time µs, gait), oldest first; at most [`GaitTrack::KEPT`].
+    switches: Vec<(u64, u8)>,
+}
+
+impl GaitTrack {
+    /// Switches kept. A step is decided within a stance of its touchdown (well under a second);
+    /// at most a switch per stance, eight reach back further than any step waits.
+    pub const KEPT: usize = 8;
+
+    /// The controller said `gait` is in force at `t_us`.
+    pub fn observe(&mut self, t_us: u64, gait: u8) {
+        if self.switches.last().is_some_and(|&(_, g)| g == gait) {
+            return;
+        }
+        if self.switches.len() == Self::KEPT {
+            self.switches.remove(0);
+        }
+        self.switches.push((t_us, gait));
+    }
+
+    /// The gait in force at `t_us`; `None` before the first GaitStatus, or earlier than the
+    /// switches kept reach.
+    pub fn at(&self, t_us: u64) -> Option<u8> {
+        self.switches
+            .iter()
+            .rev()
+            .find(|&&(t, _)| t <= t_us)
+            .map(|&(_, g)| g)
+    }
+}
+
 /// The node's stance logic and repair filter, turning frames into labelled step images.
 pub struct Capture {
     pipeline: StancePipeline,
@@ -303,6 +342,8 @@ pub struct Capture {
     labelling: Labelling,
     counts: CaptureCounts,
     decided: Vec<u8>,
+    ids: protocol::ids::IdConfig,
+    gaits: GaitTrack,
 }
 
 impl Capture {
@@ -312,10 +353,12 @@ impl Capture {
             health: (0..cfg.feet).map(|_| LineHealth::new(0, 0)).collect(),
             repair: cfg.repair,
             dead_after: cfg.dead_after_stances,
+            ids: cfg.ids.clone(),
             pipeline: StancePipeline::for_capture(cfg),
             labelling,
             counts: CaptureCounts::default(),
             decided: Vec::new(),
+            gaits: GaitTrack::default(),
         }
     }
 
@@ -338,6 +381,16 @@ impl Capture {
 
     /// One received (or logged) frame; a step it ends goes to `out`.
     pub fn process(&mut self, st: &Stamped, out: &mut impl FnMut(CapturedStep)) {
+        use protocol::ids::MessageKind;
+        use protocol::messages::{Message, decode};
+        if let Some((MessageKind::GaitStatus, _)) =
+            self.ids.lookup(st.frame.raw_id(), st.frame.is_extended())
+            // A malformed GaitStatus says nothing about the gait: the last one stands.
+            && let Ok(Some((_, Message::GaitStatus(g)))) = decode(&st.frame, &self.ids)
+            && g.gait != 0
+        {
+            self.gaits.observe(st.t_us, g.gait);
+        }
         let decided = &mut self.decided;
         self.pipeline
             .on_frame(st, &mut |foot, _| decided.push(foot));
@@ -404,39 +457,94 @@ impl Capture {
             load_sum: image.pixels.iter().map(|&p| p as u64).sum(),
             damage_pct: h.damage_pct(),
             repaired_lines,
+            gait: self.gaits.at(touchdown_us),
             image,
         })
     }
 }
 
-/// Each image's run (the manifest's `source`: the candump log or interface it was captured
-/// from), by its path relative to the training-set folder (`terrain/name.pgm`). `Ok(None)` when
-/// `dir` has no manifest (a folder not written by `presrs capture`).
-pub fn read_runs(
+/// What the manifest says of one image besides its terrain folder.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ManifestEntry {
+    /// Its run: the candump log or interface it was captured from (`source`).
+    pub source: String,
+    /// The gait in force at its touchdown (`gait`, empty when the bus carried no GaitStatus,
+    /// and in manifests written before the column).
+    pub gait: Option<u8>,
+}
+
+/// One manifest line, parsed: `Ok(None)` for a header or blank line; `Err` says what is wrong.
+/// Lines have the 9 columns of [`MANIFEST_HEADER_V1`] or the 10 of [`MANIFEST_HEADER`]: a
+/// capture appends 10 to a manifest that began with 9, and both stay readable.
+struct ManifestLine<'a> {
+    file: &'a str,
+    foot: u8,
+    step: u16,
+    touchdown_us: u64,
+    entry: ManifestEntry,
+}
+
+fn parse_manifest_line(l: &str) -> Result<Option<ManifestLine<'_>>, String> {
+    if l.is_empty() || l == MANIFEST_HEADER || l == MANIFEST_HEADER_V1 {
+        return Ok(None);
+    }
+    let f: Vec<&str> = l.split(',').collect();
+    if !(9..=10).contains(&f.len()) {
+        return Err(format!(
+            "{} fields; want the 10 of `{MANIFEST_HEADER}` (or 9, without gait)",
+            f.len()
+        ));
+    }
+    let gait = match f.get(9) {
+        None | Some(&"") => None,
+        Some(g) => Some(
+            g.parse::<u8>()
+                .ok()
+                .filter(|&g| g != 0)
+                .ok_or_else(|| format!("gait `{g}` is not 1..255 or empty"))?,
+        ),
+    };
+    Ok(Some(ManifestLine {
+        file: f[0],
+        foot: f[2].parse().map_err(|_| format!("foot `{}`", f[2]))?,
+        step: f[3].parse().map_err(|_| format!("step `{}`", f[3]))?,
+        touchdown_us: parse_seconds(f[4]).ok_or_else(|| format!("touchdown_s `{}`", f[4]))?,
+        entry: ManifestEntry {
+            source: f[8].to_string(),
+            gait,
+        },
+    }))
+}
+
+/// Each image's manifest entry (its run, its gait), by its path relative to the training-set
+/// folder (`terrain/name.pgm`). `Ok(None)` when `dir` has no manifest (a folder not written by
+/// `presrs capture`); a manifest line that is not one is an error naming it.
+pub fn read_manifest(
     dir: &Path,
-) -> Result<Option<std::collections::HashMap<PathBuf, String>>, CaptureError> {
+) -> Result<Option<std::collections::HashMap<PathBuf, ManifestEntry>>, CaptureError> {
     let path = dir.join("manifest.csv");
     let text = match std::fs::read_to_string(&path) {
         Ok(t) => t,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
         Err(e) => return Err(io("read", &path, e)),
     };
-    let mut runs = std::collections::HashMap::new();
+    let mut entries = std::collections::HashMap::new();
     for (i, l) in text.lines().enumerate() {
-        if l.is_empty() || l == MANIFEST_HEADER {
-            continue;
+        match parse_manifest_line(l) {
+            Ok(Some(m)) => {
+                entries.insert(PathBuf::from(m.file), m.entry);
+            }
+            Ok(None) => {}
+            Err(reason) => {
+                return Err(CaptureError::Manifest {
+                    path,
+                    line: i + 1,
+                    reason,
+                });
+            }
         }
-        let f: Vec<&str> = l.split(',').collect();
-        if f.len() != 9 {
-            return Err(CaptureError::Manifest {
-                path: path.clone(),
-                line: i + 1,
-                reason: "want 9 fields".into(),
-            });
-        }
-        runs.insert(PathBuf::from(f[0]), f[8].to_string());
     }
-    Ok(Some(runs))
+    Ok(Some(entries))
 }
 
 /// A capture filling a training set, as a part on the bus ([`Component`]): `presrs capture
@@ -503,6 +611,8 @@ impl CaptureService {
             "steps": c.steps, "written": set.written, "duplicates": set.duplicates,
             "no_image": c.no_image, "blank": c.blank, "unlabelled": c.unlabelled,
             "spans_labels": c.spans_labels, "per_terrain": set.written_per_terrain,
+            "per_gait": set.written_per_gait.iter().map(|(g, n)| (gait_name(*g), *n))
+                .collect::<std::collections::BTreeMap<_, _>>(),
             "set_total": set.len(), "error": self.failed.as_ref().map(|e| e.to_string()),
         })
     }
@@ -515,8 +625,13 @@ impl CaptureService {
             .iter()
             .map(|(t, n)| format!("{t} {n}"))
             .collect();
+        let gaits: Vec<String> = set
+            .written_per_gait
+            .iter()
+            .map(|(g, n)| format!("{} {n}", gait_name(*g)))
+            .collect();
         format!(
-            "capture of {}: {} steps, {} written ({}), {} already in the set; skipped: {} without an image in the stance, {} blank, {} outside every label, {} spanning two labels; {} holds {} steps",
+            "capture of {}: {} steps, {} written ({}; by gait at touchdown: {}), {} already in the set; skipped: {} without an image in the stance, {} blank, {} outside every label, {} spanning two labels; {} holds {} steps",
             self.source,
             c.steps,
             set.written,
@@ -524,6 +639,11 @@ impl CaptureService {
                 "none".into()
             } else {
                 terrains.join(", ")
+            },
+            if gaits.is_empty() {
+                "none".into()
+            } else {
+                gaits.join(", ")
             },
             set.duplicates,
             c.no_image,
@@ -534,6 +654,11 @@ impl CaptureService {
             set.len()
         )
     }
+}
+
+/// `G1`.. for a gait the controller announced, `no GaitStatus` for a step without one.
+pub fn gait_name(gait: Option<u8>) -> String {
+    gait.map_or_else(|| "no GaitStatus".to_string(), |g| format!("G{g}"))
 }
 
 fn keep(set: &mut CaptureSet, source: &str, failed: &mut Option<CaptureError>, c: &CapturedStep) {
@@ -574,6 +699,10 @@ impl Component for CaptureService {
 
 /// The manifest's header line.
 pub const MANIFEST_HEADER: &str =
+    "file,terrain,foot,step,touchdown_s,sample_s,load_sum,damage_pct,source,gait";
+
+/// The header of manifests written before the `gait` column; still read.
+pub const MANIFEST_HEADER_V1: &str =
     "file,terrain,foot,step,touchdown_s,sample_s,load_sum,damage_pct,source";
 
 /// A training-set folder being filled: `DIR/<terrain>/<name>.pgm` plus `DIR/manifest.csv`.
@@ -587,6 +716,8 @@ pub struct CaptureSet {
     pub written: u64,
     /// Of those, per terrain name.
     pub written_per_terrain: std::collections::BTreeMap<String, u64>,
+    /// Of those, per gait in force at touchdown (`None`: no GaitStatus on the bus).
+    pub written_per_gait: std::collections::BTreeMap<Option<u8>, u64>,
     /// Steps already in the manifest.
     pub duplicates: u64,
 }
@@ -603,22 +734,19 @@ impl CaptureSet {
             Err(e) => return Err(io("read", &manifest_path, e)),
         };
         for (i, l) in existing.lines().enumerate() {
-            if l.is_empty() || l == MANIFEST_HEADER {
-                continue;
+            match parse_manifest_line(l) {
+                Ok(Some(m)) => {
+                    keys.insert((m.entry.source, m.foot, m.step, m.touchdown_us));
+                }
+                Ok(None) => {}
+                Err(reason) => {
+                    return Err(CaptureError::Manifest {
+                        path: manifest_path,
+                        line: i + 1,
+                        reason,
+                    });
+                }
             }
-            let bad = |reason: &str| CaptureError::Manifest {
-                path: manifest_path.clone(),
-                line: i + 1,
-                reason: reason.into(),
-            };
-            let f: Vec<&str> = l.split(',').collect();
-            if f.len() != 9 {
-                return Err(bad("want 9 fields"));
-            }
-            let foot = f[2].parse().map_err(|_| bad("foot"))?;
-            let step = f[3].parse().map_err(|_| bad("step"))?;
-            let td = parse_seconds(f[4]).ok_or_else(|| bad("touchdown_s"))?;
-            keys.insert((f[8].to_string(), foot, step, td));
         }
         let mut manifest = std::fs::OpenOptions::new()
             .create(true)
@@ -635,6 +763,7 @@ impl CaptureSet {
             keys,
             written: 0,
             written_per_terrain: Default::default(),
+            written_per_gait: Default::default(),
             duplicates: 0,
         })
     }
@@ -674,7 +803,7 @@ impl CaptureSet {
         }
         std::fs::rename(&tmp, &path).map_err(|e| io("write", &path, e))?;
         let line = format!(
-            "{}/{name},{},{},{},{},{},{},{:.1},{source}\n",
+            "{}/{name},{},{},{},{},{},{},{:.1},{source},{}\n",
             c.terrain.name(),
             c.terrain.name(),
             c.foot,
@@ -683,6 +812,7 @@ impl CaptureSet {
             format_seconds(c.sample_us),
             c.load_sum,
             c.damage_pct,
+            c.gait.map(|g| g.to_string()).unwrap_or_default(),
         );
         self.manifest
             .write_all(line.as_bytes())
@@ -694,6 +824,7 @@ impl CaptureSet {
             .written_per_terrain
             .entry(c.terrain.name().to_string())
             .or_default() += 1;
+        *self.written_per_gait.entry(c.gait).or_default() += 1;
         Ok(true)
     }
 
@@ -763,5 +894,64 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("cannot read /nonexistent/labels.csv"), "{e}");
+    }
+
+    #[test]
+    fn a_step_gets_the_gait_in_force_at_its_touchdown() {
+        let mut g = GaitTrack::default();
+        assert_eq!(g.at(5), None, "no GaitStatus yet");
+        g.observe(10, 2);
+        g.observe(20, 2); // the 10 Hz repeat: no switch
+        g.observe(30, 3);
+        assert_eq!(
+            (g.at(9), g.at(10), g.at(29), g.at(30)),
+            (None, Some(2), Some(2), Some(3))
+        );
+        // A step decided after later switches still gets its own touchdown's gait.
+        for (i, gait) in [1, 2, 1, 2, 1, 2, 1].into_iter().enumerate() {
+            g.observe(100 + i as u64, gait);
+        }
+        assert_eq!(g.switches.len(), GaitTrack::KEPT);
+        assert_eq!(g.at(100), Some(1));
+        // Older than every switch kept: not known, rather than a wrong gait.
+        assert_eq!(g.at(15), None);
+    }
+
+    #[test]
+    fn the_manifest_reads_with_and_without_its_gait_column() {
+        let dir = std::env::temp_dir().join(format!("presrs-manifest-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let read = |text: &str| {
+            std::fs::write(dir.join("manifest.csv"), text).unwrap();
+            read_manifest(&dir)
+        };
+        let v1 = format!("{MANIFEST_HEADER_V1}\nwood/a.pgm,wood,0,1,1.0,1.07,5,0.0,run1\n");
+        let m = read(&v1).unwrap().unwrap();
+        let want = |source: &str, gait| ManifestEntry {
+            source: source.into(),
+            gait,
+        };
+        assert_eq!(m[Path::new("wood/a.pgm")], want("run1", None));
+        // A capture appends 10 columns to a manifest that began with 9.
+        let mixed = format!(
+            "{v1}wood/b.pgm,wood,0,2,2.0,2.07,5,0.0,run2,3\nwood/c.pgm,wood,0,3,3.0,3.07,5,0.0,run2,\n"
+        );
+        let m = read(&mixed).unwrap().unwrap();
+        assert_eq!(m[Path::new("wood/b.pgm")], want("run2", Some(3)));
+        assert_eq!(m[Path::new("wood/c.pgm")], want("run2", None));
+        for (line, why) in [
+            ("wood/d.pgm,wood,0,4,4.0,4.07,5,0.0,run2,0", "gait `0`"),
+            ("wood/d.pgm,wood,0,4,4.0,4.07,5,0.0,run2,G3", "gait `G3`"),
+            ("wood/d.pgm,wood,0,4,4.0,4.07,5,0.0", "8 fields"),
+            ("wood/d.pgm,wood,x,4,4.0,4.07,5,0.0,run2,1", "foot `x`"),
+        ] {
+            let e = read(&format!("{MANIFEST_HEADER}\n{line}\n"))
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("manifest.csv line 2") && e.contains(why), "{e}");
+        }
+        std::fs::remove_file(dir.join("manifest.csv")).unwrap();
+        assert!(read_manifest(&dir).unwrap().is_none());
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }
