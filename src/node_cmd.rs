@@ -103,9 +103,12 @@ fn replay(mut node: NodeService, log: &Path, json: bool) -> Result<ExitCode> {
     let file = protocol::candump::LogFile::check(log)?;
     let mut records = file.records()?;
     let catalog = node.catalog().clone();
-    let summary = node::replay::replay_log(&mut node, &mut records, &mut |t_us, foot, tc| {
+    let summary = node::replay::replay_log(&mut node, &mut records, &mut |t_us, foot, tc, gait| {
         if json {
-            println!("{}", node::replay::class_json(t_us, foot, tc, &catalog));
+            println!(
+                "{}",
+                node::replay::class_json(t_us, foot, tc, gait, &catalog)
+            );
         } else {
             println!("{}", node::replay::class_line(t_us, foot, tc, &catalog));
         }

@@ -240,6 +240,39 @@ fn a_capture_of_the_whole_bus_records_each_stances_gait_and_train_lists_them() {
         "{said}"
     );
     assert_eq!(said.contains("without a GaitStatus"), unknown > 0, "{said}");
+    // The model says which gaits it has seen, and the node's replay counts unknowns by gait.
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&model).unwrap()).unwrap();
+    assert_eq!(
+        m["gaits"],
+        serde_json::json!([1, 2, 3]),
+        "the demo runs G1-G3"
+    );
+    let replay = common::output_ok(presrs().args([
+        "node",
+        "--replay",
+        s(&log),
+        "--model",
+        s(&model),
+        "--json",
+    ]));
+    let lines = String::from_utf8_lossy(&replay.stdout);
+    let mut by_gait = 0;
+    for l in lines.lines() {
+        let v: serde_json::Value = serde_json::from_str(l).unwrap();
+        let step = v["step"].as_u64().unwrap();
+        match v["gait"].as_u64() {
+            Some(g) => {
+                by_gait += 1;
+                assert_eq!(ran.get(&step), Some(&g.to_string()), "{l}");
+            }
+            None => assert!(v["gait"].is_null() && step <= 2, "{l}"),
+        }
+    }
+    assert!(by_gait >= 100, "{lines}");
+    let summary = String::from_utf8_lossy(&replay.stderr);
+    assert!(summary.contains("; unknown by gait: G1 "), "{summary}");
+    assert!(!summary.contains("not trained"), "{summary}");
 
     std::fs::write(
         set.join("manifest.csv"),

@@ -446,6 +446,21 @@ impl TrainingSet {
                 })
                 .sum();
         }
+        // The gaits the model has seen: its stored samples' and its calibration run's.
+        let mut gaits: Vec<u8> = split
+            .train
+            .iter()
+            .chain(&split.validation)
+            .filter_map(|&i| train_set.gaits.get(i).copied().flatten())
+            .chain(
+                calibration
+                    .iter()
+                    .flat_map(|(c, _)| c.gaits.iter().flatten().copied()),
+            )
+            .collect();
+        gaits.sort_unstable();
+        gaits.dedup();
+        model.gaits = (!gaits.is_empty()).then_some(gaits);
         Ok(Trained {
             model,
             split,

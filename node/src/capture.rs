@@ -297,42 +297,6 @@ impl Labelling {
     }
 }
 
-/// The gaits the controller announced (GaitStatus, at every switch and at 10 Hz), kept as
-/// their last switches so that a step decided after a switch still gets the gait it touched
-/// down in.
-#[derive(Clone, Debug, Default)]
-pub struct GaitTrack {
-    /// (receive time µs, gait), oldest first; at most [`GaitTrack::KEPT`].
-    switches: Vec<(u64, u8)>,
-}
-
-impl GaitTrack {
-    /// Switches kept. A step is decided within a stance of its touchdown (well under a second);
-    /// at most a switch per stance, eight reach back further than any step waits.
-    pub const KEPT: usize = 8;
-
-    /// The controller said `gait` is in force at `t_us`.
-    pub fn observe(&mut self, t_us: u64, gait: u8) {
-        if self.switches.last().is_some_and(|&(_, g)| g == gait) {
-            return;
-        }
-        if self.switches.len() == Self::KEPT {
-            self.switches.remove(0);
-        }
-        self.switches.push((t_us, gait));
-    }
-
-    /// The gait in force at `t_us`; `None` before the first GaitStatus, or earlier than the
-    /// switches kept reach.
-    pub fn at(&self, t_us: u64) -> Option<u8> {
-        self.switches
-            .iter()
-            .rev()
-            .find(|&&(t, _)| t <= t_us)
-            .map(|&(_, g)| g)
-    }
-}
-
 /// The node's stance logic and repair filter, turning frames into labelled step images.
 pub struct Capture {
     pipeline: StancePipeline,
@@ -343,7 +307,7 @@ pub struct Capture {
     counts: CaptureCounts,
     decided: Vec<u8>,
     ids: protocol::ids::IdConfig,
-    gaits: GaitTrack,
+    gaits: crate::gait::GaitTrack,
 }
 
 impl Capture {
@@ -358,7 +322,7 @@ impl Capture {
             labelling,
             counts: CaptureCounts::default(),
             decided: Vec::new(),
-            gaits: GaitTrack::default(),
+            gaits: crate::gait::GaitTrack::default(),
         }
     }
 
@@ -381,16 +345,7 @@ impl Capture {
 
     /// One received (or logged) frame; a step it ends goes to `out`.
     pub fn process(&mut self, st: &Stamped, out: &mut impl FnMut(CapturedStep)) {
-        use protocol::ids::MessageKind;
-        use protocol::messages::{Message, decode};
-        if let Some((MessageKind::GaitStatus, _)) =
-            self.ids.lookup(st.frame.raw_id(), st.frame.is_extended())
-            // A malformed GaitStatus says nothing about the gait: the last one stands.
-            && let Ok(Some((_, Message::GaitStatus(g)))) = decode(&st.frame, &self.ids)
-            && g.gait != 0
-        {
-            self.gaits.observe(st.t_us, g.gait);
-        }
+        self.gaits.on_frame(st, &self.ids);
         let decided = &mut self.decided;
         self.pipeline
             .on_frame(st, &mut |foot, _| decided.push(foot));
@@ -894,27 +849,6 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("cannot read /nonexistent/labels.csv"), "{e}");
-    }
-
-    #[test]
-    fn a_step_gets_the_gait_in_force_at_its_touchdown() {
-        let mut g = GaitTrack::default();
-        assert_eq!(g.at(5), None, "no GaitStatus yet");
-        g.observe(10, 2);
-        g.observe(20, 2); // the 10 Hz repeat: no switch
-        g.observe(30, 3);
-        assert_eq!(
-            (g.at(9), g.at(10), g.at(29), g.at(30)),
-            (None, Some(2), Some(2), Some(3))
-        );
-        // A step decided after later switches still gets its own touchdown's gait.
-        for (i, gait) in [1, 2, 1, 2, 1, 2, 1].into_iter().enumerate() {
-            g.observe(100 + i as u64, gait);
-        }
-        assert_eq!(g.switches.len(), GaitTrack::KEPT);
-        assert_eq!(g.at(100), Some(1));
-        // Older than every switch kept: not known, rather than a wrong gait.
-        assert_eq!(g.at(15), None);
     }
 
     #[test]

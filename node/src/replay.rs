@@ -31,6 +31,24 @@ pub struct ReplaySummary {
     /// Per terrain of the model that has a return map: its stances judged by the energy check
     /// and those outside the map. Empty for a model without maps.
     pub energy: Vec<EnergyTally>,
+    /// Steps and unknowns per gait in force when each was decided (the log's GaitStatus), in
+    /// gait order, steps before any GaitStatus last. Empty when the log has no GaitStatus.
+    pub gaits: Vec<GaitTally>,
+    /// The gaits the model was trained in (`Model::gaits`), when it says.
+    pub model_gaits: Option<Vec<u8>>,
+}
+
+/// One gait's steps over a replay: where the unknowns fall. Unknowns that gather in a gait the
+/// model was not trained in are the gait's, not the ground's: capture that gait
+/// (docs/real-robot.md, "Record the whole bus").
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct GaitTally {
+    /// The gait (`None`: before the log's first GaitStatus).
+    pub gait: Option<u8>,
+    /// Steps decided in it.
+    pub steps: u32,
+    /// Of them, called unknown.
+    pub unknown: u32,
 }
 
 /// One terrain's stances against its return map over a replay.
@@ -76,27 +94,70 @@ impl fmt::Display for ReplaySummary {
                 write!(f, "{sep}{} {}/{}", t.terrain, t.outside, t.judged)?;
             }
         }
+        if !self.gaits.is_empty() {
+            write!(f, "; unknown by gait:")?;
+            for (i, g) in self.gaits.iter().enumerate() {
+                let sep = if i == 0 { " " } else { ", " };
+                write!(
+                    f,
+                    "{sep}{} {}/{}",
+                    crate::capture::gait_name(g.gait),
+                    g.unknown,
+                    g.steps
+                )?;
+                if let (Some(gait), Some(trained)) = (g.gait, &self.model_gaits)
+                    && !trained.contains(&gait)
+                {
+                    write!(f, " (the model was not trained in it)")?;
+                }
+            }
+        }
         Ok(())
     }
 }
 
-/// Replays `records` through `node`, handing each TerrainClass (log time, foot, decision) to
-/// `on_class`. The records stream: a [`protocol::candump::LogFile`]'s or a slice's.
+/// Replays `records` through `node`, handing each TerrainClass (log time, foot, decision, the
+/// gait in force: the log's last GaitStatus) to `on_class`. The records stream: a
+/// [`protocol::candump::LogFile`]'s or a slice's.
 pub fn replay_log<R: Borrow<LogRecord>>(
     node: &mut NodeService,
     records: impl IntoIterator<Item = R>,
-    on_class: &mut impl FnMut(u64, u8, &TerrainClass),
+    on_class: &mut impl FnMut(u64, u8, &TerrainClass, Option<u8>),
 ) -> ReplaySummary {
     let (mut frames, mut span) = (0, None::<(u64, u64)>);
+    let mut track = crate::gait::GaitTrack::default();
+    // Gait 0 is "none" on the bus, so index 0 holds the steps before any GaitStatus.
+    let mut tally = [(0u32, 0u32); 256];
+    let ids = node.ids().clone();
     for r in records {
         let st = &r.borrow().stamped;
         frames += 1;
         span = Some(span.map_or((st.t_us, st.t_us), |(a, _)| (a, st.t_us)));
+        track.on_frame(st, &ids);
+        let gait = track.current();
         node.replay(std::iter::once(st), &mut |t_us, o| {
             if let Output::Class { foot, class } = o {
-                on_class(t_us, foot, &class);
+                let t = &mut tally[gait.unwrap_or(0) as usize];
+                t.0 += 1;
+                t.1 += (class.terrain == protocol::messages::TERRAIN_UNKNOWN) as u32;
+                on_class(t_us, foot, &class, gait);
             }
         });
+    }
+    let mut gaits: Vec<GaitTally> = (1..=255u8)
+        .map(Some)
+        .chain([None])
+        .filter_map(|g| {
+            let (steps, unknown) = tally[g.unwrap_or(0) as usize];
+            (steps > 0).then_some(GaitTally {
+                gait: g,
+                steps,
+                unknown,
+            })
+        })
+        .collect();
+    if gaits.iter().all(|g| g.gait.is_none()) {
+        gaits.clear();
     }
     ReplaySummary {
         frames,
@@ -104,6 +165,8 @@ pub fn replay_log<R: Borrow<LogRecord>>(
         counters: node.counters(),
         reassembly: node.reassembly_stats(),
         energy: node.energy_tally(),
+        gaits,
+        model_gaits: node.model().and_then(|m| m.gaits.clone()),
     }
 }
 
@@ -122,16 +185,19 @@ pub fn class_line(t_us: u64, foot: u8, tc: &TerrainClass, catalog: &TerrainCatal
 }
 
 /// One TerrainClass as a JSON object: every field of the message, the terrain also by name.
+/// `gait` is the gait in force (`null` before any GaitStatus).
 pub fn class_json(
     t_us: u64,
     foot: u8,
     tc: &TerrainClass,
+    gait: Option<u8>,
     catalog: &TerrainCatalog,
 ) -> serde_json::Value {
     serde_json::json!({
         "t_us": t_us, "foot": foot, "step": tc.step, "terrain": catalog.describe(tc.terrain),
         "terrain_id": tc.terrain, "confidence_pct": tc.confidence_pct,
         "damage_pct": tc.damage_pct, "flags": tc.flags, "latency_us": tc.latency_us,
+        "gait": gait,
     })
 }
 
@@ -151,6 +217,41 @@ mod tests {
     }
 
     #[test]
+    fn the_summary_counts_unknowns_per_gait_and_names_a_gait_the_model_never_saw() {
+        let tally = |gait, steps, unknown| GaitTally {
+            gait,
+            steps,
+            unknown,
+        };
+        let mut s = ReplaySummary {
+            frames: 10,
+            span_us: 1_000_000,
+            counters: Counters::default(),
+            reassembly: ReassemblyStats::default(),
+            energy: vec![],
+            gaits: vec![
+                tally(Some(1), 40, 1),
+                tally(Some(3), 20, 7),
+                tally(None, 1, 0),
+            ],
+            model_gaits: Some(vec![1, 2]),
+        };
+        let line = s.to_string();
+        assert!(
+            line.ends_with(
+                "; unknown by gait: G1 1/40, G3 7/20 (the model was not trained in it), \
+                 no GaitStatus 0/1"
+            ),
+            "{line}"
+        );
+        // A model that does not say which gaits it knows: counts only.
+        s.model_gaits = None;
+        assert!(!s.to_string().contains("not trained"), "{s}");
+        s.gaits.clear();
+        assert!(!s.to_string().contains("by gait"), "{s}");
+    }
+
+    #[test]
     fn lines_name_the_terrain_and_keep_every_field() {
         let cat = TerrainCatalog::paper();
         let line = class_line(1_500_000, 1, &tc(0), &cat);
@@ -161,7 +262,9 @@ mod tests {
         );
         let unknown = class_line(0, 0, &tc(protocol::messages::TERRAIN_UNKNOWN), &cat);
         assert!(unknown.contains(&cat.describe(0xFF)), "{unknown}");
-        let v = class_json(1_500_000, 1, &tc(0), &cat);
+        let v = class_json(1_500_000, 1, &tc(0), Some(2), &cat);
+        assert_eq!(v["gait"], 2);
+        assert!(class_json(0, 0, &tc(0), None, &cat)["gait"].is_null());
         assert_eq!(v["terrain"], cat.describe(0));
         assert_eq!(v["terrain_id"], 0);
         assert_eq!(v["latency_us"], 1234);

@@ -546,7 +546,7 @@ fn a_replay_decides_each_step_as_the_log_clock_says() {
         .collect();
     let mut node = NodeService::new(NodeConfig::default(), model()).unwrap();
     let mut lines = Vec::new();
-    let sum = presrs_node::replay::replay_log(&mut node, &records, &mut |t, foot, tc| {
+    let sum = presrs_node::replay::replay_log(&mut node, &records, &mut |t, foot, tc, _| {
         lines.push(presrs_node::replay::class_line(t, foot, tc, &catalog))
     });
     assert_eq!(lines.len(), terrains.len(), "{lines:?}");
@@ -1062,4 +1062,22 @@ fn a_stance_that_took_energy_its_terrain_does_not_makes_the_next_of_its_kind_unk
     bad.energy = Some(vec![Some(wood)]);
     let e = bad.validate().err().map(|e| e.to_string());
     assert!(e.as_deref().is_some_and(|e| e.contains("energy")), "{e:?}");
+}
+
+/// The gaits a model file says it was trained in: gait numbers, sorted, each once; a file
+/// without them loads as before.
+#[test]
+fn a_model_files_gaits_are_checked() {
+    let mut m = model();
+    assert!(m.gaits.is_none() && m.validate().is_ok());
+    m.gaits = Some(vec![1, 3]);
+    assert!(m.validate().is_ok());
+    for bad in [vec![0, 1], vec![3, 1], vec![2, 2]] {
+        m.gaits = Some(bad.clone());
+        let e = m.validate().err().map(|e| e.to_string());
+        assert!(
+            e.as_deref().is_some_and(|e| e.contains("gaits")),
+            "{bad:?}: {e:?}"
+        );
+    }
 }

@@ -180,6 +180,12 @@ pub struct Model {
     /// files, and in models not fitted on closed-loop runs (`presrs energy`): no energy check.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub energy: Option<Vec<Option<crate::stance::energy::ReturnMap>>>,
+    /// The gaits its training and calibration images touched down in (the capture manifest's
+    /// `gait`, see [`crate::gait`]), sorted: a stance in another gait may look new to it
+    /// (`presrs node --replay` counts unknowns per gait and names those). Absent in older model
+    /// files and where no image's gait was known.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gaits: Option<Vec<u8>>,
 }
 
 /// The working images of the stored samples, in the order of `Model::samples`: the training
@@ -427,8 +433,18 @@ impl Model {
             return Err(Invalid::new(
                 "energy",
                 format!(
-                    "want one return map (or null) per class ({}), finite, residual_s low <=                      high; fit it again with `presrs energy`",
+                    "want one return map (or null) per class ({}), finite, residual_s low <= high; fit it again with `presrs energy`",
                     self.classes.len()
+                ),
+            ));
+        }
+        if let Some(g) = &self.gaits
+            && (g.contains(&0) || g.windows(2).any(|w| w[0] >= w[1]))
+        {
+            return Err(Invalid::new(
+                "gaits",
+                format!(
+                    "gaits {g:?}: want gait numbers 1..=255, sorted, each once; or drop the field"
                 ),
             ));
         }

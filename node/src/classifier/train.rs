@@ -308,6 +308,7 @@ pub fn train(
         }),
         novelty: None,
         energy: None,
+        gaits: None,
     };
     fitted?.install(&mut model);
     if o.check_load {
