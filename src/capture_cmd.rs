@@ -28,7 +28,8 @@ pub struct CaptureArgs {
     #[arg(long)]
     pub labels: Option<PathBuf>,
     /// The training-set folder: `DIR/<terrain>/*.pgm` (what `presrs train` reads) and
-    /// `DIR/manifest.csv`. Capturing the same log again adds nothing.
+    /// `DIR/manifest.csv` (each step's run and, where the bus carried the controller's
+    /// GaitStatus, its gait). Capturing the same log again adds nothing.
     #[arg(long)]
     pub out: PathBuf,
     /// Node config (TOML): debounce, sample time, repair, feet, CAN ids, terrains.
