@@ -440,6 +440,8 @@ struct ManifestLine<'a> {
 }
 
 fn parse_manifest_line(l: &str) -> Result<Option<ManifestLine<'_>>, String> {
+    // A manifest saved by a Windows editor ends its lines in CR LF.
+    let l = l.strip_suffix('\r').unwrap_or(l);
     if l.is_empty() || l == MANIFEST_HEADER || l == MANIFEST_HEADER_V1 {
         return Ok(None);
     }
@@ -870,7 +872,7 @@ mod tests {
         let mixed = format!(
             "{v1}wood/b.pgm,wood,0,2,2.0,2.07,5,0.0,run2,3\nwood/c.pgm,wood,0,3,3.0,3.07,5,0.0,run2,\n"
         );
-        let m = read(&mixed).unwrap().unwrap();
+        let m = read(&mixed.replace('\n', "\r\n")).unwrap().unwrap();
         assert_eq!(m[Path::new("wood/b.pgm")], want("run2", Some(3)));
         assert_eq!(m[Path::new("wood/c.pgm")], want("run2", None));
         for (line, why) in [
