@@ -308,7 +308,11 @@ impl TrainingSet {
             }
         }
         let mut o = String::from("gaits at touchdown (capture manifest): ");
-        let counts: Vec<String> = all.iter().map(|(g, n)| format!("G{g} {n}")).collect();
+        let name = |g: u8| node::gait::gait_name(Some(g));
+        let counts: Vec<String> = all
+            .iter()
+            .map(|(&g, n)| format!("{} {n}", name(g)))
+            .collect();
         o.push_str(&counts.join(", "));
         let without = self.gaits.iter().filter(|g| g.is_none()).count();
         if without > 0 {
@@ -321,7 +325,7 @@ impl TrainingSet {
             .flat_map(|(c, have)| {
                 all.keys()
                     .filter(|g| !have.contains(g))
-                    .map(move |g| format!("{} in G{g}", c.name))
+                    .map(move |&g| format!("{} in {}", c.name, name(g)))
             })
             .collect();
         if lacking.is_empty() {

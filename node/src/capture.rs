@@ -568,7 +568,7 @@ impl CaptureService {
             "steps": c.steps, "written": set.written, "duplicates": set.duplicates,
             "no_image": c.no_image, "blank": c.blank, "unlabelled": c.unlabelled,
             "spans_labels": c.spans_labels, "per_terrain": set.written_per_terrain,
-            "per_gait": set.written_per_gait.iter().map(|(g, n)| (gait_name(*g), *n))
+            "per_gait": set.written_per_gait.iter().map(|(g, n)| (crate::gait::gait_name(*g), *n))
                 .collect::<std::collections::BTreeMap<_, _>>(),
             "set_total": set.len(), "error": self.failed.as_ref().map(|e| e.to_string()),
         })
@@ -585,7 +585,7 @@ impl CaptureService {
         let gaits: Vec<String> = set
             .written_per_gait
             .iter()
-            .map(|(g, n)| format!("{} {n}", gait_name(*g)))
+            .map(|(g, n)| format!("{} {n}", crate::gait::gait_name(*g)))
             .collect();
         format!(
             "capture of {}: {} steps, {} written ({}; by gait at touchdown: {}), {} already in the set; skipped: {} without an image in the stance, {} blank, {} outside every label, {} spanning two labels; {} holds {} steps",
@@ -611,11 +611,6 @@ impl CaptureService {
             set.len()
         )
     }
-}
-
-/// `G1`.. for a gait the controller announced, `no GaitStatus` for a step without one.
-pub fn gait_name(gait: Option<u8>) -> String {
-    gait.map_or_else(|| "no GaitStatus".to_string(), |g| format!("G{g}"))
 }
 
 fn keep(set: &mut CaptureSet, source: &str, failed: &mut Option<CaptureError>, c: &CapturedStep) {

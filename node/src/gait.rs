@@ -8,6 +8,11 @@ use protocol::Stamped;
 use protocol::ids::{IdConfig, MessageKind};
 use protocol::messages::{Message, decode};
 
+/// `G1`.. for a gait the controller announced, `no GaitStatus` for a step without one.
+pub fn gait_name(gait: Option<u8>) -> String {
+    gait.map_or_else(|| "no GaitStatus".to_string(), |g| format!("G{g}"))
+}
+
 /// The gaits the controller announced (GaitStatus, at every switch and at 10 Hz), kept as
 /// their last switches so that a step decided after a switch still gets the gait it touched
 /// down in.

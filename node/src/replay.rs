@@ -101,7 +101,7 @@ impl fmt::Display for ReplaySummary {
                 write!(
                     f,
                     "{sep}{} {}/{}",
-                    crate::capture::gait_name(g.gait),
+                    crate::gait::gait_name(g.gait),
                     g.unknown,
                     g.steps
                 )?;
