@@ -11,8 +11,10 @@ into this repository):
                                     out later trials as the "next run". (Not the speeds: a
                                     subject's walk changes more between speeds than between
                                     subjects, measured: 38% of subjects right across speeds.)
-                                    `gait` = the walking speed (1-3): the gait a walking foot
-                                    touched down in, as `presrs capture` records GaitStatus.
+                                    `gait` = the walking speed (1-3: slow, normal, fast; the
+                                    package's speeds average 1.09, 1.44 and 1.95 m/s): the
+                                    gait a walking foot touched down in, as `presrs capture`
+                                    records GaitStatus.
     OUT/terrains.toml               a terrains file naming the subjects (ids 100-109)
 
     python3 scripts/speedpp2d.py --out DIR

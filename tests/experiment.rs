@@ -212,10 +212,20 @@ fn open_set_takes_the_models_split_and_rate_and_refuses_ones_that_cannot_work() 
     assert_ne!(table(&paper), table(&rate));
     // Two seeds: the spread, then each source's mean with its interval and its verdict.
     assert!(!paper.contains("Over seeds"), "{paper}");
-    let means = rate
+    let (means, by_gait) = rate
         .split("The same seeds' mean, with its 95% interval")
         .nth(1)
+        .unwrap_or_default()
+        .split_once("Fresh known images called unknown, by the gait")
         .unwrap_or_default();
+    // Only the hopping stances carry more than one gait.
+    let gait_rows: Vec<&str> = by_gait.lines().filter(|l| l.starts_with("| ")).collect();
+    assert_eq!(gait_rows.len(), 2, "{by_gait}");
+    assert!(
+        gait_rows[1].starts_with("| simulator, dynamic (G1-G3) | G1 ")
+            && gait_rows[1].contains(", G3 "),
+        "{by_gait}"
+    );
     assert!(rate.contains("Over seeds 1-2"), "{rate}");
     let rows: Vec<&str> = means
         .lines()

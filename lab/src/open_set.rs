@@ -83,6 +83,34 @@ pub struct OpenSetRow {
     pub n_held_out: usize,
     /// Known test images.
     pub n_known: usize,
+    /// The known test images per gait they touched down in, and those of them called unknown
+    /// (images of unknown gait are not counted); in gait order. In [`OpenSetMeans`], summed
+    /// over the rows.
+    pub known_by_gait: Vec<GaitCount>,
+}
+
+/// Known test images of one gait, and those of them called unknown.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct GaitCount {
+    /// The gait.
+    pub gait: u8,
+    /// Known test images in it.
+    pub images: usize,
+    /// Of them, called unknown.
+    pub unknown: usize,
+}
+
+/// Adds `more` into `into`, gait by gait, keeping gait order.
+pub fn add_gait_counts(into: &mut Vec<GaitCount>, more: &[GaitCount]) {
+    for m in more {
+        match into.binary_search_by_key(&m.gait, |c| c.gait) {
+            Ok(i) => {
+                into[i].images += m.images;
+                into[i].unknown += m.unknown;
+            }
+            Err(i) => into.insert(i, *m),
+        }
+    }
 }
 
 /// Means over a source's rows.
@@ -118,6 +146,10 @@ impl OpenSetMeans {
                 calibration_unknown: m(|r| r.calibration_unknown),
                 n_held_out: rows.iter().map(|r| r.n_held_out).sum(),
                 n_known: rows.iter().map(|r| r.n_known).sum(),
+                known_by_gait: rows.iter().fold(Vec::new(), |mut v, r| {
+                    add_gait_counts(&mut v, &r.known_by_gait);
+                    v
+                }),
             },
             auroc_range: (lo, hi),
         }
@@ -236,6 +268,7 @@ pub(crate) fn mean_row(unknown_known: f64, known_accuracy: f64) -> OpenSetRow {
         calibration_unknown: 0.02,
         n_held_out: 10,
         n_known: 30,
+        known_by_gait: vec![],
     }
 }
 
@@ -275,18 +308,29 @@ pub fn leave_one_class_out(src: &OpenSetSource) -> Result<Vec<OpenSetRow>, LabEr
         let mut judge = Judge::new(model);
         // The known test images: a fresh run's, or the training run's unused ones.
         let fresh = src.fresh.as_ref().map(without);
-        let known_test: Vec<(&PressureImage, usize)> = match &fresh {
-            Some(f) => f.images.iter().zip(f.labels.iter().copied()).collect(),
+        let known_test: Vec<(&PressureImage, usize, Option<u8>)> = match &fresh {
+            Some(f) => (0..f.images.len())
+                .map(|i| (&f.images[i], f.labels[i], f.gaits[i]))
+                .collect(),
             None => split
                 .test
                 .iter()
-                .map(|&i| (&known.images[i], known.labels[i]))
+                .map(|&i| (&known.images[i], known.labels[i], known.gaits[i]))
                 .collect(),
         };
         let mut scored: Vec<Scored> = Vec::new();
         let (mut right, mut right_open, mut wrong_unknown) = (0usize, 0usize, 0usize);
-        for &(img, truth) in &known_test {
+        let mut known_by_gait: Vec<GaitCount> = Vec::new();
+        for &(img, truth, gait) in &known_test {
             let s = judge.score(img, false);
+            if let Some(gait) = gait {
+                let one = GaitCount {
+                    gait,
+                    images: 1,
+                    unknown: s.class.is_none() as usize,
+                };
+                add_gait_counts(&mut known_by_gait, &[one]);
+            }
             right += (s.class == Some(truth)) as usize;
             right_open += (s.best == Some(truth)) as usize;
             wrong_unknown += (s.class.is_none() && s.best.is_some_and(|b| b != truth)) as usize;
@@ -319,6 +363,7 @@ pub fn leave_one_class_out(src: &OpenSetSource) -> Result<Vec<OpenSetRow>, LabEr
             calibration_unknown,
             n_held_out: scored.len() - n_known,
             n_known,
+            known_by_gait,
         });
     }
     Ok(rows)

@@ -1311,7 +1311,59 @@ fn open_set(ctx: &Report) -> Result<String, ReportError> {
         let names: Vec<&str> = sources.iter().map(|s| s.name.as_str()).collect();
         md.push_str(&open_set_spread(&names, &spreads, ctx.seed, last));
     }
+    let names: Vec<&str> = sources.iter().map(|s| s.name.as_str()).collect();
+    md.push_str(&open_set_by_gait(&names, &spreads));
     Ok(md)
+}
+
+/// The fresh run's known images called unknown per gait they touched down in, for the sources
+/// whose images carry two or more gaits (a simulated gait, a capture manifest's `gait`: for
+/// SpeedPP2D the walking speed), pooled over the left-out classes and the seeds run: where the
+/// cost of the rejection falls. Empty when no source has two gaits.
+fn open_set_by_gait(names: &[&str], spreads: &[crate::open_set::SeedSpread]) -> String {
+    use crate::open_set::{GaitCount, add_gait_counts};
+    let pooled: Vec<(&str, Vec<GaitCount>)> = names
+        .iter()
+        .zip(spreads)
+        .map(|(name, s)| {
+            let mut v = Vec::new();
+            for m in &s.means {
+                add_gait_counts(&mut v, &m.known_by_gait);
+            }
+            (*name, v)
+        })
+        .filter(|(_, v)| v.len() >= 2)
+        .collect();
+    if pooled.is_empty() {
+        return String::new();
+    }
+    let mut md = format!(
+        "
+Fresh known images called unknown, by the gait they touched down in (pooled over \
+         the left-out classes and {}; each image counts once per model that judged it): \
+         whether the rejection's cost gathers in one gait.\n\n| source | by gait |\n|---|---|\n",
+        match spreads.first().map(|s| s.seeds.as_slice()) {
+            Some([a, .., b]) => format!("seeds {a}-{b}"),
+            Some([a]) => format!("seed {a}"),
+            _ => String::new(),
+        }
+    );
+    for (name, v) in pooled {
+        let cells: Vec<String> = v
+            .iter()
+            .map(|c| {
+                format!(
+                    "{} {} ({}/{})",
+                    node::gait::gait_name(Some(c.gait)),
+                    pct(c.unknown as f64 / c.images.max(1) as f64),
+                    c.unknown,
+                    c.images
+                )
+            })
+            .collect();
+        let _ = writeln!(md, "| {name} | {} |", cells.join(", "));
+    }
+    md
 }
 
 /// The spread table: each source's means over seeds `first`-`last`, median (range), and the
@@ -1476,6 +1528,33 @@ mod tests {
         bad.push(2, row(0.05, 0.9));
         let md = open_set_spread(&["src"], &[bad], 1, 2);
         assert!(md.contains("| fresh missed; gap missed |"), "{md}");
+    }
+
+    #[test]
+    fn the_gait_table_pools_seeds_and_skips_sources_of_one_gait() {
+        use crate::open_set::{GaitCount, SeedSpread, mean_row as row};
+        let g = |gait, images, unknown| GaitCount {
+            gait,
+            images,
+            unknown,
+        };
+        let (mut two, mut one) = (SeedSpread::default(), SeedSpread::default());
+        for (seed, unknown) in [(3, 1), (4, 3)] {
+            let mut r = row(0.02, 0.98);
+            r.known_by_gait = vec![g(1, 50, unknown), g(3, 50, 0)];
+            two.push(seed, r);
+            let mut r = row(0.02, 0.98);
+            r.known_by_gait = vec![g(2, 100, 1)];
+            one.push(seed, r);
+        }
+        let md = open_set_by_gait(&["walk", "press"], &[two, one]);
+        assert!(md.contains("seeds 3-4;"), "{md}");
+        assert!(
+            md.contains("| walk | G1 4.0% (4/100), G3 0.0% (0/100) |"),
+            "{md}"
+        );
+        assert!(!md.contains("press"), "{md}");
+        assert_eq!(open_set_by_gait(&["press"], &[SeedSpread::default()]), "");
     }
 
     #[test]
