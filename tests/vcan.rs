@@ -1260,7 +1260,12 @@ fn capture_path_over_socketcan_from_candump_logs_to_a_deployed_model() {
          [[segments]]\nterrain = \"grass\"\nlength_m = 8.3\n",
     )
     .unwrap();
-    let r = sim_report(&iface, &["--track", &s(&track)], 6.0, 78, "unknown");
+    let mut r = serde_json::Value::Null;
+    // The whole bus, controller included, as a lab records it: its GaitStatus gives each
+    // captured step its gait (checked below against the simulator's own record).
+    let bus_log = candump_during(&iface, "whole-bus", || {
+        r = sim_report(&iface, &["--track", &s(&track)], 6.0, 78, "unknown");
+    });
     drop((node, controller));
     let steps = r["steps"].as_array().unwrap();
     let grass: Vec<&serde_json::Value> = steps.iter().filter(|s| s["truth"] == "grass").collect();
@@ -1282,6 +1287,52 @@ fn capture_path_over_socketcan_from_candump_logs_to_a_deployed_model() {
     assert!(
         first_safe.is_some_and(|d| d <= 3),
         "safe gait after {first_safe:?} grass steps"
+    );
+
+    // Captured from the whole bus over SocketCAN, each step carries the gait the controller
+    // announced at its touchdown; the simulator records the gait the leg ran when the node's
+    // decision arrived, which is the same gait unless a switch fell between the two.
+    let gait_set = dir.join("gait-set");
+    let out = presrs_ok(&[
+        "capture",
+        "--replay",
+        &s(&bus_log),
+        "--label",
+        "wood",
+        "--out",
+        &s(&gait_set),
+        "--json",
+    ]);
+    let _ = std::fs::remove_file(&bus_log);
+    let j: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    eprintln!("capture of the whole bus: {j}");
+    let ran: std::collections::HashMap<(u64, u64), u64> = steps
+        .iter()
+        .map(|s| {
+            let k = (s["foot"].as_u64().unwrap(), s["step"].as_u64().unwrap());
+            (k, s["gait"].as_u64().unwrap())
+        })
+        .collect();
+    let manifest = std::fs::read_to_string(gait_set.join("manifest.csv")).unwrap();
+    let (mut same, mut differ, mut none) = (0, 0, 0);
+    for line in manifest.lines().skip(1) {
+        let f: Vec<&str> = line.split(',').collect();
+        let k = (f[2].parse().unwrap(), f[3].parse().unwrap());
+        match (f[9].parse::<u64>().ok(), ran.get(&k)) {
+            (None, _) => none += 1,
+            (Some(g), Some(&want)) if g == want => same += 1,
+            (Some(_), Some(_)) => differ += 1,
+            (Some(_), None) => {}
+        }
+    }
+    eprintln!(
+        "whole-bus capture: {same} steps with the simulator's gait, {differ} another, {none} none"
+    );
+    // The controller's first GaitStatus comes at its first gait switch or 10 Hz beat; a switch
+    // between touchdown and decision can put a step on either side.
+    assert!(
+        same >= 10 && differ <= 2 && none <= 3,
+        "{same} same, {differ} differ, {none} none"
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
