@@ -86,31 +86,18 @@ pub struct OpenSetRow {
     /// The known test images per gait they touched down in, and those of them called unknown
     /// (images of unknown gait are not counted); in gait order. In [`OpenSetMeans`], summed
     /// over the rows.
-    pub known_by_gait: Vec<GaitCount>,
+    pub known_by_gait: Vec<node::gait::GaitCount>,
 }
 
-/// Known test images of one gait, and those of them called unknown.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct GaitCount {
-    /// The gait.
-    pub gait: u8,
-    /// Known test images in it.
-    pub images: usize,
-    /// Of them, called unknown.
-    pub unknown: usize,
-}
-
-/// Adds `more` into `into`, gait by gait, keeping gait order.
-pub fn add_gait_counts(into: &mut Vec<GaitCount>, more: &[GaitCount]) {
-    for m in more {
-        match into.binary_search_by_key(&m.gait, |c| c.gait) {
-            Ok(i) => {
-                into[i].images += m.images;
-                into[i].unknown += m.unknown;
-            }
-            Err(i) => into.insert(i, *m),
-        }
+/// The per-gait counts of several rows, summed gait by gait.
+pub fn pool_gait_counts<'a>(
+    rows: impl IntoIterator<Item = &'a Vec<node::gait::GaitCount>>,
+) -> Vec<node::gait::GaitCount> {
+    let mut v = Vec::new();
+    for c in rows.into_iter().flatten() {
+        node::gait::add_count(&mut v, c.gait, c.steps, c.unknown);
     }
+    v
 }
 
 /// Means over a source's rows.
@@ -146,10 +133,7 @@ impl OpenSetMeans {
                 calibration_unknown: m(|r| r.calibration_unknown),
                 n_held_out: rows.iter().map(|r| r.n_held_out).sum(),
                 n_known: rows.iter().map(|r| r.n_known).sum(),
-                known_by_gait: rows.iter().fold(Vec::new(), |mut v, r| {
-                    add_gait_counts(&mut v, &r.known_by_gait);
-                    v
-                }),
+                known_by_gait: pool_gait_counts(rows.iter().map(|r| &r.known_by_gait)),
             },
             auroc_range: (lo, hi),
         }
@@ -320,16 +304,12 @@ pub fn leave_one_class_out(src: &OpenSetSource) -> Result<Vec<OpenSetRow>, LabEr
         };
         let mut scored: Vec<Scored> = Vec::new();
         let (mut right, mut right_open, mut wrong_unknown) = (0usize, 0usize, 0usize);
-        let mut known_by_gait: Vec<GaitCount> = Vec::new();
+        let mut known_by_gait = Vec::new();
         for &(img, truth, gait) in &known_test {
             let s = judge.score(img, false);
             if let Some(gait) = gait {
-                let one = GaitCount {
-                    gait,
-                    images: 1,
-                    unknown: s.class.is_none() as usize,
-                };
-                add_gait_counts(&mut known_by_gait, &[one]);
+                let unknown = s.class.is_none() as usize;
+                node::gait::add_count(&mut known_by_gait, Some(gait), 1, unknown);
             }
             right += (s.class == Some(truth)) as usize;
             right_open += (s.best == Some(truth)) as usize;

@@ -1321,16 +1321,12 @@ fn open_set(ctx: &Report) -> Result<String, ReportError> {
 /// SpeedPP2D the walking speed), pooled over the left-out classes and the seeds run: where the
 /// cost of the rejection falls. Empty when no source has two gaits.
 fn open_set_by_gait(names: &[&str], spreads: &[crate::open_set::SeedSpread]) -> String {
-    use crate::open_set::{GaitCount, add_gait_counts};
-    let pooled: Vec<(&str, Vec<GaitCount>)> = names
+    let pooled: Vec<(&str, Vec<node::gait::GaitCount>)> = names
         .iter()
         .zip(spreads)
         .map(|(name, s)| {
-            let mut v = Vec::new();
-            for m in &s.means {
-                add_gait_counts(&mut v, &m.known_by_gait);
-            }
-            (*name, v)
+            let rows = s.means.iter().map(|m| &m.known_by_gait);
+            (*name, crate::open_set::pool_gait_counts(rows))
         })
         .filter(|(_, v)| v.len() >= 2)
         .collect();
@@ -1354,10 +1350,10 @@ Fresh known images called unknown, by the gait they touched down in (pooled over
             .map(|c| {
                 format!(
                     "{} {} ({}/{})",
-                    node::gait::gait_name(Some(c.gait)),
-                    pct(c.unknown as f64 / c.images.max(1) as f64),
+                    node::gait::gait_name(c.gait),
+                    pct(c.unknown as f64 / c.steps.max(1) as f64),
                     c.unknown,
-                    c.images
+                    c.steps
                 )
             })
             .collect();
@@ -1532,10 +1528,10 @@ mod tests {
 
     #[test]
     fn the_gait_table_pools_seeds_and_skips_sources_of_one_gait() {
-        use crate::open_set::{GaitCount, SeedSpread, mean_row as row};
-        let g = |gait, images, unknown| GaitCount {
-            gait,
-            images,
+        use crate::open_set::{SeedSpread, mean_row as row};
+        let g = |gait, steps, unknown| node::gait::GaitCount {
+            gait: Some(gait),
+            steps,
             unknown,
         };
         let (mut two, mut one) = (SeedSpread::default(), SeedSpread::default());

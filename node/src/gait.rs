@@ -13,6 +13,39 @@ pub fn gait_name(gait: Option<u8>) -> String {
     gait.map_or_else(|| "no GaitStatus".to_string(), |g| format!("G{g}"))
 }
 
+/// Steps decided in one gait, and those of them called unknown: where a run's unknowns fall.
+/// Unknowns that gather in a gait the model was not trained in are the gait's, not the
+/// ground's: capture that gait (docs/real-robot.md, "Record the whole bus").
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct GaitCount {
+    /// The gait (`None`: not known, before the first GaitStatus).
+    pub gait: Option<u8>,
+    /// Steps (or images) in it.
+    pub steps: usize,
+    /// Of them, called unknown.
+    pub unknown: usize,
+}
+
+/// Adds `steps` steps of `gait`, `unknown` of them unknown, to `counts`, which stays in gait
+/// order with the steps of no known gait last.
+pub fn add_count(counts: &mut Vec<GaitCount>, gait: Option<u8>, steps: usize, unknown: usize) {
+    let key = |g: Option<u8>| g.map_or(256, u16::from);
+    match counts.binary_search_by_key(&key(gait), |c| key(c.gait)) {
+        Ok(i) => {
+            counts[i].steps += steps;
+            counts[i].unknown += unknown;
+        }
+        Err(i) => counts.insert(
+            i,
+            GaitCount {
+                gait,
+                steps,
+                unknown,
+            },
+        ),
+    }
+}
+
 /// The gaits the controller announced (GaitStatus, at every switch and at 10 Hz), kept as
 /// their last switches so that a step decided after a switch still gets the gait it touched
 /// down in.
@@ -89,6 +122,18 @@ mod tests {
         assert_eq!(g.at(100), Some(1));
         // Older than every switch kept: not known, rather than a wrong gait.
         assert_eq!(g.at(15), None);
+    }
+
+    #[test]
+    fn counts_stay_in_gait_order_with_the_unknown_gait_last() {
+        let mut v = Vec::new();
+        add_count(&mut v, None, 1, 0);
+        add_count(&mut v, Some(3), 2, 1);
+        add_count(&mut v, Some(1), 4, 0);
+        add_count(&mut v, Some(3), 1, 1);
+        let got: Vec<(Option<u8>, usize, usize)> =
+            v.iter().map(|c| (c.gait, c.steps, c.unknown)).collect();
+        assert_eq!(got, [(Some(1), 4, 0), (Some(3), 3, 2), (None, 1, 0)]);
     }
 
     #[test]

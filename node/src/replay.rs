@@ -14,6 +14,7 @@ use protocol::candump::LogRecord;
 use protocol::messages::TerrainClass;
 use protocol::tactile::ReassemblyStats;
 
+use crate::gait::{GaitCount, add_count};
 use crate::service::{NodeService, Output};
 use crate::stance::Counters;
 
@@ -33,22 +34,9 @@ pub struct ReplaySummary {
     pub energy: Vec<EnergyTally>,
     /// Steps and unknowns per gait in force when each was decided (the log's GaitStatus), in
     /// gait order, steps before any GaitStatus last. Empty when the log has no GaitStatus.
-    pub gaits: Vec<GaitTally>,
+    pub gaits: Vec<GaitCount>,
     /// The gaits the model was trained in (`Model::gaits`), when it says.
     pub model_gaits: Option<Vec<u8>>,
-}
-
-/// One gait's steps over a replay: where the unknowns fall. Unknowns that gather in a gait the
-/// model was not trained in are the gait's, not the ground's: capture that gait
-/// (docs/real-robot.md, "Record the whole bus").
-#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize)]
-pub struct GaitTally {
-    /// The gait (`None`: before the log's first GaitStatus).
-    pub gait: Option<u8>,
-    /// Steps decided in it.
-    pub steps: u32,
-    /// Of them, called unknown.
-    pub unknown: u32,
 }
 
 /// One terrain's stances against its return map over a replay.
@@ -126,8 +114,7 @@ pub fn replay_log<R: Borrow<LogRecord>>(
 ) -> ReplaySummary {
     let (mut frames, mut span) = (0, None::<(u64, u64)>);
     let mut track = crate::gait::GaitTrack::default();
-    // Gait 0 is "none" on the bus, so index 0 holds the steps before any GaitStatus.
-    let mut tally = [(0u32, 0u32); 256];
+    let mut gaits = Vec::new();
     let ids = node.ids().clone();
     for r in records {
         let st = &r.borrow().stamped;
@@ -137,25 +124,12 @@ pub fn replay_log<R: Borrow<LogRecord>>(
         let gait = track.current();
         node.replay(std::iter::once(st), &mut |t_us, o| {
             if let Output::Class { foot, class } = o {
-                let t = &mut tally[gait.unwrap_or(0) as usize];
-                t.0 += 1;
-                t.1 += (class.terrain == protocol::messages::TERRAIN_UNKNOWN) as u32;
+                let unknown = class.terrain == protocol::messages::TERRAIN_UNKNOWN;
+                add_count(&mut gaits, gait, 1, unknown as usize);
                 on_class(t_us, foot, &class, gait);
             }
         });
     }
-    let mut gaits: Vec<GaitTally> = (1..=255u8)
-        .map(Some)
-        .chain([None])
-        .filter_map(|g| {
-            let (steps, unknown) = tally[g.unwrap_or(0) as usize];
-            (steps > 0).then_some(GaitTally {
-                gait: g,
-                steps,
-                unknown,
-            })
-        })
-        .collect();
     if gaits.iter().all(|g| g.gait.is_none()) {
         gaits.clear();
     }
@@ -218,7 +192,7 @@ mod tests {
 
     #[test]
     fn the_summary_counts_unknowns_per_gait_and_names_a_gait_the_model_never_saw() {
-        let tally = |gait, steps, unknown| GaitTally {
+        let tally = |gait, steps, unknown| GaitCount {
             gait,
             steps,
             unknown,
