@@ -23,7 +23,7 @@ pub fn log_to_recording<R: Borrow<LogRecord>>(
         rec.frame(st, out)?;
         if let Some(node) = node.as_deref_mut() {
             node.replay(std::iter::once(st), &mut |t, o| {
-                if let Output::Class { foot, class } = o {
+                if let Output::Class { foot, class, .. } = o {
                     decided.push((t, foot, class));
                 }
             });

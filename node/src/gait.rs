@@ -46,13 +46,97 @@ pub fn add_count(counts: &mut Vec<GaitCount>, gait: Option<u8>, steps: usize, un
     }
 }
 
+/// Steps and unknowns per gait as a node decides them: counted on the hot path (a decision
+/// in, a count up) without allocating, then read as [`GaitCount`]s for a report. The gait a
+/// step is counted in is the one in force when it is decided, as `presrs node --replay` and the
+/// live node's log both count.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct GaitTally {
+    /// [steps, unknown] per gait id; index 0 holds the steps before any GaitStatus (gait 0 is
+    /// the protocol's "none").
+    counts: Box<[[u64; 2]; 256]>,
+}
+
+impl Default for GaitTally {
+    fn default() -> Self {
+        Self {
+            counts: Box::new([[0; 2]; 256]),
+        }
+    }
+}
+
+impl GaitTally {
+    /// One step decided in `gait` (`None`: before any GaitStatus), `unknown` or not.
+    pub fn add(&mut self, gait: Option<u8>, unknown: bool) {
+        let c = &mut self.counts[gait.map_or(0, usize::from)];
+        c[0] += 1;
+        c[1] += unknown as u64;
+    }
+
+    /// What was counted after `earlier` (a copy of this tally taken before).
+    pub fn since(&self, earlier: &GaitTally) -> GaitTally {
+        let mut d = self.clone();
+        for (c, e) in d.counts.iter_mut().zip(earlier.counts.iter()) {
+            c[0] = c[0].saturating_sub(e[0]);
+            c[1] = c[1].saturating_sub(e[1]);
+        }
+        d
+    }
+
+    /// Steps called unknown, over all gaits.
+    pub fn unknown(&self) -> u64 {
+        self.counts.iter().map(|c| c[1]).sum()
+    }
+
+    /// The gaits with steps, in gait order, the steps of no known gait last; empty when no
+    /// step had a gait (a bus without GaitStatus has nothing to say per gait).
+    pub fn counts(&self) -> Vec<GaitCount> {
+        let mut v = Vec::new();
+        for (g, c) in self.counts.iter().enumerate().filter(|(_, c)| c[0] > 0) {
+            let gait = (g > 0).then_some(g as u8);
+            add_count(&mut v, gait, c[0] as usize, c[1] as usize);
+        }
+        if v.iter().all(|c| c.gait.is_none()) {
+            v.clear();
+        }
+        v
+    }
+}
+
+/// `G1 3/103, G2 0/67 (the model was not trained in it)`: unknown steps of all steps per gait,
+/// naming the gaits `model_gaits` (the model's, when it says) lacks.
+pub fn describe_counts(counts: &[GaitCount], model_gaits: Option<&[u8]>) -> String {
+    let mut s = String::new();
+    for (i, g) in counts.iter().enumerate() {
+        if i > 0 {
+            s.push_str(", ");
+        }
+        s.push_str(&format!("{} {}/{}", gait_name(g.gait), g.unknown, g.steps));
+        if let (Some(gait), Some(trained)) = (g.gait, model_gaits)
+            && !trained.contains(&gait)
+        {
+            s.push_str(" (the model was not trained in it)");
+        }
+    }
+    s
+}
+
 /// The gaits the controller announced (GaitStatus, at every switch and at 10 Hz), kept as
 /// their last switches so that a step decided after a switch still gets the gait it touched
 /// down in.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct GaitTrack {
-    /// (receive time µs, gait), oldest first; at most [`GaitTrack::KEPT`].
+    /// (receive time µs, gait), oldest first; at most [`GaitTrack::KEPT`], allocated once so
+    /// that following the bus never allocates.
     switches: Vec<(u64, u8)>,
+}
+
+impl Default for GaitTrack {
+    fn default() -> Self {
+        Self {
+            switches: Vec::with_capacity(Self::KEPT),
+        }
+    }
 }
 
 impl GaitTrack {
@@ -134,6 +218,31 @@ mod tests {
         let got: Vec<(Option<u8>, usize, usize)> =
             v.iter().map(|c| (c.gait, c.steps, c.unknown)).collect();
         assert_eq!(got, [(Some(1), 4, 0), (Some(3), 3, 2), (None, 1, 0)]);
+    }
+
+    #[test]
+    fn a_tally_counts_per_gait_and_says_nothing_without_gait_status() {
+        let mut t = GaitTally::default();
+        t.add(None, false);
+        assert!(t.counts().is_empty(), "no GaitStatus: nothing per gait");
+        t.add(Some(3), true);
+        t.add(Some(1), false);
+        t.add(Some(3), false);
+        assert_eq!(t.unknown(), 1);
+        let got: Vec<(Option<u8>, usize, usize)> = t
+            .counts()
+            .iter()
+            .map(|c| (c.gait, c.steps, c.unknown))
+            .collect();
+        assert_eq!(got, [(Some(1), 1, 0), (Some(3), 2, 1), (None, 1, 0)]);
+        assert_eq!(
+            describe_counts(&t.counts(), Some(&[1, 2])),
+            "G1 0/1, G3 1/2 (the model was not trained in it), no GaitStatus 0/1"
+        );
+        assert_eq!(
+            describe_counts(&t.counts(), None),
+            "G1 0/1, G3 1/2, no GaitStatus 0/1"
+        );
     }
 
     #[test]

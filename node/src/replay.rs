@@ -14,7 +14,7 @@ use protocol::candump::LogRecord;
 use protocol::messages::TerrainClass;
 use protocol::tactile::ReassemblyStats;
 
-use crate::gait::{GaitCount, add_count};
+use crate::gait::{GaitCount, describe_counts};
 use crate::service::{NodeService, Output};
 use crate::stance::Counters;
 
@@ -83,22 +83,8 @@ impl fmt::Display for ReplaySummary {
             }
         }
         if !self.gaits.is_empty() {
-            write!(f, "; unknown by gait:")?;
-            for (i, g) in self.gaits.iter().enumerate() {
-                let sep = if i == 0 { " " } else { ", " };
-                write!(
-                    f,
-                    "{sep}{} {}/{}",
-                    crate::gait::gait_name(g.gait),
-                    g.unknown,
-                    g.steps
-                )?;
-                if let (Some(gait), Some(trained)) = (g.gait, &self.model_gaits)
-                    && !trained.contains(&gait)
-                {
-                    write!(f, " (the model was not trained in it)")?;
-                }
-            }
+            let by_gait = describe_counts(&self.gaits, self.model_gaits.as_deref());
+            write!(f, "; unknown by gait: {by_gait}")?;
         }
         Ok(())
     }
@@ -113,26 +99,19 @@ pub fn replay_log<R: Borrow<LogRecord>>(
     on_class: &mut impl FnMut(u64, u8, &TerrainClass, Option<u8>),
 ) -> ReplaySummary {
     let (mut frames, mut span) = (0, None::<(u64, u64)>);
-    let mut track = crate::gait::GaitTrack::default();
-    let mut gaits = Vec::new();
-    let ids = node.ids().clone();
+    // The gaits counted from this replay's decisions alone, as the node counts since it began.
+    let before = node.gait_tally().clone();
     for r in records {
         let st = &r.borrow().stamped;
         frames += 1;
         span = Some(span.map_or((st.t_us, st.t_us), |(a, _)| (a, st.t_us)));
-        track.on_frame(st, &ids);
-        let gait = track.current();
         node.replay(std::iter::once(st), &mut |t_us, o| {
-            if let Output::Class { foot, class } = o {
-                let unknown = class.terrain == protocol::messages::TERRAIN_UNKNOWN;
-                add_count(&mut gaits, gait, 1, unknown as usize);
+            if let Output::Class { foot, class, gait } = o {
                 on_class(t_us, foot, &class, gait);
             }
         });
     }
-    if gaits.iter().all(|g| g.gait.is_none()) {
-        gaits.clear();
-    }
+    let gaits = node.gait_tally().since(&before).counts();
     ReplaySummary {
         frames,
         span_us: span.map_or(0, |(a, b)| b.saturating_sub(a)),

@@ -29,7 +29,7 @@ use std::time::{Duration, Instant};
 use protocol::bus::{BusSource, ControllerState, Tap};
 use protocol::clock::Clock;
 use protocol::component::{self, Component, Link, LinkStats, Outbox, RunOptions, Threaded};
-use protocol::messages::{Message, NodeState, NodeStatus, TerrainClass};
+use protocol::messages::{Message, NodeState, NodeStatus, TERRAIN_UNKNOWN, TerrainClass};
 use protocol::tactile::ReassemblyStats;
 use protocol::terrain::CatalogError;
 use protocol::{CanFrame, IdConfig, MessageKind, Stamped, TerrainCatalog};
@@ -38,6 +38,7 @@ use thiserror::Error;
 use crate::classifier::Model;
 use crate::classifier::model::{CatalogMismatch, ModelError};
 use crate::config::NodeConfig;
+use crate::gait::{GaitTally, GaitTrack, describe_counts};
 use crate::replay::EnergyTally;
 use crate::stance::{Counters, StancePipeline};
 
@@ -75,6 +76,9 @@ pub enum Output {
         foot: u8,
         /// The decision.
         class: TerrainClass,
+        /// The gait in force when it was decided (the controller's last GaitStatus; `None`
+        /// before any): not on the bus frame, which carries the decision alone.
+        gait: Option<u8>,
     },
     /// The heartbeat, at `status_hz`.
     Status(NodeStatus),
@@ -85,7 +89,7 @@ impl Output {
     /// the node's.
     pub fn to_frame(&self, ids: &IdConfig) -> Option<CanFrame> {
         match *self {
-            Output::Class { foot, class } => Message::TerrainClass(class).to_frame(ids, foot),
+            Output::Class { foot, class, .. } => Message::TerrainClass(class).to_frame(ids, foot),
             Output::Status(s) => Message::NodeStatus(s).to_frame(ids, 0),
         }
     }
@@ -105,6 +109,7 @@ struct Shared {
     crc_failures: AtomicU64,
     incomplete: AtomicU64,
     decode_errors: AtomicU64,
+    unknown: AtomicU64,
 }
 
 /// A node's counters at one moment.
@@ -130,6 +135,9 @@ pub struct NodeStats {
     pub steps: u64,
     /// Steps decided from an image.
     pub classified: u64,
+    /// Steps decided unknown (TerrainClass 0xFF): not like any trained terrain, or outside
+    /// its return map ([`NodeService::gait_tally`] counts them per gait).
+    pub unknown: u64,
     /// Steps that ended without an image.
     pub no_sample: u64,
     /// Tactile images reassembled.
@@ -145,8 +153,9 @@ pub struct NodeStats {
 }
 
 impl Shared {
-    fn publish(&self, c: &Counters, r: &ReassemblyStats, damage_pct: f64) {
+    fn publish(&self, c: &Counters, r: &ReassemblyStats, damage_pct: f64, unknown: u64) {
         let r_ = Ordering::Relaxed;
+        self.unknown.store(unknown, r_);
         self.steps.store(c.steps, r_);
         self.classified.store(c.classified, r_);
         self.no_sample.store(c.no_sample, r_);
@@ -170,6 +179,7 @@ impl Shared {
             bus_errors: l(&self.link.bus_errors),
             steps: l(&self.steps),
             classified: l(&self.classified),
+            unknown: l(&self.unknown),
             no_sample: l(&self.no_sample),
             images: l(&self.images),
             crc_failures: l(&self.crc_failures),
@@ -204,6 +214,11 @@ pub struct NodeService {
     said: Vec<Output>,
     last_log: Instant,
     last_logged: Counters,
+    /// The controller's gait, followed from its GaitStatus frames.
+    gait: GaitTrack,
+    /// Decisions and unknowns per gait since the node began.
+    tally: GaitTally,
+    last_logged_unknown: u64,
 }
 
 impl NodeService {
@@ -227,6 +242,9 @@ impl NodeService {
             said: Vec::with_capacity(16),
             last_log: Instant::now(),
             last_logged: Counters::default(),
+            gait: GaitTrack::default(),
+            tally: GaitTally::default(),
+            last_logged_unknown: 0,
         })
     }
 
@@ -239,8 +257,12 @@ impl NodeService {
 
     /// One received frame; the decisions it completes go to `out`.
     pub fn process(&mut self, frame: &Stamped, out: &mut impl FnMut(Output)) {
-        self.pipeline
-            .on_frame(frame, &mut |foot, class| out(Output::Class { foot, class }));
+        self.gait.on_frame(frame, self.pipeline.ids());
+        let (gait, tally) = (self.gait.current(), &mut self.tally);
+        self.pipeline.on_frame(frame, &mut |foot, class| {
+            tally.add(gait, class.terrain == TERRAIN_UNKNOWN);
+            out(Output::Class { foot, class, gait })
+        });
     }
 
     /// A recorded run on its own clock: each frame's time ticks the node before the frame is
@@ -261,8 +283,10 @@ impl NodeService {
     /// Everything due by `now_us` (the clock of [`Stamped::t_us`]): steps whose sample deadline
     /// has passed with no nearer frame possible, and NodeStatus when a status period is up.
     pub fn tick(&mut self, now_us: u64, out: &mut impl FnMut(Output)) {
+        let (gait, tally) = (self.gait.current(), &mut self.tally);
         self.pipeline.tick(now_us, &mut |foot, class| {
-            out(Output::Class { foot, class })
+            tally.add(gait, class.terrain == TERRAIN_UNKNOWN);
+            out(Output::Class { foot, class, gait })
         });
         // A clock that jumped back (a new bus clock) must not silence the heartbeat.
         let due = self
@@ -286,8 +310,12 @@ impl NodeService {
     /// The NodeStatus the heartbeat carries now.
     pub fn status(&mut self, stopping: bool) -> NodeStatus {
         let r = self.pipeline.reassembly_stats();
-        self.shared
-            .publish(&self.pipeline.counters, &r, self.pipeline.damage_pct());
+        self.shared.publish(
+            &self.pipeline.counters,
+            &r,
+            self.pipeline.damage_pct(),
+            self.tally.unknown(),
+        );
         self.heartbeat = self.heartbeat.wrapping_add(1);
         // The low 8 bits of the running totals, as docs/protocol.md says: a monitor takes
         // differences mod 256. (Saturating at 255 hid every loss after the 255th: measured on
@@ -343,6 +371,25 @@ impl NodeService {
     /// The pipeline's counters per stage.
     pub fn counters(&self) -> Counters {
         self.pipeline.counters
+    }
+
+    /// Decisions and unknowns per gait since the node began: where its unknowns gather. Many
+    /// in a gait the model was not trained in ([`Model::gaits`]) are that gait's, not new
+    /// ground's (docs/real-robot.md, "A gait the model never saw").
+    pub fn gait_tally(&self) -> &GaitTally {
+        &self.tally
+    }
+
+    /// The gait in force now (the controller's last GaitStatus), if any came.
+    pub fn current_gait(&self) -> Option<u8> {
+        self.gait.current()
+    }
+
+    /// `G1 3/103, G2 0/67`: unknown of decided steps per gait, naming gaits the model was not
+    /// trained in; empty when no GaitStatus came. For logs and summaries, not the hot path.
+    pub fn describe_gaits(&self) -> String {
+        let model_gaits = self.model().and_then(|m| m.gaits.as_deref());
+        describe_counts(&self.tally.counts(), model_gaits)
     }
 
     /// Tactile reassembly counters.
@@ -479,7 +526,7 @@ impl RunningNode {
     /// Stops the threads (a last NodeStatus says `Stopping`), joins them and returns the final
     /// counters.
     pub fn stop(self) -> NodeStats {
-        let _ = self.threads.stop();
+        let node = self.threads.stop();
         let s = NodeStats {
             record_dropped: self.tap.as_ref().map_or(0, |t| t.dropped()),
             ..self.shared.snapshot()
@@ -492,6 +539,8 @@ impl RunningNode {
             bus_errors = s.bus_errors,
             steps = s.steps,
             classified = s.classified,
+            unknown = s.unknown,
+            unknown_by_gait = %node.as_ref().map(|n| n.describe_gaits()).unwrap_or_default(),
             record_dropped = s.record_dropped,
             "presrs node stopped"
         );
@@ -531,10 +580,13 @@ impl Component for NodeService {
             let c = self.counters();
             let r = self.reassembly_stats();
             let last = self.last_logged;
+            let unknown = self.tally.unknown();
             tracing::info!(
                 frames = c.frames - last.frames,
                 steps = c.steps - last.steps,
                 classified = c.classified - last.classified,
+                unknown = unknown - self.last_logged_unknown,
+                unknown_by_gait = %self.describe_gaits(),
                 no_sample = c.no_sample - last.no_sample,
                 decode_errors = c.decode_errors - last.decode_errors,
                 images = r.delivered,
@@ -545,6 +597,7 @@ impl Component for NodeService {
                 "last 10 s"
             );
             self.last_logged = c;
+            self.last_logged_unknown = unknown;
             self.last_log = Instant::now();
         }
     }

@@ -168,6 +168,17 @@ fn lock_step(node: &mut NodeService, frames: &[Stamped], end_us: u64) -> Vec<(u6
     said
 }
 
+/// `frames` as a candump log's records (interface can0).
+fn as_log(frames: &[Stamped]) -> Vec<protocol::candump::LogRecord> {
+    frames
+        .iter()
+        .map(|st| protocol::candump::LogRecord {
+            iface: "can0".into(),
+            stamped: *st,
+        })
+        .collect()
+}
+
 fn classes(said: &[(u64, Output)]) -> Vec<(u64, TerrainClass)> {
     said.iter()
         .filter_map(|&(t, o)| match o {
@@ -433,11 +444,27 @@ fn started_on_a_bus_it_answers_each_step_and_says_when_it_stops() {
         panic!("no TerrainClass for the step");
     };
     assert_eq!(TerrainCatalog::paper().describe(tc.terrain), "grass");
+    // A texture the model was not trained on: unknown, and counted so.
+    let novel = foot.step(1_400_000, 200, |ms, rng| {
+        (ms < 200).then(|| texture(rng, 2))
+    });
+    for st in novel {
+        robot.send(&st.frame).unwrap();
+    }
+    let class = wait_for(&mut robot, &|m| matches!(m, Message::TerrainClass(_)));
+    let Some(Message::TerrainClass(tc)) = class else {
+        panic!("no TerrainClass for the second step");
+    };
+    assert_eq!(tc.terrain, messages::TERRAIN_UNKNOWN, "{tc:?}");
     assert!(running.reload_model(&dir.join("missing.json")).is_err());
     assert_eq!(running.reload_model(&path).unwrap(), model().id());
     assert!(running.is_running());
     let stats = running.stop();
-    assert_eq!((stats.steps, stats.classified), (1, 1), "{stats:?}");
+    assert_eq!(
+        (stats.steps, stats.classified, stats.unknown),
+        (2, 2, 1),
+        "{stats:?}"
+    );
     assert!(stats.tx_frames >= 2);
     let mut last = None;
     while let Ok(Some(st)) = robot.recv(Duration::from_millis(50)) {
@@ -537,13 +564,7 @@ fn a_replay_decides_each_step_as_the_log_clock_says() {
         assert_eq!(t - (1_000_000 + k as u64 * 400_000), 66_000, "step {k}");
     }
     // The same frames as a candump log: the same decisions, and a summary that counts them.
-    let records: Vec<_> = frames
-        .iter()
-        .map(|st| protocol::candump::LogRecord {
-            iface: "can0".into(),
-            stamped: *st,
-        })
-        .collect();
+    let records = as_log(&frames);
     let mut node = NodeService::new(NodeConfig::default(), model()).unwrap();
     let mut lines = Vec::new();
     let sum = presrs_node::replay::replay_log(&mut node, &records, &mut |t, foot, tc, _| {
@@ -1062,6 +1083,93 @@ fn a_stance_that_took_energy_its_terrain_does_not_makes_the_next_of_its_kind_unk
     bad.energy = Some(vec![Some(wood)]);
     let e = bad.validate().err().map(|e| e.to_string());
     assert!(e.as_deref().is_some_and(|e| e.contains("energy")), "{e:?}");
+}
+
+/// The node counts its unknowns per gait in force when each step is decided (the controller's
+/// GaitStatus), live as in a replay: where a run's unknowns gather.
+#[test]
+fn unknowns_are_counted_in_the_gait_each_step_was_decided_in() {
+    use presrs_node::stance::energy::ReturnMap;
+    use protocol::messages::{GaitReason, GaitStatus};
+    let mut m = model();
+    // Wood's return map makes the fourth stance unknown (as the test above shows).
+    m.energy = Some(vec![
+        Some(ReturnMap {
+            intercept_s: 0.0,
+            slope: 1.0,
+            residual_s: [-0.010, 0.010],
+            stances: 50,
+        }),
+        None,
+        None,
+    ]);
+    m.gaits = Some(vec![1]);
+    let ids = IdConfig::default();
+    let gait_status = |t_us: u64, gait: u8| Stamped {
+        t_us,
+        frame: Message::GaitStatus(GaitStatus {
+            gait,
+            terrain: 0,
+            omega_rad_s: 6.0,
+            beta_des_rad: 0.27,
+            reason: GaitReason::Terrain,
+            foot: 0,
+        })
+        .to_frame(&ids, 0)
+        .unwrap(),
+    };
+    let mut foot = FakeFoot::new();
+    let mut frames = Vec::new();
+    let touchdowns = [1_000_000u64, 1_400_000, 1_800_000, 2_150_000, 2_500_000];
+    for &td in &touchdowns {
+        frames.extend(foot.stance(0, td, 200, |_| true));
+    }
+    // The first step before any GaitStatus; G1 from 1.3 s; G2 from 2.1 s (10 Hz repeats).
+    for t in (1_300_000..2_100_000).step_by(100_000) {
+        frames.push(gait_status(t, 1));
+    }
+    for t in (2_100_000..3_000_000).step_by(100_000) {
+        frames.push(gait_status(t, 2));
+    }
+    frames.sort_by_key(|s| s.t_us);
+    let mut node = NodeService::new(NodeConfig::default(), m).unwrap();
+    let said = lock_step(&mut node, &frames, 3_000_000);
+    let decided: Vec<(Option<u8>, bool)> = said
+        .iter()
+        .filter_map(|(_, o)| match o {
+            Output::Class { class, gait, .. } => {
+                Some((*gait, class.terrain == messages::TERRAIN_UNKNOWN))
+            }
+            Output::Status(_) => None,
+        })
+        .collect();
+    assert_eq!(
+        decided,
+        [
+            (None, false),
+            (Some(1), false),
+            (Some(1), false),
+            (Some(2), true),
+            (Some(2), false)
+        ]
+    );
+    assert_eq!(node.gait_tally().unknown(), 1);
+    assert_eq!(
+        node.describe_gaits(),
+        "G1 0/2, G2 1/2 (the model was not trained in it), no GaitStatus 0/1"
+    );
+    // The same frames replayed from a log count the same.
+    let records = as_log(&frames);
+    let model = node.model().unwrap().clone();
+    let mut replayed = NodeService::new(NodeConfig::default(), model).unwrap();
+    let sum = presrs_node::replay::replay_log(&mut replayed, &records, &mut |_, _, _, _| {});
+    assert_eq!(sum.gaits, node.gait_tally().counts());
+    assert!(
+        sum.to_string().ends_with(
+            "unknown by gait: G1 0/2, G2 1/2 (the model was not trained in it), no GaitStatus 0/1"
+        ),
+        "{sum}"
+    );
 }
 
 /// The gaits a model file says it was trained in: gait numbers, sorted, each once; a file
