@@ -227,6 +227,22 @@ fn open_set_takes_the_models_split_and_rate_and_refuses_ones_that_cannot_work() 
         "{by_gait}"
     );
     assert!(rate.contains("Over seeds 1-2"), "{rate}");
+    // Then the targets where they apply: each source's classes no score separates, and a
+    // verdict on each of the four figures.
+    let (means, judged) = means
+        .split_once("The targets where they apply.")
+        .unwrap_or_default();
+    let judged: Vec<&str> = judged
+        .lines()
+        .filter(|l| l.starts_with("| simulator"))
+        .collect();
+    assert_eq!(judged.len(), 3, "{judged:?}");
+    for r in judged {
+        assert_eq!(r.matches(" | ").count(), 6, "{r}");
+        for what in ["AUROC", "left-out", "cost", "fresh (all)"] {
+            assert!(r.contains(&format!("{what} m")), "{what}: {r}");
+        }
+    }
     let rows: Vec<&str> = means
         .lines()
         .filter(|l| l.starts_with("| simulator"))

@@ -141,6 +141,17 @@ fn dynamic_stances_tell_clay_and_grass_but_not_wood_from_carpet() {
     // ranks a left-out wood stance below known ones (AUROC 0.24-0.30 measured), the ceiling
     // that no distance in this feature space beats.
     assert!(row("wood").nn_auroc < 0.5, "{rows:?}");
+    // Carpet the plain nearest neighbour misses too (0.33 over seeds 1-10) but our score ranks
+    // (0.97): separable, so it counts. The targets where they apply (`experiment open-set
+    // --seeds 10`, the last table): over carpet, clay and grass, AUROC 0.986 and left out 98.2%
+    // called unknown on average; on this seed carpet 46.7%, the three 82.2%.
+    let separable: Vec<&OpenSetRow> = rows.iter().filter(|r| r.held_out != "wood").collect();
+    let mean = |f: fn(&OpenSetRow) -> f64| {
+        separable.iter().map(|r| f(r)).sum::<f64>() / separable.len() as f64
+    };
+    assert!(row("carpet").auroc >= 0.9, "{rows:?}");
+    assert!(mean(|r| r.auroc) >= 0.95, "{rows:?}");
+    assert!(mean(|r| r.unknown_held_out) >= 0.75, "{rows:?}");
     let m = means(&rows);
     // Measured (seeds 1-10): fresh known 0-8.3% unknown, median 4.2% (3.6-11.1% on seeds 1-3
     // before the calibration run's images were references; the dynamic runs are 10 stances
