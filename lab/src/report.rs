@@ -1417,19 +1417,6 @@ fn open_set_spread(
             },
         );
     }
-    let ci = |s: Spread, scale: f64, unit: &str| {
-        let (mut lo, mut hi) = s.interval();
-        if unit == "%" {
-            // A share: the t interval knows no bounds, the share does.
-            (lo, hi) = (lo.max(0.0), hi.min(1.0));
-        }
-        format!(
-            "{:.1}{unit} ({:.1}-{:.1})",
-            scale * s.mean,
-            scale * lo,
-            scale * hi
-        )
-    };
     let _ = write!(
         md,
         "\nThe same seeds' mean, with its 95% interval (Student's t over the seeds): the rate a \
@@ -1459,10 +1446,10 @@ fn open_set_spread(
         let _ = writeln!(
             md,
             "| {name} | {} | {} | {} | {} | {} |",
-            ci(out, 100.0, "%"),
-            ci(fresh, 100.0, "%"),
-            ci(s.of(|m| m.unknown_known_misclassified), 100.0, "%"),
-            ci(gap, 100.0, ""),
+            ci(out, true),
+            ci(fresh, true),
+            ci(s.of(|m| m.unknown_known_misclassified), true),
+            ci(gap, false),
             if verdict.is_empty() {
                 "all met".to_string()
             } else {
@@ -1474,12 +1461,28 @@ fn open_set_spread(
     md
 }
 
+/// A mean over seeds and its 95% interval in percent (points when not a `share`): a share's
+/// interval is clamped to 0-100%, which the t interval does not know.
+fn ci(s: crate::open_set::Spread, share: bool) -> String {
+    let (mut lo, mut hi) = s.interval();
+    if share {
+        (lo, hi) = (lo.max(0.0), hi.min(1.0));
+    }
+    let unit = if share { "%" } else { "" };
+    format!(
+        "{:.1}{unit} ({:.1}-{:.1})",
+        100.0 * s.mean,
+        100.0 * lo,
+        100.0 * hi
+    )
+}
+
 /// The issue's targets where they apply: its AUROC and left-out targets hold "where the
 /// classes are separable at all", so classes that no measured score separates are named and
 /// left out of those two; the fresh run's unknowns are split into the images the model had
 /// right (the rejection's cost: the accuracy gap) and those it had wrong. Empty without rows.
 fn open_set_judged(names: &[&str], spreads: &[crate::open_set::SeedSpread]) -> String {
-    use crate::open_set::{SEPARABLE_AUROC, Spread};
+    use crate::open_set::SEPARABLE_AUROC;
     if spreads.iter().all(|s| s.rows.iter().all(Vec::is_empty)) {
         return String::new();
     }
@@ -1497,20 +1500,6 @@ The targets where they apply. The AUROC and left-out targets hold \"where the cl
          | source | not separable (AUROC ours / nearest neighbour) | AUROC, separable classes | left-out unknown, separable classes | fresh known unknown | of them it had right (the cost), points | targets |\n\
          |---|---|---|---|---|---|---|\n"
     );
-    // Shares clamped to 0-100% (the t interval knows no bounds); the gap is a difference.
-    let ci = |s: Spread, share: bool| {
-        let (mut lo, mut hi) = s.interval();
-        if share {
-            (lo, hi) = (lo.max(0.0), hi.min(1.0));
-        }
-        let unit = if share { "%" } else { "" };
-        format!(
-            "{:.1}{unit} ({:.1}-{:.1})",
-            100.0 * s.mean,
-            100.0 * lo,
-            100.0 * hi
-        )
-    };
     for (name, s) in names.iter().zip(spreads) {
         let hard = s.inseparable();
         let except: Vec<String> = hard.iter().map(|(n, _, _)| n.clone()).collect();
