@@ -42,6 +42,10 @@ pub struct ExperimentArgs {
     /// --unknown-rate` (default 0.02): to see what a lower or higher rate trades on your set.
     #[arg(long, value_name = "R")]
     pub unknown_rate: Option<f64>,
+    /// With open-set: the models also carry the texture check (`train --check-texture`), to
+    /// see what it finds and costs on your set.
+    #[arg(long)]
+    pub check_texture: bool,
     /// Your own dataset (DIR/<class>/<images>, as `presrs train` reads it) for Table 1,
     /// Figure 5, Figure 16 and Table 6. The other experiments need several sets (sandpaper,
     /// one per gait, a closed loop) and run on the simulator.
@@ -70,7 +74,8 @@ pub struct ExperimentArgs {
 
 pub fn run(a: ExperimentArgs) -> Result<ExitCode> {
     // Refused before any section runs (the open-set section, which uses them, is the last).
-    let open_set_models = OpenSetModels::new(a.per_class.zip(a.train), a.unknown_rate)?;
+    let open_set_models =
+        OpenSetModels::new(a.per_class.zip(a.train), a.unknown_rate, a.check_texture)?;
     // One dataset folder (`--data` or an `--extra-source`), named by its flag in errors.
     let load = |flag: &str, dir: &PathBuf, crop: Crop| -> Result<UserData> {
         let (set, _) = TrainingSet::load(dir, &a.terrains.catalog()?, a.skip_bad)

@@ -205,6 +205,8 @@ pub struct OpenSetModels {
     split: Option<(usize, usize)>,
     /// `--unknown-rate` (`None`: the default, 0.02).
     unknown_rate: Option<f64>,
+    /// `--check-texture`: the models carry the texture check.
+    check_texture: bool,
 }
 
 impl OpenSetModels {
@@ -213,10 +215,12 @@ impl OpenSetModels {
     pub fn new(
         split: Option<(usize, usize)>,
         unknown_rate: Option<f64>,
+        check_texture: bool,
     ) -> Result<Self, ReportError> {
         let m = Self {
             split,
             unknown_rate,
+            check_texture,
         };
         let o = m.options();
         if !(o.unknown_rate > 0.0 && o.unknown_rate <= node::classifier::model::MAX_UNKNOWN_RATE) {
@@ -235,6 +239,7 @@ impl OpenSetModels {
         if let Some(r) = self.unknown_rate {
             o.unknown_rate = r;
         }
+        o.check_texture = self.check_texture;
         o
     }
 
@@ -1216,7 +1221,7 @@ fn open_set(ctx: &Report) -> Result<String, ReportError> {
     let _ = writeln!(
         md,
         "Per source, each class in turn is left out of training; the model ({split}, \
-         rejection calibrated to `--unknown-rate {rate}`) then classifies every \
+         rejection calibrated to `--unknown-rate {rate}`{texture}) then classifies every \
          image of the left-out class and the known classes' images of a **fresh run** (one the \
          model was neither trained nor calibrated on). The simulated sources are three runs on \
          three sensors (serials 1, 2, 3; seeds {s0}-{s2}; {n} images per terrain to train on, \
@@ -1248,6 +1253,11 @@ fn open_set(ctx: &Report) -> Result<String, ReportError> {
         s2 = ctx.seed + 42,
         h = n / 2,
         split = ctx.open_set_models.describe_split(),
+        texture = if ctx.open_set_models.check_texture {
+            ", with the texture check of `train --check-texture`"
+        } else {
+            ""
+        },
     );
     let _ = writeln!(
         md,

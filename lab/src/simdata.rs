@@ -450,6 +450,26 @@ impl TrainingSet {
                 })
                 .sum();
         }
+        // The texture ranges over the calibration run too: the next run's spread, not only the
+        // training run's.
+        if opts.check_texture
+            && let Some((cal, _)) = calibration
+        {
+            let index = |set: &TrainingSet, l: usize| {
+                let name = &set.classes[l].name;
+                model.classes.iter().position(|c| &c.name == name)
+            };
+            let images: Vec<(&PressureImage, usize)> = [train_set, cal]
+                .into_iter()
+                .flat_map(|set| {
+                    set.images
+                        .iter()
+                        .zip(&set.labels)
+                        .filter_map(move |(img, &l)| index(set, l).map(|k| (img, k)))
+                })
+                .collect();
+            node::classifier::train::add_texture_check(&mut model, images);
+        }
         // The gaits the model has seen: its stored samples' and its calibration run's.
         let mut gaits: Vec<u8> = split
             .train

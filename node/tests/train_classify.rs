@@ -38,6 +38,13 @@ fn dataset(seed: u64, n: usize) -> (Vec<PressureImage>, Vec<usize>) {
     (imgs, labels)
 }
 
+fn labelled<'a>(imgs: &'a [PressureImage], labels: &[usize]) -> Vec<Labelled<'a>> {
+    imgs.iter()
+        .zip(labels)
+        .map(|(image, &class)| Labelled { image, class })
+        .collect()
+}
+
 fn classes() -> Vec<ClassInfo> {
     ["wood", "carpet", "grass"]
         .iter()
@@ -50,11 +57,7 @@ fn classes() -> Vec<ClassInfo> {
 
 fn trained() -> (Model, Vec<PressureImage>, Vec<usize>, Vec<usize>) {
     let (imgs, labels) = dataset(1, 40);
-    let data: Vec<Labelled> = imgs
-        .iter()
-        .zip(&labels)
-        .map(|(image, &class)| Labelled { image, class })
-        .collect();
+    let data = labelled(&imgs, &labels);
     let opts = TrainOptions {
         crop: "2,2,2,2".parse::<Crop>().unwrap(),
         ..TrainOptions::default()
@@ -252,11 +255,7 @@ fn a_model_holds_more_than_sixteen_classes() {
             labels.push(k);
         }
     }
-    let data: Vec<Labelled> = imgs
-        .iter()
-        .zip(&labels)
-        .map(|(image, &class)| Labelled { image, class })
-        .collect();
+    let data = labelled(&imgs, &labels);
     let classes: Vec<ClassInfo> = (0..20)
         .map(|k| ClassInfo {
             name: format!("lab_{k}"),
@@ -385,11 +384,7 @@ fn model_file_round_trips_and_guards_its_version() {
 #[test]
 fn training_rejects_bad_requests() {
     let (imgs, labels) = dataset(2, 10);
-    let data: Vec<Labelled> = imgs
-        .iter()
-        .zip(&labels)
-        .map(|(image, &class)| Labelled { image, class })
-        .collect();
+    let data = labelled(&imgs, &labels);
     let e = train(&data, &classes(), &TrainOptions::default()).unwrap_err();
     assert!(e.to_string().contains("has 10 images"), "{e}");
     let o = TrainOptions {
@@ -695,4 +690,63 @@ fn a_refit_recalibrates_the_novelty() {
     );
     assert_eq!(b.nuisance.len(), a.nuisance.len());
     assert_ne!(a.reference, b.reference);
+}
+
+/// `check_texture`: per class a roughness band over the training images, held against each
+/// image's best class; a refit to dead lines drops it; a file with a bad band is refused.
+#[test]
+fn the_texture_check_holds_each_image_to_its_best_classs_band() {
+    use presrs_node::classifier::train::refit;
+    let (imgs, labels) = dataset(1, 40);
+    let data = labelled(&imgs, &labels);
+    let opts = TrainOptions {
+        crop: "2,2,2,2".parse::<Crop>().unwrap(),
+        check_texture: true,
+        ..TrainOptions::default()
+    };
+    let (model, split) = train(&data, &classes(), &opts).unwrap();
+    let bands = model.texture_ranges.clone().unwrap();
+    assert_eq!(bands.len(), 3);
+    assert!(
+        bands.iter().all(|[lo, hi]| lo.is_finite() && lo < hi),
+        "{bands:?}"
+    );
+    let known = |m: &Model| {
+        let mut c = Classifier::new(m.clone());
+        split
+            .test
+            .iter()
+            .filter(|&&i| c.classify_image(&imgs[i], false).unwrap().class == Some(labels[i]))
+            .count()
+    };
+    // Known images of the training textures pass their class's band as they passed without it.
+    let mut without = model.clone();
+    without.texture_ranges = None;
+    assert_eq!(known(&model), known(&without));
+    assert!(known(&model) * 10 >= split.test.len() * 9);
+    // A band no image reaches: every one unknown.
+    let mut none_fit = model.clone();
+    none_fit.texture_ranges = Some(vec![[1e9, 2e9]; 3]);
+    assert_eq!(known(&none_fit), 0);
+    // A refit to dead lines goes without it (its bands were drawn on a whole sensor).
+    let mut dead_rows = vec![false; 40];
+    dead_rows[10] = true;
+    assert!(
+        refit(&model, &dead_rows, &[false; 40])
+            .unwrap()
+            .texture_ranges
+            .is_none()
+    );
+    // A file whose bands do not fit its classes is refused, naming the key and the file.
+    for bad in [vec![[0.0, 1.0]; 2], vec![[1.0, 0.0]; 3]] {
+        let mut m = model.clone();
+        m.texture_ranges = Some(bad);
+        let e = Model::from_json(&serde_json::to_string(&m).unwrap(), "bad.json")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("texture_ranges") && e.contains("bad.json"),
+            "{e}"
+        );
+    }
 }

@@ -2,7 +2,7 @@
 //!
 //! Per image: [`image`] crop and downsampling, the [`features`] vector (eqs. 1-3), PCA
 //! projection and the Parzen-window decision ([`pwe`]); the [`novelty`] score that calls an
-//! image unlike every known terrain unknown; the [`repair`] filter for dead sensor
+//! image unlike every known terrain unknown, and the [`texture`] check beside it; the [`repair`] filter for dead sensor
 //! lines; [`train`]ing with the paper's 13/7 split; the [`model`] file; [`dataset`] readers.
 
 pub mod dataset;
@@ -13,6 +13,7 @@ pub mod model;
 pub mod novelty;
 pub mod pwe;
 pub mod repair;
+pub mod texture;
 pub mod train;
 
 pub use image::{Crop, PressureImage};

@@ -153,6 +153,11 @@ pub struct Model {
     /// older model files: no load check.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub load_ranges: Option<Vec<[f64; 2]>>,
+    /// Per class: the roughness ([`super::texture::roughness`]) its training and calibration
+    /// images showed, widened; an image outside its best class's range is "unknown"
+    /// (`train --check-texture`). Absent in older model files: no texture check.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub texture_ranges: Option<Vec<[f64; 2]>>,
     /// Content hashes of the training images (to keep test images out).
     pub train_hashes: Vec<String>,
     /// Content hashes of the validation images.
@@ -415,17 +420,22 @@ impl Model {
                 ));
             }
         }
-        if let Some(l) = &self.load_ranges
-            && (l.len() != self.classes.len()
-                || l.iter().any(|[a, b]| a.is_nan() || b.is_nan() || a > b))
-        {
-            return Err(Invalid::new(
-                "load_ranges",
-                format!(
-                    "want one [low, high] pair per class ({}), low <= high",
-                    self.classes.len()
-                ),
-            ));
+        for (key, bands) in [
+            ("load_ranges", &self.load_ranges),
+            ("texture_ranges", &self.texture_ranges),
+        ] {
+            if let Some(l) = bands
+                && (l.len() != self.classes.len()
+                    || l.iter().any(|[a, b]| a.is_nan() || b.is_nan() || a > b))
+            {
+                return Err(Invalid::new(
+                    key,
+                    format!(
+                        "{key}: want one [low, high] pair per class ({}), low <= high",
+                        self.classes.len()
+                    ),
+                ));
+            }
         }
         if let Some(e) = &self.energy
             && (e.len() != self.classes.len() || e.iter().flatten().any(|m| !m.is_valid()))

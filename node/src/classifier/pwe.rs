@@ -533,7 +533,14 @@ impl Classifier {
             }
             None => (-log_dens[best], -threshold),
         };
-        let known = novelty <= threshold && in_range;
+        // The roughness last, and only for an image every other check calls known.
+        let known = novelty <= threshold
+            && in_range
+            && m.texture_ranges.as_ref().is_none_or(|r| {
+                let (w, rows, cols) = (&self.work, self.work_rows, self.work_cols);
+                let t = super::texture::roughness_with(w, rows, cols, self.avx2_fma);
+                (r[best][0]..=r[best][1]).contains(&t)
+            });
         Decision {
             class: known.then_some(best),
             best,

@@ -60,6 +60,13 @@ pub struct TrainOptions {
     /// transitions).
     #[cfg_attr(feature = "clap", arg(long))]
     pub check_load: bool,
+    /// Also call unknown an image whose roughness (how bumpy the contact is) lies outside its
+    /// class's range over the training and calibration images: catches ground smoother or
+    /// rougher than the terrain its shape resembles (on the simulator: wood among carpet,
+    /// clay and grass; a grit among its neighbours). Found nothing and cost nothing on real
+    /// plantar-pressure maps (docs/real-robot.md, "The texture check").
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub check_texture: bool,
 }
 
 /// `--downsample`: 1..=MAX_DOWNSAMPLE, refused as the command line is read (`train` refuses it
@@ -100,6 +107,7 @@ impl Default for TrainOptions {
             seed: 1,
             unknown_rate: DEFAULT_UNKNOWN_RATE,
             check_load: false,
+            check_texture: false,
         }
     }
 }
@@ -298,6 +306,7 @@ pub fn train(
         unknown_rate: Some(o.unknown_rate),
         unknown_thresholds: None,
         load_ranges: None,
+        texture_ranges: None,
         train_hashes: hash(&split.train),
         val_hashes: hash(&split.validation),
         contact: Some(MinContact::of_training(&work)),
@@ -313,6 +322,9 @@ pub fn train(
     fitted?.install(&mut model);
     if o.check_load {
         add_load_check(&mut model);
+    }
+    if o.check_texture {
+        add_texture_check(&mut model, data.iter().map(|l| (l.image, l.class)));
     }
     // The paper's classifier had no rejection: a rate of 0 keeps the density rule, which
     // rejects almost nothing.
@@ -813,6 +825,12 @@ pub fn refit(model: &Model, dead_rows: &[bool], dead_cols: &[bool]) -> Result<Mo
     let mut m = model.clone();
     fitted.install(&mut m);
     // The damaged images carry less load: the ranges follow them.
+    // The texture ranges were drawn on a whole sensor: filled lines are smoother and dead ones
+    // edged, and the stored images alone are too few to draw them again. A refitted model
+    // goes without the check rather than call a damaged sensor's known steps unknown.
+    if m.texture_ranges.take().is_some() {
+        tracing::info!("refit to dead lines: the texture check is off for this model");
+    }
     if m.load_ranges.is_some() {
         m.load_ranges = Some(load_ranges(
             &work,
@@ -1124,6 +1142,23 @@ fn unknown_thresholds(m: &Model) -> (Vec<f64>, f64) {
             f64::NEG_INFINITY
         },
     )
+}
+
+/// Adds the texture check (`TrainOptions::check_texture`) to `m`: per class, the roughness
+/// band of `images` (each with its class index) through the model's crop and downsampling,
+/// calibrated with its `unknown_rate`. Pass every image of the class the model may meet as
+/// known: the training run's and the calibration run's (`TrainingSet::train_calibrated` does).
+pub fn add_texture_check<'a>(
+    m: &mut Model,
+    images: impl IntoIterator<Item = (&'a PressureImage, usize)>,
+) {
+    let mut per: Vec<Vec<f64>> = vec![Vec::new(); m.classes.len()];
+    for (img, k) in images {
+        if let (Some(v), Some(w)) = (per.get_mut(k), preprocess(img, &m.crop, m.downsample)) {
+            v.push(super::texture::roughness(&w.pixels, w.rows, w.cols));
+        }
+    }
+    m.texture_ranges = Some(super::texture::ranges(per, m.unknown_rate.unwrap_or(0.0)));
 }
 
 /// Adds the load check (`TrainOptions::check_load`) to a trained model from its stored images,

@@ -63,6 +63,19 @@ pub(super) fn quad_form(e: &[f32], q: &[f32], avx2_fma: bool) -> f64 {
     portable::quad_form(e, q)
 }
 
+/// The roughness's sums over a working image (`rows`, `cols` at least 3; see
+/// [`super::texture::roughness`]): squared Laplacian over loaded sensels, their count, load.
+pub(super) fn roughness_sums(work: &[u16], rows: usize, cols: usize, avx2_fma: bool) -> [u64; 3] {
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = avx2_fma;
+    #[cfg(target_arch = "x86_64")]
+    if avx2_fma {
+        // SAFETY: the CPU supports the features the function was compiled for.
+        return unsafe { x86_64::roughness_sums_avx2(work, rows, cols) };
+    }
+    portable::roughness_sums(work, rows, cols)
+}
+
 /// `out = f - mean` and `|f - mean|^2` (in f64).
 pub(super) fn centre(f: &[f32], mean: &[f32], out: &mut [f32], avx2_fma: bool) -> f64 {
     #[cfg(not(target_arch = "x86_64"))]

@@ -162,6 +162,11 @@ pub(super) fn quad_form_avx2(e: &[f32], q: &[f32]) -> f64 {
 }
 
 #[target_feature(enable = "avx2,fma")]
+pub(super) fn roughness_sums_avx2(work: &[u16], rows: usize, cols: usize) -> [u64; 3] {
+    portable::roughness_sums(work, rows, cols)
+}
+
+#[target_feature(enable = "avx2,fma")]
 pub(super) fn centre_avx2(f: &[f32], mean: &[f32], out: &mut [f32]) -> f64 {
     portable::centre(f, mean, out)
 }
