@@ -135,6 +135,21 @@ impl Trained {
             ),
             None => writeln!(o, "unknown terrain: rejection off (--unknown-rate 0)"),
         };
+        if let Some(bands) = &model.texture_ranges {
+            let each: Vec<String> = model
+                .classes
+                .iter()
+                .zip(bands)
+                .map(|(c, [lo, hi])| format!("{} {lo:.3}-{hi:.3}", c.name))
+                .collect();
+            let _ = writeln!(
+                o,
+                "texture check: an image whose roughness lies outside its terrain's band is \
+                 unknown; bands over the images trained and calibrated on: {} (terrains whose \
+                 bands overlap it cannot tell apart)",
+                each.join(", ")
+            );
+        }
         if let Some(c) = model.novelty.as_ref().map(|nv| &nv.calibration)
             && c.source == node::classifier::novelty::CalibrationSource::HeldOutRuns
             && c.training_run_images() == 0
@@ -616,6 +631,62 @@ mod tests {
         let (c, report) = trained(14, 9);
         assert_eq!((c.held_out_images, c.training_run_images()), (40, 24));
         assert!(!report.contains(&note), "{report}");
+    }
+
+    /// `--check-texture`: the bands cover the training run's and the calibration run's images
+    /// (a robot's next run scatters like the calibration run), and `train` prints them.
+    #[test]
+    fn the_texture_bands_cover_both_runs_and_train_prints_them() {
+        let kind = sim::dataset::Kind::Static;
+        let train_run = crate::study::dataset_on(kind, 20, controller::Gait::g2(), 41, 1);
+        let cal = crate::study::dataset_on(kind, 10, controller::Gait::g2(), 42, 2);
+        let crop = node::classifier::image::Crop {
+            top: 2,
+            bottom: 2,
+            left: 2,
+            right: 2,
+        };
+        let opts = TrainOptions {
+            crop,
+            check_texture: true,
+            ..Default::default()
+        };
+        let t = train_run
+            .train_calibrated(&opts, Some((&cal, &["run2.log".to_string()])))
+            .unwrap();
+        let bands = t.model.texture_ranges.clone().unwrap();
+        for set in [&train_run, &cal] {
+            for (img, &l) in set.images.iter().zip(&set.labels) {
+                let w = img.crop(&crop).unwrap();
+                let r = node::classifier::texture::roughness(&w.pixels, w.rows, w.cols);
+                let [lo, hi] = bands[l];
+                assert!((lo..=hi).contains(&r), "{r} outside {lo}-{hi}");
+            }
+        }
+        let report = t.report(opts.unknown_rate, std::time::Duration::ZERO, "m.json");
+        let line = report
+            .lines()
+            .find(|l| l.starts_with("texture check:"))
+            .unwrap_or_default();
+        for c in &t.model.classes {
+            assert!(line.contains(&format!("{} ", c.name)), "{report}");
+        }
+        // Without the flag: no bands, no line.
+        let plain = train_run
+            .train_calibrated(
+                &TrainOptions {
+                    crop,
+                    ..Default::default()
+                },
+                None,
+            )
+            .unwrap();
+        assert!(plain.model.texture_ranges.is_none());
+        assert!(
+            !plain
+                .report(0.02, std::time::Duration::ZERO, "m.json")
+                .contains("texture")
+        );
     }
 
     /// `train` lists the gaits a set's stances touched down in and the terrains lacking one;
