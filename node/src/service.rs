@@ -380,11 +380,6 @@ impl NodeService {
         &self.tally
     }
 
-    /// The gait in force now (the controller's last GaitStatus), if any came.
-    pub fn current_gait(&self) -> Option<u8> {
-        self.gait.current()
-    }
-
     /// `G1 3/103, G2 0/67`: unknown of decided steps per gait, naming gaits the model was not
     /// trained in; empty when no GaitStatus came. For logs and summaries, not the hot path.
     pub fn describe_gaits(&self) -> String {
