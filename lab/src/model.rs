@@ -78,7 +78,7 @@ pub fn sim_model(seed: u64) -> Result<Model, LabError> {
 /// per terrain of the default track.
 pub const ENERGY_FIT_STEPS: usize = 400;
 
-/// Fits `m`'s energy check ([`node::stance::energy`]) as a lab would on its robot: a
+/// Fits `m`'s energy check ([`node::unknown::energy`]) as a lab would on its robot: a
 /// closed-loop run of `steps` steps on the default track (the controller switching gaits, so
 /// that stances are entered at several energies), labelled with the simulator's truth.
 ///

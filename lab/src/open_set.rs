@@ -183,7 +183,7 @@ impl Spread {
     /// The spread of `v` (NaN everywhere when it is empty).
     pub fn of(v: &[f64]) -> Self {
         let mut v = v.to_vec();
-        let median = node::classifier::novelty::median(&mut v);
+        let median = node::stats::median(&mut v);
         let n = v.len();
         let mean = v.iter().sum::<f64>() / n as f64;
         let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n.saturating_sub(1) as f64;

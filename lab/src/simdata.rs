@@ -151,7 +151,7 @@ impl Trained {
             );
         }
         if let Some(c) = model.novelty.as_ref().map(|nv| &nv.calibration)
-            && c.source == node::classifier::novelty::CalibrationSource::HeldOutRuns
+            && c.source == node::unknown::novelty::CalibrationSource::HeldOutRuns
             && c.training_run_images() == 0
         {
             let _ = writeln!(o, "{}", no_training_run_images_note());

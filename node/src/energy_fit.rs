@@ -1,4 +1,4 @@
-//! Fitting a model's energy check ([`crate::stance::energy`]) from the robot's closed-loop runs
+//! Fitting a model's energy check ([`crate::unknown::energy`]) from the robot's closed-loop runs
 //! on known ground (`presrs energy`): each run's candump log goes through the node's own stance
 //! logic and classifier; each stance whose label and texture agree gives its class one
 //! (flight before, flight after) pair.
@@ -16,7 +16,7 @@ use crate::capture::Skip;
 use crate::classifier::Model;
 use crate::config::NodeConfig;
 use crate::stance::StancePipeline;
-use crate::stance::energy::{self, ReturnMap};
+use crate::unknown::energy::{self, ReturnMap};
 
 /// Why no energy check could be fitted.
 #[derive(Debug, thiserror::Error)]

@@ -43,6 +43,8 @@ pub mod health;
 pub mod replay;
 pub mod service;
 pub mod stance;
+pub mod stats;
+pub mod unknown;
 
 pub use config::{NodeConfig, RefitMode, RepairMode};
 pub use service::{NodeService, NodeStats, Output, RunningNode, ServiceError};

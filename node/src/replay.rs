@@ -61,15 +61,15 @@ impl fmt::Display for ReplaySummary {
         let (c, r) = (&self.counters, &self.reassembly);
         write!(
             f,
-            "replayed {} frames ({:.1} s): {} steps, {} classified ({} unknown by the energy \
-             check), {} without a sample; {} images, {} CRC failures, {} incomplete, {} \
-             undecodable frames",
+            "replayed {} frames ({:.1} s): {} steps, {} classified, {} without a sample; \
+             unknown by reason: {}; {} images, {} CRC failures, {} incomplete, {} undecodable \
+             frames",
             self.frames,
             self.span_us as f64 * 1e-6,
             c.steps,
             c.classified,
-            c.energy_unknown,
             c.no_sample,
+            c.unknown_by_reason,
             r.delivered,
             r.crc_failures,
             r.incomplete,
@@ -127,13 +127,15 @@ pub fn replay_log<R: Borrow<LogRecord>>(
 /// damage and flags.
 pub fn class_line(t_us: u64, foot: u8, tc: &TerrainClass, catalog: &TerrainCatalog) -> String {
     format!(
-        "{:.6} foot {foot} step {:5} {:<13} {:5.1}%  damage {:4.1}%  flags 0x{:02X}",
+        "{:.6} foot {foot} step {:5} {:<13} {:5.1}%  damage {:4.1}%  flags 0x{:02X}{}",
         t_us as f64 * 1e-6,
         tc.step,
         catalog.describe(tc.terrain),
         tc.confidence_pct,
         tc.damage_pct,
-        tc.flags
+        tc.flags,
+        tc.unknown_reason()
+            .map_or(String::new(), |r| format!("  ({})", r.name()))
     )
 }
 
@@ -150,7 +152,7 @@ pub fn class_json(
         "t_us": t_us, "foot": foot, "step": tc.step, "terrain": catalog.describe(tc.terrain),
         "terrain_id": tc.terrain, "confidence_pct": tc.confidence_pct,
         "damage_pct": tc.damage_pct, "flags": tc.flags, "latency_us": tc.latency_us,
-        "gait": gait,
+        "unknown_reason": tc.unknown_reason().map(|r| r.name()), "gait": gait,
     })
 }
 

@@ -21,6 +21,7 @@
 //! Receive and send each open their own handle with retry and backoff: a missing interface, or
 //! one that goes down, shows as `Degraded` in NodeStatus and in the log, never as an exit.
 
+use crate::unknown::{Reason, ReasonCounts};
 use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -110,6 +111,7 @@ struct Shared {
     incomplete: AtomicU64,
     decode_errors: AtomicU64,
     unknown: AtomicU64,
+    unknown_by_reason: [AtomicU64; Reason::ALL.len()],
 }
 
 /// A node's counters at one moment.
@@ -138,6 +140,9 @@ pub struct NodeStats {
     /// Steps decided unknown (TerrainClass 0xFF): not like any trained terrain, or outside
     /// its return map ([`NodeService::gait_tally`] counts them per gait).
     pub unknown: u64,
+    /// Unknown steps per reason: the image's check (novelty, load, texture), the energy
+    /// check, no contact or no sample, as each TerrainClass says.
+    pub unknown_by_reason: ReasonCounts,
     /// Steps that ended without an image.
     pub no_sample: u64,
     /// Tactile images reassembled.
@@ -156,6 +161,9 @@ impl Shared {
     fn publish(&self, c: &Counters, r: &ReassemblyStats, damage_pct: f64, unknown: u64) {
         let r_ = Ordering::Relaxed;
         self.unknown.store(unknown, r_);
+        for (a, &v) in self.unknown_by_reason.iter().zip(&c.unknown_by_reason.0) {
+            a.store(v, r_);
+        }
         self.steps.store(c.steps, r_);
         self.classified.store(c.classified, r_);
         self.no_sample.store(c.no_sample, r_);
@@ -180,6 +188,7 @@ impl Shared {
             steps: l(&self.steps),
             classified: l(&self.classified),
             unknown: l(&self.unknown),
+            unknown_by_reason: ReasonCounts(std::array::from_fn(|i| l(&self.unknown_by_reason[i]))),
             no_sample: l(&self.no_sample),
             images: l(&self.images),
             crc_failures: l(&self.crc_failures),
@@ -535,6 +544,7 @@ impl RunningNode {
             steps = s.steps,
             classified = s.classified,
             unknown = s.unknown,
+            unknown_by_reason = %s.unknown_by_reason,
             unknown_by_gait = %node.as_ref().map(|n| n.describe_gaits()).unwrap_or_default(),
             record_dropped = s.record_dropped,
             "presrs node stopped"
@@ -581,6 +591,7 @@ impl Component for NodeService {
                 steps = c.steps - last.steps,
                 classified = c.classified - last.classified,
                 unknown = unknown - self.last_logged_unknown,
+                unknown_by_reason = %c.unknown_by_reason,
                 unknown_by_gait = %self.describe_gaits(),
                 no_sample = c.no_sample - last.no_sample,
                 decode_errors = c.decode_errors - last.decode_errors,

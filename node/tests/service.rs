@@ -1022,7 +1022,7 @@ fn error_frames_set_the_node_state_until_the_controller_restarts() {
 /// a stance of another class, or one after a stance the map allows, is the texture's.
 #[test]
 fn a_stance_that_took_energy_its_terrain_does_not_makes_the_next_of_its_kind_unknown() {
-    use presrs_node::stance::energy::ReturnMap;
+    use presrs_node::unknown::energy::ReturnMap;
     let mut m = model();
     // Wood: the flight after a stance as long as the one before, within 10 ms.
     let wood = ReturnMap {
@@ -1089,7 +1089,7 @@ fn a_stance_that_took_energy_its_terrain_does_not_makes_the_next_of_its_kind_unk
 /// GaitStatus), live as in a replay: where a run's unknowns gather.
 #[test]
 fn unknowns_are_counted_in_the_gait_each_step_was_decided_in() {
-    use presrs_node::stance::energy::ReturnMap;
+    use presrs_node::unknown::energy::ReturnMap;
     use protocol::messages::{GaitReason, GaitStatus};
     let mut m = model();
     // Wood's return map makes the fourth stance unknown (as the test above shows).
@@ -1186,6 +1186,105 @@ fn a_model_files_gaits_are_checked() {
         assert!(
             e.as_deref().is_some_and(|e| e.contains("gaits")),
             "{bad:?}: {e:?}"
+        );
+    }
+}
+
+/// A model of the terrains `known` (indices into [`PERIODS`]) only.
+fn model_of(known: &[usize]) -> Model {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(1);
+    let imgs: Vec<(PressureImage, usize)> = known
+        .iter()
+        .enumerate()
+        .flat_map(|(k, &t)| (0..30).map(move |_| (k, t)))
+        .map(|(k, t)| {
+            (
+                PressureImage::new(44, 44, 8, texture(&mut rng, PERIODS[t])),
+                k,
+            )
+        })
+        .collect();
+    let data: Vec<Labelled> = imgs
+        .iter()
+        .map(|(image, class)| Labelled {
+            image,
+            class: *class,
+        })
+        .collect();
+    let classes: Vec<ClassInfo> = known
+        .iter()
+        .map(|&t| ClassInfo {
+            name: NAMES[t].to_string(),
+            terrain_id: TerrainCatalog::paper().by_name(NAMES[t]).unwrap().id(),
+        })
+        .collect();
+    let opts = TrainOptions {
+        crop: "2,2,2,2".parse::<Crop>().unwrap(),
+        ..TrainOptions::default()
+    };
+    train(&data, &classes, &opts).unwrap().0
+}
+
+/// Issue 47: the multi-frame path calls a terrain the model never saw unknown as often as the
+/// single-frame path (it used to take the summed posterior's terrain, never unknown), and
+/// says why on the bus; known ground stays known in both.
+#[test]
+fn multi_frame_calls_ground_the_model_never_saw_unknown_as_single_frame_does() {
+    for (left_out, name) in NAMES.iter().enumerate() {
+        let known: Vec<usize> = (0..NAMES.len()).filter(|&t| t != left_out).collect();
+        let model = model_of(&known);
+        let mut foot = FakeFoot::new();
+        let mut frames = Vec::new();
+        let mut truth = Vec::new();
+        for i in 0..30u64 {
+            let t = (i % 3) as usize;
+            frames.extend(foot.stance(t, 1_000_000 + i * 400_000, 200, |_| true));
+            truth.push(t);
+        }
+        let end = 1_000_000 + 31 * 400_000;
+        let unknown_share = |multi_frame: bool| {
+            let cfg = NodeConfig {
+                multi_frame,
+                ..NodeConfig::default()
+            };
+            let mut node = NodeService::new(cfg, model.clone()).unwrap();
+            let said = classes(&lock_step(&mut node, &frames, end));
+            assert_eq!(said.len(), truth.len(), "one decision per step");
+            let (mut novel, mut novel_unknown, mut known_unknown) = (0, 0, 0);
+            for ((_, tc), &t) in said.iter().zip(&truth) {
+                let unknown = tc.terrain == messages::TERRAIN_UNKNOWN;
+                if unknown {
+                    assert_eq!(
+                        tc.unknown_reason(),
+                        Some(messages::UnknownReason::Novelty),
+                        "flags {:#x}",
+                        tc.flags
+                    );
+                }
+                assert_eq!(tc.flags & flags::MULTI_FRAME != 0, multi_frame);
+                if t == left_out {
+                    novel += 1;
+                    novel_unknown += unknown as usize;
+                } else {
+                    known_unknown += unknown as usize;
+                }
+            }
+            let stats = node.counters().unknown_by_reason;
+            assert_eq!(
+                stats.get(messages::UnknownReason::Novelty) as usize,
+                novel_unknown + known_unknown
+            );
+            (novel_unknown as f64 / novel as f64, known_unknown)
+        };
+        let (single, single_known) = unknown_share(false);
+        let (multi, multi_known) = unknown_share(true);
+        assert!(
+            single >= 0.9 && multi >= single - 0.1,
+            "left out {name}: single-frame {single:.2}, multi-frame {multi:.2}"
+        );
+        assert!(
+            single_known <= 2 && multi_known <= 2,
+            "left out {name}: known steps called unknown {single_known} / {multi_known} of 20"
         );
     }
 }

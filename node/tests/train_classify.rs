@@ -2,9 +2,9 @@
 //! their spatial statistics, as the paper's terrains do), and the model file's guards.
 
 use presrs_node::classifier::model::{MODEL_VERSION, ModelError};
-use presrs_node::classifier::novelty::{HELD_OUT_RATE_FACTOR, NUISANCE_DIRECTIONS, Novelty};
 use presrs_node::classifier::train::{Labelled, TrainOptions, train};
 use presrs_node::classifier::{ClassInfo, Classifier, Crop, Kernels, Model, PressureImage, repair};
+use presrs_node::unknown::novelty::{HELD_OUT_RATE_FACTOR, NUISANCE_DIRECTIONS, Novelty};
 use rand::{Rng, SeedableRng};
 
 /// 44x44 image of a texture: `period` sets the contact-patch spacing, `fill` the contact
@@ -539,8 +539,8 @@ fn calibrate_on_another_run(
 /// they came from, and bad runs are refused naming the run and the fix.
 #[test]
 fn calibration_on_another_run_and_its_bad_inputs() {
-    use presrs_node::classifier::novelty::CalibrationSource;
     use presrs_node::classifier::train::{CalibrateError, calibrate_on_runs};
+    use presrs_node::unknown::novelty::CalibrationSource;
     let (mut model, ..) = trained();
     let same = model.novelty.clone().unwrap();
     assert_eq!(same.calibration.source, CalibrationSource::SameRun);

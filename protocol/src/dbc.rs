@@ -173,6 +173,9 @@ pub fn signals(kind: MessageKind) -> Vec<Signal> {
             sig("FlagMultiFrame", 43, 1, false, 1.0, ""),
             sig("FlagNoContact", 44, 1, false, 1.0, ""),
             sig("FlagEnergy", 45, 1, false, 1.0, ""),
+            sig("UnknownReason", 46, 2, false, 1.0, "")
+                .range(0.0, 3.0)
+                .values("UnknownReason"),
             sig("LatencyUs", 48, 16, false, 1.0, "us"),
         ],
         MessageKind::NodeStatus => vec![
@@ -242,6 +245,11 @@ pub fn signals(kind: MessageKind) -> Vec<Signal> {
 /// What a signal means where its name and unit do not say it (docs/protocol.md says more).
 fn comment(kind: MessageKind, signal: &str) -> Option<&'static str> {
     Some(match (kind, signal) {
+        (MessageKind::TerrainClass, "UnknownReason") => {
+            "With TerrainId 255: the check of the stance image that called it unknown, 1 novelty \
+             (unlike every known terrain), 2 load, 3 texture; 0 when a flag says why (FlagNoSample, \
+             FlagNoContact, FlagEnergy)."
+        }
         (MessageKind::TerrainClass, "LatencyUs") => {
             "From the kernel's receive time of the sampled frame's last segment to the decision, \
              on the node's clock: a node that was stopped or behind shows it. Saturates at \
@@ -307,7 +315,14 @@ fn fmt_num(v: f64) -> String {
 }
 
 /// The names of the DBC's value tables.
-pub const VALUE_TABLES: [&str; 5] = ["Terrain", "Phase", "NodeState", "GaitReason", "LegMode"];
+pub const VALUE_TABLES: [&str; 6] = [
+    "Terrain",
+    "Phase",
+    "NodeState",
+    "GaitReason",
+    "LegMode",
+    "UnknownReason",
+];
 
 /// The value table `name` (one of [`VALUE_TABLES`]): each value with its label, the catalog's
 /// terrains for `Terrain`. Empty for another name.
@@ -339,6 +354,7 @@ pub fn value_table(name: &str, terrains: &TerrainCatalog) -> Vec<(u32, String)> 
             "bus_off",
         ]),
         "GaitReason" => fixed(&["initial", "terrain", "unknown", "node_lost"]),
+        "UnknownReason" => fixed(&["none", "novelty", "load", "texture"]),
         "LegMode" => fixed(&[
             "waiting",
             "running",

@@ -137,6 +137,77 @@ pub mod flags {
     /// stance, given the flight before) that the terrain does not: other ground that looks
     /// like it. The terrain is unknown.
     pub const ENERGY: u8 = 1 << 5;
+    /// Bits 6-7: which check of the stance image called the step unknown, an
+    /// [`super::UnknownReason`] code (0: none of them; see [`super::TerrainClass::unknown_reason`]).
+    pub const REASON_MASK: u8 = 0b11 << REASON_SHIFT;
+    /// The lowest bit of [`REASON_MASK`].
+    pub const REASON_SHIFT: u8 = 6;
+}
+
+/// Why a step is unknown (`TerrainId` [`TERRAIN_UNKNOWN`]): one reason per step, the first that
+/// applies in this order. A monitor counts unknowns per reason with
+/// [`TerrainClass::unknown_reason`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum UnknownReason {
+    /// No image arrived in the stance ([`flags::NO_SAMPLE`]).
+    NoSample,
+    /// The image showed no foot on the ground ([`flags::NO_CONTACT`]).
+    NoContact,
+    /// The image is unlike every known terrain (its novelty score above its class's threshold;
+    /// `UnknownReason` code 1).
+    Novelty,
+    /// The image's load lies outside its terrain's trained band (code 2).
+    Load,
+    /// The image's roughness lies outside its terrain's trained band (code 3).
+    Texture,
+    /// The terrain the image shows took energy out of the foot's last hop that it does not
+    /// ([`flags::ENERGY`]).
+    Energy,
+}
+
+impl UnknownReason {
+    /// Every reason, in the order [`TerrainClass::unknown_reason`] reports them.
+    pub const ALL: [UnknownReason; 6] = [
+        UnknownReason::NoSample,
+        UnknownReason::NoContact,
+        UnknownReason::Novelty,
+        UnknownReason::Load,
+        UnknownReason::Texture,
+        UnknownReason::Energy,
+    ];
+
+    /// The name in logs, JSON and the DBC's `UnknownReason` table.
+    pub fn name(self) -> &'static str {
+        match self {
+            UnknownReason::NoSample => "no_sample",
+            UnknownReason::NoContact => "no_contact",
+            UnknownReason::Novelty => "novelty",
+            UnknownReason::Load => "load",
+            UnknownReason::Texture => "texture",
+            UnknownReason::Energy => "energy",
+        }
+    }
+
+    /// The image checks' 2-bit code in [`flags::REASON_MASK`] (1 novelty, 2 load, 3 texture);
+    /// 0 for the reasons that have a flag of their own.
+    pub fn code(self) -> u8 {
+        match self {
+            UnknownReason::Novelty => 1,
+            UnknownReason::Load => 2,
+            UnknownReason::Texture => 3,
+            _ => 0,
+        }
+    }
+
+    /// The flag bits that carry this reason.
+    pub fn flag_bits(self) -> u8 {
+        match self {
+            UnknownReason::NoSample => flags::NO_SAMPLE,
+            UnknownReason::NoContact => flags::NO_CONTACT,
+            UnknownReason::Energy => flags::ENERGY,
+            r => r.code() << flags::REASON_SHIFT,
+        }
+    }
 }
 
 /// Largest value of `TerrainClass::latency_us` (its 16-bit CAN field): longer latencies read as
@@ -471,6 +542,29 @@ impl TerrainClass {
             latency_us: u16_at(d, 6) as u32,
         })
     }
+
+    /// Why the step is unknown, from its flags; `None` for a terrain (or an unknown step sent
+    /// without a reason, as nodes before the reason field did).
+    pub fn unknown_reason(&self) -> Option<UnknownReason> {
+        if self.terrain != TERRAIN_UNKNOWN {
+            return None;
+        }
+        let f = self.flags;
+        if f & flags::NO_SAMPLE != 0 {
+            Some(UnknownReason::NoSample)
+        } else if f & flags::NO_CONTACT != 0 {
+            Some(UnknownReason::NoContact)
+        } else if f & flags::ENERGY != 0 {
+            Some(UnknownReason::Energy)
+        } else {
+            match (f & flags::REASON_MASK) >> flags::REASON_SHIFT {
+                1 => Some(UnknownReason::Novelty),
+                2 => Some(UnknownReason::Load),
+                3 => Some(UnknownReason::Texture),
+                _ => None,
+            }
+        }
+    }
 }
 
 impl NodeStatus {
@@ -803,5 +897,31 @@ mod tests {
         let st =
             CanFrame::classic(make_id(0x280, false).unwrap(), &[0, 9, 0, 0, 0, 0, 0, 0]).unwrap();
         assert!(decode(&st, &ids).is_err());
+    }
+
+    #[test]
+    fn an_unknown_step_says_why_in_its_flags() {
+        let mut tc = TerrainClass {
+            terrain: TERRAIN_UNKNOWN,
+            ..TerrainClass::default()
+        };
+        assert_eq!(tc.unknown_reason(), None, "a node before the reason field");
+        for r in UnknownReason::ALL {
+            tc.flags = r.flag_bits() | flags::REPAIRED;
+            let back = TerrainClass::decode(&tc.encode()).unwrap();
+            assert_eq!(back.unknown_reason(), Some(r), "{r:?}");
+        }
+        // A terrain has no reason, whatever bits it carries.
+        tc.terrain = 3;
+        assert_eq!(tc.unknown_reason(), None);
+        // The image checks' codes fit the two bits and keep clear of the other flags.
+        for r in [
+            UnknownReason::Novelty,
+            UnknownReason::Load,
+            UnknownReason::Texture,
+        ] {
+            assert_eq!(r.flag_bits() & !flags::REASON_MASK, 0);
+            assert_ne!(r.code(), 0);
+        }
     }
 }

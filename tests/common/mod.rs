@@ -47,6 +47,10 @@ pub fn signals(m: &Message) -> BTreeMap<&'static str, f64> {
             ] {
                 s.insert(name, (c.flags & bit != 0) as u8 as f64);
             }
+            s.insert(
+                "UnknownReason",
+                ((c.flags & flags::REASON_MASK) >> flags::REASON_SHIFT) as f64,
+            );
             s.insert("LatencyUs", c.latency_us as f64);
         }
         Message::NodeStatus(c) => {

@@ -1,16 +1,16 @@
 //! The terrain classifier of the paper (sections 4, 5, 7.2, 8).
 //!
 //! Per image: [`image`] crop and downsampling, the [`features`] vector (eqs. 1-3), PCA
-//! projection and the Parzen-window decision ([`pwe`]); the [`novelty`] score that calls an
-//! image unlike every known terrain unknown, and the [`texture`] check beside it; the [`repair`] filter for dead sensor
-//! lines; [`train`]ing with the paper's 13/7 split; the [`model`] file; [`dataset`] readers.
+//! projection and the Parzen-window decision ([`pwe`]), whose unknown-ground verdict is
+//! [`crate::unknown`]'s; the image's roughness ([`texture`]); the [`repair`] filter for dead
+//! sensor lines; [`train`]ing with the paper's 13/7 split; the [`model`] file; [`dataset`]
+//! readers.
 
 pub mod dataset;
 pub mod features;
 pub mod image;
 mod kernels;
 pub mod model;
-pub mod novelty;
 pub mod pwe;
 pub mod repair;
 pub mod texture;

@@ -13,9 +13,7 @@ pub const MODEL_VERSION: u32 = 1;
 /// Largest downsampling factor (a 44x44 image at 8 keeps 6x6 pixels).
 pub const MAX_DOWNSAMPLE: usize = 8;
 
-/// The largest share of known-terrain images a model may be calibrated to call unknown
-/// (`train --unknown-rate`): past it the rejection would discard more than it protects.
-pub const MAX_UNKNOWN_RATE: f64 = 0.5;
+pub use crate::unknown::MAX_UNKNOWN_RATE;
 /// Most classes a model may have: one per terrain id of a catalog (0-254; 255 is "unknown").
 /// The classifier's per-class buffers are sized to the model's classes when it is built.
 pub const MAX_CLASSES: usize = 255;
@@ -179,12 +177,12 @@ pub struct Model {
     /// [`super::novelty`]). Absent in older model files: the per-class density thresholds
     /// (`unknown_thresholds`) decide, as they did.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub novelty: Option<super::novelty::Novelty>,
+    pub novelty: Option<crate::unknown::novelty::Novelty>,
     /// Per class: the return map of the stance's energy balance (see
-    /// [`crate::stance::energy`]), `null` for a class without one. Absent in older model
+    /// [`crate::unknown::energy`]), `null` for a class without one. Absent in older model
     /// files, and in models not fitted on closed-loop runs (`presrs energy`): no energy check.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub energy: Option<Vec<Option<crate::stance::energy::ReturnMap>>>,
+    pub energy: Option<Vec<Option<crate::unknown::energy::ReturnMap>>>,
     /// The gaits its training and calibration images touched down in (the capture manifest's
     /// `gait`, see [`crate::gait`]), sorted: a stance in another gait may look new to it
     /// (`presrs node --replay` counts unknowns per gait and names those). Absent in older model
@@ -507,7 +505,7 @@ impl Model {
         }
         if let Some(nv) = &self.novelty {
             nv.validate(self.classes.len())
-                .map_err(|msg| Invalid::new("novelty", msg))?;
+                .map_err(|e| Invalid::new("novelty", e.0))?;
             let n_feat = self.pca_mean.len();
             if n_feat == 0 || !nv.nuisance.len().is_multiple_of(n_feat) {
                 return Err(Invalid::new(

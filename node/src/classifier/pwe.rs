@@ -6,13 +6,14 @@ use super::Kernels;
 use super::features::FeatureExtractor;
 use super::kernels::{centre, gram_inverse, half_matrix, project, quad_form, sq_dists};
 use super::model::{MinContact, Model};
-use super::novelty::MAX_K;
 use super::repair;
+use crate::unknown::novelty::MAX_K;
+use crate::unknown::{self, Bands, Measured, Reason};
 
 /// The outcome for one image.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Decision {
-    /// The class, or `None` when the best class's density is below the model's unknown threshold.
+    /// The class, or `None` when the image is unknown ground (see `reason`) or shows no contact.
     pub class: Option<usize>,
     /// The most probable class, known or not.
     pub best: usize,
@@ -26,12 +27,15 @@ pub struct Decision {
     /// was computed: the decision is unknown, confidence 0, and no class is "best".
     pub contact: bool,
     /// How unlike any known terrain the image is, larger = less like (see
-    /// [`super::novelty`]); for a model without a novelty score, the negated log density.
+    /// [`crate::unknown::novelty`]); for a model without a novelty score, the negated log density.
     /// +inf without contact.
     pub novelty: f64,
     /// The best class's threshold the novelty was held against: above it, unknown. (For a
     /// model without a novelty score, the negated density threshold.)
     pub threshold: f64,
+    /// Which check called the image unknown ([`crate::unknown::image_verdict`]); `None` for a
+    /// terrain and for an image without contact.
+    pub reason: Option<Reason>,
 }
 
 impl Decision {
@@ -45,6 +49,7 @@ impl Decision {
         contact: false,
         novelty: f64::INFINITY,
         threshold: f64::INFINITY,
+        reason: None,
     };
 
     /// What to call this decision among the model's class `names`: the class, `unknown`, or
@@ -72,6 +77,7 @@ impl Decision {
             "confidence": self.confidence,
             "novelty": num(self.novelty),
             "threshold": num(self.threshold),
+            "reason": self.reason.map(Reason::name),
         })
     }
 }
@@ -491,10 +497,6 @@ impl Classifier {
             Some(t) => t[best],
             None => m.unknown_threshold,
         };
-        let in_range = m
-            .load_ranges
-            .as_ref()
-            .is_none_or(|r| (r[best][0]..=r[best][1]).contains(&total));
         let (novelty, threshold) = match &m.novelty {
             Some(nv) => {
                 // The best class's stored samples and references only: the kNN ratio looks at
@@ -533,14 +535,21 @@ impl Classifier {
             }
             None => (-log_dens[best], -threshold),
         };
-        // The roughness last, and only for an image every other check calls known.
-        let known = novelty <= threshold
-            && in_range
-            && m.texture_ranges.as_ref().is_none_or(|r| {
-                let (w, rows, cols) = (&self.work, self.work_rows, self.work_cols);
-                let t = super::texture::roughness_with(w, rows, cols, self.avx2_fma);
-                (r[best][0]..=r[best][1]).contains(&t)
-            });
+        let measured = Measured {
+            best,
+            novelty,
+            threshold,
+            load: total,
+        };
+        let bands = Bands {
+            load: m.load_ranges.as_deref(),
+            texture: m.texture_ranges.as_deref(),
+        };
+        let (w, rows, cols, avx2) = (&self.work, self.work_rows, self.work_cols, self.avx2_fma);
+        let reason = unknown::image_verdict(measured, bands, || {
+            super::texture::roughness_with(w, rows, cols, avx2)
+        });
+        let known = reason.is_none();
         Decision {
             class: known.then_some(best),
             best,
@@ -554,6 +563,7 @@ impl Classifier {
             contact: true,
             novelty,
             threshold,
+            reason,
         }
     }
 

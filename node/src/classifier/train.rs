@@ -13,9 +13,10 @@ use super::model::{
     ClassInfo, MAX_CLASSES, MAX_DOWNSAMPLE, MAX_UNKNOWN_RATE, MODEL_VERSION, MinContact, Model,
     StoredImages,
 };
-use super::novelty::{
+use crate::stats::{median, upper_quantile};
+use crate::unknown::novelty::{
     Calibration, CalibrationSource, HELD_OUT_RATE_FACTOR, NOVELTY_K, NUISANCE_DIRECTIONS, Novelty,
-    NoveltyScore, SAME_RUN_MARGIN, SHRINK_IMAGES, median, upper_quantile,
+    NoveltyScore, SAME_RUN_MARGIN, SHRINK_IMAGES,
 };
 
 /// How to train: the paper's split and the preprocessing. With the `clap` feature these are
@@ -1158,7 +1159,10 @@ pub fn add_texture_check<'a>(
             v.push(super::texture::roughness(&w.pixels, w.rows, w.cols));
         }
     }
-    m.texture_ranges = Some(super::texture::ranges(per, m.unknown_rate.unwrap_or(0.0)));
+    m.texture_ranges = Some(crate::stats::class_bands(
+        per,
+        m.unknown_rate.unwrap_or(0.0),
+    ));
 }
 
 /// Adds the load check (`TrainOptions::check_load`) to a trained model from its stored images,
@@ -1175,54 +1179,17 @@ pub fn add_load_check(m: &mut Model) -> bool {
     true
 }
 
-/// Per class, the range of load (summed working image) its images showed at the sample time,
-/// widened by a quarter of its width on each side: an image whose load lies outside its best
-/// class's range is unknown, however its texture matches.
-///
-/// Why: the feature vector is load-normalised (a gait change must not change the terrain), so
-/// ground that a known terrain's texture matches but that yields differently is invisible to
-/// the density. Measured on the simulator (G2 stances, 60 per terrain): sand's load 70 ms after
-/// touchdown is 48.9-52.6k (5th-95th percentile) against clay's 56.8-60.5k, and sand's images
-/// lie at the core of clay's density (leave-one-terrain-out AUROC 0.29 on density alone), so
-/// every sand step was "clay". The price, measured in the demo with sand on the track
-/// (`presrs demo --check-load`): the closed loop's stances after a gait switch (slower, lighter)
-/// fall outside ranges learned from steady hopping, so known steps are called unknown too.
-/// The load also carries the hopper's history: on a track of wood, sand, grass, clay, sand and
-/// carpet (`presrs demo --check-load`, 300 steps, seed 1), carpet entered from sand at the
-/// slow safe gait read 50.7k rising to 60k over 7 steps, against 61.0-69.0k learned from steady
-/// hopping (a fixed-G1 run on carpet reads 62.7-67.1k, as the training set does): 92 of 108
-/// sand steps were unknown, but so were 74 of 192 known ones, each keeping the robot at the
-/// safe gait, where the load stays low. Ranges from the robot's own closed-loop runs do not
-/// cure it: learned from a 300-step demo run on the default track (captured with `presrs
-/// capture --labels`), they left 21-25% of the known steps of two runs on that track with sand
-/// outside their range (77-81% of the sand steps), grass entered from sand reading 49-57k for
-/// up to nine steps against 57-66k: on the simulator sand's mark is the energy it takes out of
-/// a hop, and the next steps carry it (docs/real-robot.md, "Unknown terrain"). Hence opt-in.
+/// Per class, the band of load (summed working image) its images showed at the sample time
+/// ([`crate::stats::class_bands`]): an image whose load lies outside its best class's band is
+/// unknown, however its texture matches. It also carries the hopper's history (the steps after
+/// sand are light too): docs/decisions/unknown-load-check.md.
 fn load_ranges(work: &[Vec<u16>], labels: &[usize], rate: f64) -> Vec<[f64; 2]> {
     let n_classes = labels.iter().max().map_or(0, |m| m + 1);
     let mut per: Vec<Vec<f64>> = vec![Vec::new(); n_classes];
     for (p, &k) in work.iter().zip(labels) {
         per[k].push(p.iter().map(|&v| v as f64).sum());
     }
-    per.iter_mut()
-        .map(|v| {
-            if v.is_empty() {
-                return [f64::NEG_INFINITY, f64::INFINITY];
-            }
-            v.sort_by(f64::total_cmp);
-            widened_band(v, rate)
-        })
-        .collect()
-}
-
-/// The band of sorted, non-empty `v` that lets `rate` of it out (half each side), widened by
-/// a quarter of its width each side: the next run is not the one the band was drawn on. The
-/// load check's ranges and the energy check's residual bands.
-pub fn widened_band(v: &[f64], rate: f64) -> [f64; 2] {
-    let tail = ((rate / 2.0 * v.len() as f64).floor() as usize).min(v.len() - 1);
-    let (lo, hi) = (v[tail], v[v.len() - 1 - tail]);
-    let margin = 0.25 * (hi - lo);
-    [lo - margin, hi + margin]
+    crate::stats::class_bands(per, rate)
 }
 
 /// Moves a class's calibrated threshold `q` so that images DISTANCE_MARGIN farther from the

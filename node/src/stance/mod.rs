@@ -1,5 +1,5 @@
 //! Per-step terrain classification: micro-switch debounce, the stance, the sampled frame, the
-//! repair, the decision, the hop's energy balance ([`energy`]), and exactly one `TerrainClass`
+//! repair, the decision, the hop's energy balance ([`crate::unknown::energy`]), and exactly one `TerrainClass`
 //! per step.
 //!
 //! [`StancePipeline::on_frame`] and [`StancePipeline::tick`] are the whole decision on one
@@ -10,7 +10,6 @@
 mod adapt;
 mod debounce;
 mod decision;
-pub mod energy;
 mod sample;
 
 use protocol::clock::Clock;
@@ -23,9 +22,10 @@ use std::sync::Arc;
 use crate::classifier::{Classifier, Model};
 use crate::config::NodeConfig;
 use crate::health::LineHealth;
+use crate::unknown::energy::{Balance, EnergyObservation};
+use crate::unknown::{self, Reason, ReasonCounts};
 use adapt::{Adaptation, Adapted, Refitter, classify};
 use debounce::{Edge, Switch};
-use energy::{Balance, EnergyObservation};
 
 /// Counters per stage, for NodeStatus and the logs.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -48,6 +48,8 @@ pub struct Counters {
     pub energy_unknown: u64,
     /// Images skipped because their size is not the model's (said once per size in the log).
     pub wrong_size: u64,
+    /// Unknown steps per reason (no sample and no contact included).
+    pub unknown_by_reason: ReasonCounts,
     /// Models refitted to a foot's dead lines.
     pub refits: u64,
 }
@@ -69,6 +71,10 @@ struct Foot {
     /// Multi-frame: summed log-posteriors (one per class of the model) and frames used.
     sum_lp: Vec<f64>,
     used: u32,
+    /// Multi-frame: the verdict on the frame nearest the sample time so far (|dt - sample| in
+    /// µs): the checks were calibrated on images at the sample time, so that frame's verdict
+    /// is the step's, as in the single-frame path.
+    sample_verdict: Option<(u32, Option<Reason>)>,
     /// An image of this stance was looked at and showed no contact.
     no_contact: bool,
     /// A line of this stance's frames was filled.
@@ -114,6 +120,7 @@ impl Foot {
             best_ts: 0,
             sum_lp: vec![0.0; classes],
             used: 0,
+            sample_verdict: None,
             no_contact: false,
             repaired: false,
             health,
@@ -400,6 +407,7 @@ impl StancePipeline {
             f.best_err = None;
             f.sum_lp.fill(0.0);
             f.used = 0;
+            f.sample_verdict = None;
             f.no_contact = false;
             f.repaired = false;
             f.step = f.step.wrapping_add(1);
@@ -486,6 +494,10 @@ impl StancePipeline {
                     Some((d, repaired)) if d.contact => {
                         f.repaired |= repaired;
                         f.used += 1;
+                        let err = dt.abs_diff(self.cfg.sample_ms * 1000);
+                        if f.sample_verdict.is_none_or(|(e, _)| err < e) {
+                            f.sample_verdict = Some((err, d.reason));
+                        }
                     }
                     Some(_) => f.no_contact = true,
                     None => {}
@@ -566,6 +578,8 @@ impl StancePipeline {
         let cfg = &self.cfg;
         let f = &mut self.feet[foot as usize];
         f.decided = true;
+        // Why the step's image is unknown ground, if it is (`unknown::image_verdict`).
+        let mut image_reason = None;
         let mut tc = TerrainClass {
             step: f.step,
             terrain: messages::TERRAIN_UNKNOWN,
@@ -579,10 +593,13 @@ impl StancePipeline {
                 let m = cls.model();
                 let lp = f.sum_lp.get(..m.classes.len()).unwrap_or(&f.sum_lp);
                 let (best, pct) = decision::combine(lp);
-                tc.terrain = m.classes[best].terrain_id;
                 tc.confidence_pct = pct;
                 tc.flags |= flags::MULTI_FRAME;
-                f.balance.class = Some(best);
+                image_reason = f.sample_verdict.and_then(|(_, r)| r);
+                if image_reason.is_none() {
+                    tc.terrain = m.classes[best].terrain_id;
+                }
+                f.balance.class = image_reason.is_none().then_some(best);
             }
             Some(cls) if !cfg.multi_frame && f.best_err.is_some() => {
                 let m = cls.model();
@@ -598,9 +615,7 @@ impl StancePipeline {
                         f.repaired = repaired;
                         tc.terrain = d.terrain_id;
                         tc.confidence_pct = d.confidence * 100.0;
-                        if d.class.is_none() {
-                            tc.flags |= flags::LOW_CONFIDENCE;
-                        }
+                        image_reason = d.reason;
                         f.balance.class = d.class;
                     }
                     None => {}
@@ -616,14 +631,24 @@ impl StancePipeline {
             decision::Outcome::Classified => self.counters.classified += 1,
         }
         decision::set_flags(&mut tc, outcome, cfg.low_confidence, f.repaired);
-        if outcome == decision::Outcome::Classified
-            && f.balance.class.is_some_and(|k| f.balance.rejects(k))
-        {
-            // The texture's terrain took energy out of the last hop that it does not: other
-            // ground that looks like it (see `energy`).
+        // The step's verdict, in one place for both paths: the image's checks, then the
+        // energy check (the texture's terrain took energy out of the last hop that it does
+        // not: other ground that looks like it).
+        let reason = match outcome {
+            decision::Outcome::NoContact => Some(Reason::NoContact),
+            decision::Outcome::NoSample => Some(Reason::NoSample),
+            decision::Outcome::Classified => unknown::step_verdict(
+                image_reason,
+                f.balance.class.is_some_and(|k| f.balance.rejects(k)),
+            ),
+        };
+        if let Some(r) = reason {
             tc.terrain = messages::TERRAIN_UNKNOWN;
-            tc.flags |= flags::ENERGY;
-            self.counters.energy_unknown += 1;
+            tc.flags |= r.flag_bits();
+            self.counters.unknown_by_reason.add(r);
+            if r == Reason::Energy {
+                self.counters.energy_unknown += 1;
+            }
         }
         tc.damage_pct = f.health.damage_pct();
         // From the receipt of the sampled frame to now (the decision made, handed to the

@@ -1,30 +1,20 @@
 //! The stance's energy balance: what a stance did to the hop, read from the flights on either
-//! side of it, held against what stances on its terrain do.
+//! side of it, held against what stances on its terrain do ([`super::Reason::Energy`]).
 //!
 //! A hopper's flight is ballistic, so its length says how fast the foot left the ground; the
 //! flight before a stance says how fast it came down. On one terrain (and the stance law the
 //! robot runs) the flight after a stance follows from the flight before it, a return map
 //! `after = intercept + slope * before`, learned per class from the robot's own closed-loop
-//! runs on known ground. Ground that looks like a known terrain to the texture but takes more
-//! energy out of a hop (or gives more back) shows as a flight after its stance that the class's
-//! map does not predict.
-//!
-//! Why not the load of the stance image: measured on the simulator, sand's texture lies at the
-//! core of clay's, and its load at 70 ms is lower, but so is the load of every stance after sand
-//! (the hop carries sand's loss for up to nine steps), so a load check called 21-25% of known
-//! steps unknown. The flight after a stance given the flight before it carries no such history.
-//! Measured before this was written (closed-loop runs of the default track, seeds 1-3, 886
-//! stances, as the fit; two tracks with sand, seeds 4-6, as the test; the flights from the runs'
-//! candump logs): 0.7% of known stances outside their class's map and 88% of the sand stances
-//! outside clay's; the load of the stance image given the flight before it did worse than the
-//! load alone (27% of known stances outside, 24% of sand). With the node's own edges, in the demo
-//! (`presrs demo --track examples/sand-track.toml`, seeds 1-5): 91-93% of sand steps unknown,
-//! 0.9-2.3% of known steps (0.5-1.4% without the check).
+//! runs on known ground (`presrs energy`). Ground that looks like a known terrain to the
+//! texture but takes more energy out of a hop (or gives more back) shows as a flight after its
+//! stance that the class's map does not predict.
 //!
 //! The verdict on a stance comes at the next touchdown, when its flight after has ended. The
 //! node uses it for the stance after: a stance the texture gives the class whose last stance
 //! took energy its map does not allow is unknown (TerrainClass flag ENERGY). On new ground the
 //! first stance is the texture's; the robot's controller confirms unknown on the second.
+//!
+//! Why this and not the image's load: docs/decisions/unknown-energy-check.md.
 
 use serde::{Deserialize, Serialize};
 
@@ -140,7 +130,7 @@ pub fn fit(stances: &[(usize, f64, f64)], n_classes: usize, rate: f64) -> Vec<Op
             Some(ReturnMap {
                 intercept_s: intercept,
                 slope,
-                residual_s: crate::classifier::train::widened_band(&r, rate),
+                residual_s: crate::stats::widened_band(&r, rate),
                 stances: n,
             })
         })
@@ -149,7 +139,7 @@ pub fn fit(stances: &[(usize, f64, f64)], n_classes: usize, rate: f64) -> Vec<Op
 
 /// One foot's energy balance as the stances go by (no allocation: runs per step).
 #[derive(Clone, Copy, Debug, Default)]
-pub(super) struct Balance {
+pub(crate) struct Balance {
     /// The last liftoff, foot clock, and when it was received.
     liftoff_us: Option<u32>,
     liftoff_rx_us: u64,

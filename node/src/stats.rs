@@ -1,0 +1,81 @@
+//! Order statistics shared by training and the unknown-ground checks: a leaf module (it
+//! imports nothing of the crate), so that neither has to import the other for them.
+
+/// The `q` quantile of `v` (sorted in place), by the nearest rank at or above: with `n` values,
+/// at most `floor((1 - q) n)` lie above it. NaN when empty.
+pub fn upper_quantile(v: &mut [f64], q: f64) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    let i = ((q * v.len() as f64).ceil() as usize).clamp(1, v.len()) - 1;
+    v[i]
+}
+
+/// The median of `v` (sorted in place); NaN when empty.
+pub fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// The band of sorted, non-empty `v` that lets `rate` of it out (half each side), widened by
+/// a quarter of its width each side: the next run is not the one the band was drawn on.
+pub fn widened_band(v: &[f64], rate: f64) -> [f64; 2] {
+    let tail = ((rate / 2.0 * v.len() as f64).floor() as usize).min(v.len() - 1);
+    let (lo, hi) = (v[tail], v[v.len() - 1 - tail]);
+    let margin = 0.25 * (hi - lo);
+    [lo - margin, hi + margin]
+}
+
+/// Per class, [`widened_band`] of its values (non-finite ones left out), its lower end at 0 at
+/// the least (loads and roughness are never negative); a class without values accepts all.
+pub fn class_bands(per_class: Vec<Vec<f64>>, rate: f64) -> Vec<[f64; 2]> {
+    per_class
+        .into_iter()
+        .map(|mut v| {
+            v.retain(|x| x.is_finite());
+            if v.is_empty() {
+                return [f64::NEG_INFINITY, f64::INFINITY];
+            }
+            v.sort_by(f64::total_cmp);
+            let [lo, hi] = widened_band(&v, rate);
+            [lo.max(0.0), hi]
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quantiles_and_bands() {
+        let mut v: Vec<f64> = (1..=100).map(f64::from).collect();
+        assert_eq!(upper_quantile(&mut v, 0.98), 98.0);
+        assert_eq!(median(&mut [3.0, 1.0, 2.0, 4.0]), 2.5);
+        assert!(median(&mut []).is_nan());
+        // A band of a non-negative quantity never starts below zero (it printed
+        // `-0.953-11.849` for a roughness before).
+        let b = class_bands(vec![vec![0.1, 0.2, 10.0], vec![], vec![f64::NAN]], 0.0);
+        assert_eq!(b[0][0], 0.0);
+        assert!(b[0][1] > 10.0);
+        assert_eq!(b[1], [f64::NEG_INFINITY, f64::INFINITY]);
+        assert_eq!(b[2], [f64::NEG_INFINITY, f64::INFINITY]);
+    }
+
+    #[test]
+    fn bands_let_the_rate_out_widened() {
+        let r = class_bands(vec![(0..100).map(|i| i as f64).collect()], 0.02);
+        // 1 of 100 out each side: 1..=98, widened by 97 / 4, and not below zero.
+        assert_eq!(r[0], [0.0, 98.0 + 24.25]);
+        assert_eq!(widened_band(&[10.0, 20.0], 0.0), [7.5, 22.5]);
+    }
+}
