@@ -87,6 +87,9 @@ pub struct OpenSetRow {
     /// (images of unknown gait are not counted); in gait order. In [`OpenSetMeans`], summed
     /// over the rows.
     pub known_by_gait: Vec<node::gait::GaitCount>,
+    /// The unknown-ground checks the model was trained with (`train --unknown-checks`' list:
+    /// what `train` chose on the known classes, or the options given).
+    pub checks: String,
 }
 
 /// The per-gait counts of several rows, summed gait by gait.
@@ -134,6 +137,7 @@ impl OpenSetMeans {
                 n_held_out: rows.iter().map(|r| r.n_held_out).sum(),
                 n_known: rows.iter().map(|r| r.n_known).sum(),
                 known_by_gait: pool_gait_counts(rows.iter().map(|r| &r.known_by_gait)),
+                checks: String::new(),
             },
             auroc_range: (lo, hi),
         }
@@ -319,6 +323,7 @@ pub(crate) fn mean_row(unknown_known: f64, known_accuracy: f64) -> OpenSetRow {
         n_held_out: 10,
         n_known: 30,
         known_by_gait: vec![],
+        checks: String::new(),
     }
 }
 
@@ -350,6 +355,7 @@ pub fn leave_one_class_out(src: &OpenSetSource) -> Result<Vec<OpenSetRow>, LabEr
         });
         let trained =
             known.train_calibrated(&src.opts, cal.as_ref().map(|(c, n)| (c, n.as_slice())))?;
+        let checks = trained.choice.candidate.to_string();
         let (model, split) = (trained.model, trained.split);
         let calibration_unknown = model
             .novelty
@@ -410,6 +416,7 @@ pub fn leave_one_class_out(src: &OpenSetSource) -> Result<Vec<OpenSetRow>, LabEr
             n_held_out: scored.len() - n_known,
             n_known,
             known_by_gait,
+            checks,
         });
     }
     Ok(rows)
@@ -474,20 +481,9 @@ impl Judge {
 
 /// P(a novel image scores above a known one), ties counting half (the Mann-Whitney statistic).
 fn auroc(scored: &[Scored], f: impl Fn(&Scored) -> f64) -> f64 {
-    let mut novel: Vec<f64> = scored.iter().filter(|s| s.novel).map(&f).collect();
+    let novel: Vec<f64> = scored.iter().filter(|s| s.novel).map(&f).collect();
     let known: Vec<f64> = scored.iter().filter(|s| !s.novel).map(&f).collect();
-    if novel.is_empty() || known.is_empty() {
-        return f64::NAN;
-    }
-    novel.sort_by(f64::total_cmp);
-    // For each known score, the novel ones above it and tied with it, by binary search.
-    let mut wins = 0.0;
-    for &k in &known {
-        let below = novel.partition_point(|&v| v < k);
-        let not_above = novel.partition_point(|&v| v <= k);
-        wins += (novel.len() - not_above) as f64 + 0.5 * (not_above - below) as f64;
-    }
-    wins / (novel.len() * known.len()) as f64
+    node::stats::auroc(&known, &novel)
 }
 
 #[cfg(test)]

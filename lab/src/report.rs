@@ -1265,7 +1265,7 @@ fn open_set(ctx: &Report) -> Result<String, ReportError> {
     );
     let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|---|");
     let mut detail = String::from(
-        "\nPer left-out class:\n\n| source | left out | AUROC: ours | density | nearest neighbour | left-out unknown | fresh known unknown (another terrain) | known right (on / off) |\n|---|---|---|---|---|---|---|---|\n",
+        "\nPer left-out class (*checks*: what `train` chose on the other classes, as its `--unknown-checks` list):\n\n| source | left out | checks | AUROC: ours | density | nearest neighbour | left-out unknown | fresh known unknown (another terrain) | known right (on / off) |\n|---|---|---|---|---|---|---|---|---|\n",
     );
     for (src, spread) in sources.iter().zip(&mut spreads) {
         let rows = leave_one_class_out(src)?;
@@ -1296,9 +1296,10 @@ fn open_set(ctx: &Report) -> Result<String, ReportError> {
         for x in &rows {
             let _ = writeln!(
                 detail,
-                "| {} | {} | {:.3} | {:.3} | {:.3} | {} | {} ({}) | {} / {} |",
+                "| {} | {} | `{}` | {:.3} | {:.3} | {:.3} | {} | {} ({}) | {} / {} |",
                 src.name,
                 x.held_out,
+                x.checks,
                 x.auroc,
                 x.density_auroc,
                 x.nn_auroc,

@@ -2,7 +2,7 @@
 //! and `node` crates, which do not depend on each other) or from a dataset directory.
 
 use node::classifier::dataset::Dataset;
-use node::classifier::train::{Labelled, Split, TrainOptions, train};
+use node::classifier::train::{CalibrateError, Labelled, Split, TrainOptions, train};
 use node::classifier::{ClassInfo, PressureImage};
 use protocol::terrain::{Terrain, TerrainCatalog};
 use sim::dataset::Sample;
@@ -70,6 +70,8 @@ pub struct Trained {
     pub train_images: usize,
     /// Calibration images not used: beyond `MAX_CALIBRATION_PER_CLASS` of a terrain.
     pub unused_calibration: usize,
+    /// How the unknown-ground checks were chosen, and the table.
+    pub choice: node::training::choice::Choice,
 }
 
 impl Trained {
@@ -81,6 +83,9 @@ impl Trained {
         let (model, split) = (&self.model, &self.split);
         let mut o = String::new();
         // Writing to a String cannot fail.
+        if unknown_rate > 0.0 {
+            let _ = write!(o, "{}", self.choice);
+        }
         if self.unused_calibration > 0 {
             let _ = writeln!(
                 o,
@@ -199,6 +204,9 @@ pub enum TrainCalibratedError {
     /// Calibrating on the other run.
     #[error(transparent)]
     Calibrate(#[from] node::classifier::train::CalibrateError),
+    /// Choosing the unknown-ground checks.
+    #[error(transparent)]
+    Choice(#[from] node::training::choice::ChoiceError),
 }
 
 /// What each run of a set is used for, per class: see [`TrainingSet::split_runs`].
@@ -450,6 +458,34 @@ impl TrainingSet {
             }
             None => (self, None),
         };
+        // Which unknown-ground checks this lab's ground needs, measured on its runs.
+        let cal_labelled: Vec<Labelled<'_>> = match calibration {
+            Some((cal, names)) => cal
+                .images
+                .iter()
+                .zip(&cal.labels)
+                .map(|(image, &l)| {
+                    let name = &cal.classes[l].name;
+                    let class = train_set
+                        .classes
+                        .iter()
+                        .position(|c| &c.name == name)
+                        .ok_or_else(|| CalibrateError::UnknownClass {
+                            run: names.join(", "),
+                            class: name.clone(),
+                        })?;
+                    Ok(Labelled { image, class })
+                })
+                .collect::<Result<_, CalibrateError>>()?,
+            None => Vec::new(),
+        };
+        let choice = node::training::choice::choose(
+            &train_set.labelled(),
+            &cal_labelled,
+            &train_set.classes,
+            opts,
+        )?;
+        let opts = &opts.with_candidate(&choice.candidate);
         let (mut model, split) = train(&train_set.labelled(), &train_set.classes, opts)?;
         let mut unused_calibration = 0;
         if let Some((cal, names)) = calibration {
@@ -465,9 +501,9 @@ impl TrainingSet {
                 })
                 .sum();
         }
-        // The texture ranges over the calibration run too: the next run's spread, not only the
-        // training run's.
-        if opts.check_texture
+        // The load and texture bands over the calibration run too: the next run's spread, not
+        // only the training run's.
+        if (opts.check_texture || opts.check_load)
             && let Some((cal, _)) = calibration
         {
             let index = |set: &TrainingSet, l: usize| {
@@ -483,7 +519,12 @@ impl TrainingSet {
                         .filter_map(move |(img, &l)| index(set, l).map(|k| (img, k)))
                 })
                 .collect();
-            node::classifier::train::add_texture_check(&mut model, images);
+            if opts.check_texture {
+                node::classifier::train::add_texture_check(&mut model, images.iter().copied());
+            }
+            if opts.check_load {
+                node::classifier::train::add_load_check_on(&mut model, images);
+            }
         }
         // The gaits the model has seen: its stored samples' and its calibration run's.
         let mut gaits: Vec<u8> = split
@@ -500,11 +541,13 @@ impl TrainingSet {
         gaits.sort_unstable();
         gaits.dedup();
         model.gaits = (!gaits.is_empty()).then_some(gaits);
+        model.unknown_choice = (opts.unknown_rate > 0.0).then(|| choice.record());
         Ok(Trained {
             model,
             split,
             train_images: train_set.images.len(),
             unused_calibration,
+            choice,
         })
     }
 

@@ -44,6 +44,7 @@ pub mod replay;
 pub mod service;
 pub mod stance;
 pub mod stats;
+pub mod training;
 pub mod unknown;
 
 pub use config::{NodeConfig, RefitMode, RepairMode};

@@ -52,6 +52,25 @@ pub fn class_bands(per_class: Vec<Vec<f64>>, rate: f64) -> Vec<[f64; 2]> {
         .collect()
 }
 
+/// The area under the ROC curve of a score that should be larger for `positive` than for
+/// `negative` values: the share of (negative, positive) pairs it orders right, ties half. NaN
+/// when either side is empty.
+pub fn auroc(negative: &[f64], positive: &[f64]) -> f64 {
+    if negative.is_empty() || positive.is_empty() {
+        return f64::NAN;
+    }
+    let mut pos = positive.to_vec();
+    pos.sort_by(f64::total_cmp);
+    // For each negative, the positives above it and tied with it, by binary search.
+    let mut wins = 0.0;
+    for &k in negative {
+        let below = pos.partition_point(|&v| v < k);
+        let not_above = pos.partition_point(|&v| v <= k);
+        wins += (pos.len() - not_above) as f64 + 0.5 * (not_above - below) as f64;
+    }
+    wins / (pos.len() * negative.len()) as f64
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -77,5 +96,13 @@ mod tests {
         // 1 of 100 out each side: 1..=98, widened by 97 / 4, and not below zero.
         assert_eq!(r[0], [0.0, 98.0 + 24.25]);
         assert_eq!(widened_band(&[10.0, 20.0], 0.0), [7.5, 22.5]);
+    }
+
+    #[test]
+    fn auroc_counts_pairs_and_ties() {
+        // Pairs (negative, positive): (1,3) (1,2) (2,3) win, (2,2) ties: 3.5 of 4.
+        assert_eq!(auroc(&[1.0, 2.0], &[3.0, 2.0]), 0.875);
+        assert_eq!(auroc(&[3.0], &[1.0]), 0.0);
+        assert!(auroc(&[], &[1.0]).is_nan());
     }
 }

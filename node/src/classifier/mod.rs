@@ -11,6 +11,7 @@ pub mod features;
 pub mod image;
 mod kernels;
 pub mod model;
+pub mod options;
 pub mod pwe;
 pub mod repair;
 pub mod texture;

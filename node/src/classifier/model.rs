@@ -189,6 +189,10 @@ pub struct Model {
     /// files and where no image's gait was known.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gaits: Option<Vec<u8>>,
+    /// How its unknown-ground checks were chosen, with the table measured at training
+    /// (`crate::training::choice`). Absent in older model files and where nothing was chosen.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unknown_choice: Option<crate::unknown::ChoiceRecord>,
 }
 
 /// The working images of the stored samples, in the order of `Model::samples`: the training

@@ -19,120 +19,7 @@ use crate::unknown::novelty::{
     NoveltyScore, SAME_RUN_MARGIN, SHRINK_IMAGES,
 };
 
-/// How to train: the paper's split and the preprocessing. With the `clap` feature these are
-/// also `presrs train`'s options (the field's doc is its help).
-#[derive(Clone, Debug)]
-#[cfg_attr(feature = "clap", derive(clap::Args))]
-pub struct TrainOptions {
-    /// Images drawn per class (section 7.2: 20).
-    #[cfg_attr(feature = "clap", arg(long, default_value_t = 20))]
-    pub per_class: usize,
-    /// Of those, images to train on; the rest validate the kernel width (13 of 20).
-    #[cfg_attr(feature = "clap", arg(long, default_value_t = 13))]
-    pub train: usize,
-    /// Rows/columns removed before the features: top,bottom,left,right (the paper: 2,2,2,2 on
-    /// the static platform; 0,3,6,0 on the foot).
-    #[cfg_attr(feature = "clap", arg(long, default_value = "0,0,0,0"))]
-    pub crop: Crop,
-    /// Keep every k-th row and column after the crop (1 = full resolution, at most 8).
-    #[cfg_attr(feature = "clap", arg(long, default_value_t = 1, value_parser = parse_downsample))]
-    pub downsample: usize,
-    /// Scale each image to the training set's mean total intensity (the paper's intensity scaling).
-    #[cfg_attr(feature = "clap", arg(long))]
-    pub normalize_load: bool,
-    /// PCA dimensions; default: the paper's 52, or as many as the samples support.
-    #[cfg_attr(feature = "clap", arg(long = "dims", value_name = "N"))]
-    pub h: Option<usize>,
-    /// Seed of the random split.
-    #[cfg_attr(feature = "clap", arg(long, default_value_t = 1))]
-    pub seed: u64,
-    /// The share of known-terrain images the model may call unknown (0..=0.5): the novelty
-    /// threshold is set so that this share of held-out known images scores above it. 0 keeps
-    /// the paper's classifier without the novelty score, which rejects almost nothing.
-    #[cfg_attr(
-        feature = "clap",
-        arg(long, default_value_t = DEFAULT_UNKNOWN_RATE, value_parser = parse_rate)
-    )]
-    pub unknown_rate: f64,
-    /// Also call unknown an image whose load (summed working image, before normalisation) lies
-    /// outside its class's training range: catches ground whose texture matches a known terrain
-    /// but that yields differently (on the simulator: sand that reads as clay), at the price of
-    /// false unknowns when the robot's stances differ from the training stances (gait
-    /// transitions).
-    #[cfg_attr(feature = "clap", arg(long))]
-    pub check_load: bool,
-    /// Also call unknown an image whose roughness (how bumpy the contact is) lies outside its
-    /// class's range over the training and calibration images: catches ground smoother or
-    /// rougher than the terrain its shape resembles (on the simulator: wood among carpet,
-    /// clay and grass; a grit among its neighbours). Found nothing and cost nothing on real
-    /// plantar-pressure maps (docs/real-robot.md, "The texture check").
-    #[cfg_attr(feature = "clap", arg(long))]
-    pub check_texture: bool,
-}
-
-/// `--downsample`: 1..=MAX_DOWNSAMPLE, refused as the command line is read (`train` refuses it
-/// too, for callers that build the options themselves).
-#[cfg(feature = "clap")]
-fn parse_downsample(s: &str) -> Result<usize, String> {
-    match s.parse::<usize>() {
-        Ok(k) if (1..=MAX_DOWNSAMPLE).contains(&k) => Ok(k),
-        _ => Err(format!(
-            "`{s}` is not a factor in 1..={MAX_DOWNSAMPLE} (1: full resolution)"
-        )),
-    }
-}
-
-/// `--unknown-rate`: a share in 0..=MAX_UNKNOWN_RATE (as `parse_downsample`).
-#[cfg(feature = "clap")]
-fn parse_rate(s: &str) -> Result<f64, String> {
-    match s.parse::<f64>() {
-        Ok(r) if (0.0..=MAX_UNKNOWN_RATE).contains(&r) => Ok(r),
-        _ => Err(format!(
-            "`{s}` is not a share in 0..={MAX_UNKNOWN_RATE} (0.02 is 2%)"
-        )),
-    }
-}
-
-/// `train --unknown-rate`'s default: 2% of known-terrain images may be called unknown.
-pub const DEFAULT_UNKNOWN_RATE: f64 = 0.02;
-
-impl Default for TrainOptions {
-    fn default() -> Self {
-        Self {
-            per_class: 20,
-            train: 13,
-            crop: Crop::default(),
-            downsample: 1,
-            normalize_load: false,
-            h: None,
-            seed: 1,
-            unknown_rate: DEFAULT_UNKNOWN_RATE,
-            check_load: false,
-            check_texture: false,
-        }
-    }
-}
-
-impl TrainOptions {
-    /// The options that no data can make work: a downsampling factor, an unknown rate or a
-    /// split out of range. [`train`] checks them too; a caller that trains later (an
-    /// experiment's last section) checks them before it starts.
-    pub fn check(&self) -> Result<(), TrainError> {
-        if !(1..=MAX_DOWNSAMPLE).contains(&self.downsample) {
-            return Err(TrainError::Downsample(self.downsample));
-        }
-        if !(0.0..=MAX_UNKNOWN_RATE).contains(&self.unknown_rate) {
-            return Err(TrainError::UnknownRate(self.unknown_rate));
-        }
-        if self.train == 0 || self.train >= self.per_class {
-            return Err(TrainError::BadSplit {
-                train: self.train,
-                per_class: self.per_class,
-            });
-        }
-        Ok(())
-    }
-}
+pub use super::options::{DEFAULT_UNKNOWN_RATE, TrainOptions};
 
 /// Why a training request cannot be met.
 #[derive(Debug, thiserror::Error, PartialEq)]
@@ -211,7 +98,11 @@ pub struct Split {
 }
 
 /// Crop, then keep every `downsample`-th row and column: the working image.
-fn preprocess(img: &PressureImage, crop: &Crop, downsample: usize) -> Option<PressureImage> {
+pub(crate) fn preprocess(
+    img: &PressureImage,
+    crop: &Crop,
+    downsample: usize,
+) -> Option<PressureImage> {
     let c = img.crop(crop)?;
     Some(if downsample > 1 {
         c.downsample(downsample)
@@ -226,10 +117,40 @@ pub fn train(
     classes: &[ClassInfo],
     o: &TrainOptions,
 ) -> Result<(Model, Split), TrainError> {
+    let (m, _, split) = train_variants(data, classes, o, false)?;
+    Ok((m, split))
+}
+
+/// [`train`], and the same model at the most PCA dimensions (`Dims::Max`: `o` with `--dims
+/// 52`), from one PCA: what `crate::training::choice` compares, at the cost of one fit. The
+/// second is `None` where `o` fixes the dimensions.
+pub fn train_with_max_dims(
+    data: &[Labelled<'_>],
+    classes: &[ClassInfo],
+    o: &TrainOptions,
+) -> Result<(Model, Option<Model>, Split), TrainError> {
+    train_variants(data, classes, o, true)
+}
+
+fn train_variants(
+    data: &[Labelled<'_>],
+    classes: &[ClassInfo],
+    o: &TrainOptions,
+    with_max: bool,
+) -> Result<(Model, Option<Model>, Split), TrainError> {
     if classes.len() < 2 || classes.len() > MAX_CLASSES {
         return Err(TrainError::Classes(classes.len()));
     }
     o.check()?;
+    // An expert's `--unknown-checks` list sets its parts (the flags' pins stay on).
+    let with_list;
+    let o = match &o.unknown_checks {
+        super::options::UnknownChecks::Fixed(c) => {
+            with_list = o.with_candidate(c);
+            &with_list
+        }
+        super::options::UnknownChecks::Auto => o,
+    };
     let (rows, cols, bits) = (data[0].image.rows, data[0].image.cols, data[0].image.bits);
     for d in data {
         if (d.image.rows, d.image.cols, d.image.bits) != (rows, cols, bits) {
@@ -319,8 +240,33 @@ pub fn train(
         novelty: None,
         energy: None,
         gaits: None,
+        unknown_choice: None,
     };
-    fitted?.install(&mut model);
+    let (fitted, fitted_max) = fitted?;
+    let max_model = (with_max && o.h.is_none()).then(|| {
+        let mut m = model.clone();
+        fitted_max.install(&mut m);
+        m
+    });
+    fitted.install(&mut model);
+    let model = finish(model, data, classes, o, &split, &prep)?;
+    let max_model = match max_model {
+        Some(m) => Some(finish(m, data, classes, o, &split, &prep)?),
+        None => None,
+    };
+    Ok((model, max_model, split))
+}
+
+/// What [`train`] adds to a fitted model: the checks `o` asks for and the novelty's
+/// calibration on the training run's unused images (`split.test`).
+fn finish(
+    mut model: Model,
+    data: &[Labelled<'_>],
+    classes: &[ClassInfo],
+    o: &TrainOptions,
+    split: &Split,
+    prep: &dyn Fn(usize) -> Result<PressureImage, TrainError>,
+) -> Result<Model, TrainError> {
     if o.check_load {
         add_load_check(&mut model);
     }
@@ -356,9 +302,10 @@ pub fn train(
             Vec::new(),
             SAME_RUN_MARGIN,
             0,
+            o.score(),
         );
     }
-    Ok((model, split))
+    Ok(model)
 }
 
 /// Most calibration images per class kept in a model file (each is a working image: 41x38
@@ -503,6 +450,10 @@ pub fn calibrate_on_runs(
         classes.extend(nv.calibration.classes.iter().copied());
     }
     let n = pixels.len();
+    let score = model
+        .novelty
+        .as_ref()
+        .map_or(NoveltyScore::KnnResidual, |nv| nv.score);
     set_novelty(
         model,
         pixels,
@@ -511,6 +462,7 @@ pub fn calibrate_on_runs(
         runs.to_vec(),
         1.0,
         held_out,
+        score,
     );
     match &model.novelty {
         Some(nv) => Ok(nv.calibration.called_unknown),
@@ -518,10 +470,30 @@ pub fn calibrate_on_runs(
     }
 }
 
-/// Fits the novelty score of `model` (class spreads from its stored samples) and calibrates its
-/// thresholds on the working images `pixels` of classes `classes` (empty with `LeaveOneOut`: the
-/// stored images, each left out of its own neighbours). Images without contact are left out;
-/// with none left, the model keeps no novelty score (the density rule decides).
+/// Calibrates `model`'s novelty again, on the images it was calibrated on, for another
+/// `score` (nothing without a novelty score).
+pub fn rescore(model: &mut Model, score: NoveltyScore) {
+    if let Some(nv) = model.novelty.clone() {
+        let c = nv.calibration;
+        set_novelty(
+            model,
+            c.pixels,
+            c.classes,
+            c.source,
+            c.runs,
+            c.margin,
+            c.held_out_images,
+            score,
+        );
+    }
+}
+
+/// Fits the novelty `score` of `model` (class spreads from its stored samples) and calibrates
+/// its thresholds on the working images `pixels` of classes `classes` (empty with
+/// `LeaveOneOut`: the stored images, each left out of its own neighbours). Images without
+/// contact are left out; with none left, the model keeps no novelty score (the density rule
+/// decides).
+#[allow(clippy::too_many_arguments)]
 fn set_novelty(
     model: &mut Model,
     pixels: Vec<Vec<u16>>,
@@ -530,13 +502,14 @@ fn set_novelty(
     runs: Vec<String>,
     margin: f64,
     held_out: usize,
+    score: NoveltyScore,
 ) {
     let n_classes = model.classes.len();
     let k = NOVELTY_K;
     let spread = class_spreads(model, k);
     let rate = model.unknown_rate.unwrap_or(0.0);
     let provisional = Novelty {
-        score: NoveltyScore::KnnResidual,
+        score,
         k,
         class_spread: spread,
         residual_scale: vec![1.0; n_classes],
@@ -824,7 +797,16 @@ pub fn refit(model: &Model, dead_rows: &[bool], dead_cols: &[bool]) -> Result<Mo
     )
     .map_err(|_| RefitError::Pca)?;
     let mut m = model.clone();
-    fitted.install(&mut m);
+    // At the dimensions the model was chosen with.
+    let max_dims = model
+        .unknown_choice
+        .as_ref()
+        .and_then(|c| c.chosen.parse::<super::options::UnknownChecks>().ok())
+        .is_some_and(|c| {
+            matches!(c, super::options::UnknownChecks::Fixed(c) if c.dims == super::options::Dims::Max)
+        });
+    let (accuracy, most) = fitted;
+    if max_dims { most } else { accuracy }.install(&mut m);
     // The damaged images carry less load: the ranges follow them.
     // The texture ranges were drawn on a whole sensor: filled lines are smoother and dead ones
     // edged, and the stored images alone are too few to draw them again. A refitted model
@@ -857,6 +839,7 @@ pub fn refit(model: &Model, dead_rows: &[bool], dead_cols: &[bool]) -> Result<Mo
             c.runs,
             c.margin,
             c.held_out_images,
+            nv.score,
         );
         if let Some(n) = m.novelty.as_mut() {
             n.calibration.pixels = c.pixels;
@@ -910,7 +893,8 @@ impl Fitted {
 }
 
 /// Features, PCA, and the choice of h and kernel width on V, for working images `work` (T then
-/// V; the first `n_t` are T) with class `labels`.
+/// V; the first `n_t` are T) with class `labels`; second, the model at the most dimensions
+/// (`Dims::Max`, with its own best kernel width), from the same SVD and the same search.
 fn fit(
     work: &[Vec<u16>],
     labels: &[usize],
@@ -918,7 +902,7 @@ fn fit(
     n_classes: usize,
     normalize: bool,
     dims: Option<usize>,
-) -> Result<Fitted, TrainError> {
+) -> Result<(Fitted, Fitted), TrainError> {
     let n_px = work[0].len();
     let total = |p: &[u16]| p.iter().map(|&v| v as f64).sum::<f64>();
     let normalize_load =
@@ -987,6 +971,8 @@ fn fit(
         }
     };
     let mut best = (f64::NEG_INFINITY, h_max, 1.0f64);
+    // The best kernel width at h_max alone: the `Dims::Max` model, from the same SVD.
+    let mut best_max = (f64::NEG_INFINITY, h_max, 1.0f64);
     for &h in &candidates {
         let t_proj: Vec<f32> = (0..n_t)
             .flat_map(|r| proj[r * h_max..r * h_max + h].iter().copied())
@@ -1007,10 +993,12 @@ fn fit(
             if score >= best.0 {
                 best = (score, h, sigma);
             }
+            if h == h_max && score >= best_max.0 {
+                best_max = (score, h, sigma);
+            }
         }
     }
-    let (_, h, sigma) = best;
-    Ok(Fitted {
+    let fitted = |(_, h, sigma): (f64, usize, f64)| Fitted {
         normalize_load,
         n_fft: fft_len(n_px),
         h,
@@ -1021,7 +1009,8 @@ fn fit(
             .flat_map(|r| proj[r * h_max..r * h_max + h].iter().copied())
             .collect(),
         kernel_width: sigma,
-    })
+    };
+    Ok((fitted(best), fitted(best_max)))
 }
 
 /// The Parzen decision for one projected vector `q` against stored samples `t` (equal class
@@ -1063,9 +1052,16 @@ fn parzen(
     (best, ld[truth] - ld[best] - z.ln())
 }
 
-/// Squared Euclidean distance of two projected samples.
+/// Squared Euclidean distance of two projected samples. (`d * d`, not `powi(2)`: this build
+/// called libgcc's `__powidf2` for it, half of `train`'s time; the same value.)
 fn sq_dist(a: &[f32], b: &[f32]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| ((x - y) as f64).powi(2)).sum()
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| {
+            let d = (x - y) as f64;
+            d * d
+        })
+        .sum()
 }
 
 /// Median over stored samples of the distance to the nearest other sample.
@@ -1160,6 +1156,26 @@ pub fn add_texture_check<'a>(
         }
     }
     m.texture_ranges = Some(crate::stats::class_bands(
+        per,
+        m.unknown_rate.unwrap_or(0.0),
+    ));
+}
+
+/// Adds the load check to `m` with bands drawn over `images` (each with its class index),
+/// through the model's crop and downsampling, calibrated with its `unknown_rate`: pass the
+/// training run's and the calibration run's images, as for [`add_texture_check`], so that the
+/// bands hold the next run's spread, not only the stored samples'.
+pub fn add_load_check_on<'a>(
+    m: &mut Model,
+    images: impl IntoIterator<Item = (&'a PressureImage, usize)>,
+) {
+    let mut per: Vec<Vec<f64>> = vec![Vec::new(); m.classes.len()];
+    for (img, k) in images {
+        if let (Some(v), Some(w)) = (per.get_mut(k), preprocess(img, &m.crop, m.downsample)) {
+            v.push(w.pixels.iter().map(|&p| p as f64).sum());
+        }
+    }
+    m.load_ranges = Some(crate::stats::class_bands(
         per,
         m.unknown_rate.unwrap_or(0.0),
     ));

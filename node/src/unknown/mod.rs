@@ -14,17 +14,18 @@
 //!
 //! [`image_verdict`] judges a stance image (called by the classifier, so by the node's
 //! single-frame and multi-frame paths, `classify`, `eval`, `capture`, replays and experiments
-//! alike); [`step_verdict`] adds the energy check for a step. [`choice`] is how `train`
-//! decides which score and checks a model carries: by measurement on the lab's own runs.
+//! alike); [`step_verdict`] adds the energy check for a step. [`crate::training::choice`] is
+//! how `train` decides which score and checks a model carries: by measurement on the lab's
+//! own runs.
 //!
 //! The reason travels on the bus (TerrainClass `UnknownReason`, `FlagEnergy`), in the node's
 //! statistics and in recordings, so a monitor can count unknowns per reason.
 
-// CHOICE pub mod choice;
 pub mod energy;
 pub mod novelty;
 
 pub use protocol::messages::UnknownReason as Reason;
+use serde::{Deserialize, Serialize};
 
 /// The largest share of known-terrain images a model may be calibrated to call unknown
 /// (`train --unknown-rate`): past it the rejection would discard more than it protects.
@@ -86,6 +87,23 @@ pub fn image_verdict(
 #[inline]
 pub fn step_verdict(image: Option<Reason>, energy_rejects: bool) -> Option<Reason> {
     image.or(energy_rejects.then_some(Reason::Energy))
+}
+
+/// How a model's unknown-ground checks were chosen, as its file keeps it (`unknown_choice`;
+/// `crate::training::choice` measures it): candidates by their `--unknown-checks` list.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ChoiceRecord {
+    /// The kept candidate.
+    pub chosen: String,
+    /// `measured` (by leaving each terrain out), `fixed` (an expert's list) or why nothing
+    /// was measured.
+    pub how: String,
+    /// The known-image budget.
+    pub budget: f64,
+    /// Per candidate: list, AUROC, share of left-out images found, share of known called unknown.
+    #[serde(default)]
+    pub table: Vec<(String, f64, f64, f64)>,
 }
 
 /// Unknown steps per [`Reason`]: what a monitor counts (the node's statistics and logs).

@@ -13,7 +13,7 @@
 //!
 //! The novelty is the larger ratio ([`NoveltyScore::KnnResidual`]) or the kNN ratio alone
 //! ([`NoveltyScore::Knn`]); `train` measures which finds more left-out ground on the lab's own
-//! runs and keeps that one ([`super::choice`]).
+//! runs and keeps that one ([`crate::training::choice`]).
 //!
 //! **Calibration.** The thresholds are the `1 - rate` quantile of the novelty of known images
 //! the stored samples do not include: at best another run of the same terrains
@@ -50,7 +50,7 @@ pub const HELD_OUT_RATE_FACTOR: f64 = 1.5;
 pub const SHRINK_IMAGES: f64 = 30.0;
 
 /// Which score a model's novelty is (kept in the file, so that a later score is a new name).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub enum NoveltyScore {
     /// The larger of the kNN ratio and the residual ratio (this module's docs).
     #[serde(rename = "knn-residual")]

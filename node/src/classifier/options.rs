@@ -1,0 +1,304 @@
+//! What `train` is asked to do: the paper's split and preprocessing, and how the
+//! unknown-ground checks are chosen ([`UnknownChecks`]: measured on the lab's runs by
+//! `crate::training::choice`, or an expert's list).
+
+use super::image::Crop;
+use super::model::{MAX_DOWNSAMPLE, MAX_UNKNOWN_RATE};
+use super::train::TrainError;
+use crate::unknown::novelty::NoveltyScore;
+
+/// How to train: the paper's split and the preprocessing. With the `clap` feature these are
+/// also `presrs train`'s options (the field's doc is its help).
+#[derive(Clone, Debug)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
+pub struct TrainOptions {
+    /// Images drawn per class (section 7.2: 20).
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 20))]
+    pub per_class: usize,
+    /// Of those, images to train on; the rest validate the kernel width (13 of 20).
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 13))]
+    pub train: usize,
+    /// Rows/columns removed before the features: top,bottom,left,right (the paper: 2,2,2,2 on
+    /// the static platform; 0,3,6,0 on the foot).
+    #[cfg_attr(feature = "clap", arg(long, default_value = "0,0,0,0"))]
+    pub crop: Crop,
+    /// Keep every k-th row and column after the crop (1 = full resolution, at most 8).
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 1, value_parser = parse_downsample))]
+    pub downsample: usize,
+    /// Scale each image to the training set's mean total intensity (the paper's intensity
+    /// scaling). Without it, `train` measures whether it finds more unknown ground (see
+    /// --unknown-checks).
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub normalize_load: bool,
+    /// PCA dimensions. Without it, `train` measures which finds more unknown ground: the most
+    /// the samples support (up to the paper's 52) or the number that classifies the validation
+    /// images best (see --unknown-checks).
+    #[cfg_attr(feature = "clap", arg(long = "dims", value_name = "N"))]
+    pub h: Option<usize>,
+    /// Seed of the random split.
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 1))]
+    pub seed: u64,
+    /// The share of known-terrain images the model may call unknown (0..=0.5): the novelty
+    /// threshold is set so that this share of held-out known images scores above it. 0 keeps
+    /// the paper's classifier without the novelty score, which rejects almost nothing.
+    #[cfg_attr(
+        feature = "clap",
+        arg(long, default_value_t = DEFAULT_UNKNOWN_RATE, value_parser = parse_rate)
+    )]
+    pub unknown_rate: f64,
+    /// Always call unknown an image whose load (summed working image, before normalisation)
+    /// lies outside its terrain's band. Without it, `train` measures whether the check finds
+    /// more unknown ground (see --unknown-checks).
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub check_load: bool,
+    /// Always call unknown an image whose roughness lies outside its terrain's band. Without it,
+    /// `train` measures whether the check finds more unknown ground (see --unknown-checks).
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub check_texture: bool,
+    /// How the unknown-ground checks are chosen. `auto`: `train` leaves each terrain out in
+    /// turn, scores every combination of novelty score, load normalisation, PCA dimensions and
+    /// extra checks on the calibration run, keeps the one that finds the most left-out ground
+    /// at --unknown-rate, and prints the table it chose from. Or an expert's list, e.g.
+    /// `knn,normalize-load,texture`: a score (`knn-residual` or `knn`), then any of
+    /// `normalize-load`, `dims-max`, `load`, `texture` (what is not named is off). The flags
+    /// above pin their part in either case.
+    #[cfg_attr(
+        feature = "clap",
+        arg(long, default_value = "auto", value_name = "LIST")
+    )]
+    pub unknown_checks: UnknownChecks,
+}
+
+/// `--downsample`: 1..=MAX_DOWNSAMPLE, refused as the command line is read (`train` refuses it
+/// too, for callers that build the options themselves).
+#[cfg(feature = "clap")]
+fn parse_downsample(s: &str) -> Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(k) if (1..=MAX_DOWNSAMPLE).contains(&k) => Ok(k),
+        _ => Err(format!(
+            "`{s}` is not a factor in 1..={MAX_DOWNSAMPLE} (1: full resolution)"
+        )),
+    }
+}
+
+/// `--unknown-rate`: a share in 0..=MAX_UNKNOWN_RATE (as `parse_downsample`).
+#[cfg(feature = "clap")]
+fn parse_rate(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(r) if (0.0..=MAX_UNKNOWN_RATE).contains(&r) => Ok(r),
+        _ => Err(format!(
+            "`{s}` is not a share in 0..={MAX_UNKNOWN_RATE} (0.02 is 2%)"
+        )),
+    }
+}
+
+/// `train --unknown-rate`'s default: 2% of known-terrain images may be called unknown.
+pub const DEFAULT_UNKNOWN_RATE: f64 = 0.02;
+
+impl Default for TrainOptions {
+    fn default() -> Self {
+        Self {
+            per_class: 20,
+            train: 13,
+            crop: Crop::default(),
+            downsample: 1,
+            normalize_load: false,
+            h: None,
+            seed: 1,
+            unknown_rate: DEFAULT_UNKNOWN_RATE,
+            check_load: false,
+            check_texture: false,
+            unknown_checks: UnknownChecks::Auto,
+        }
+    }
+}
+
+impl TrainOptions {
+    /// The options that no data can make work: a downsampling factor, an unknown rate or a
+    /// split out of range. [`train`] checks them too; a caller that trains later (an
+    /// experiment's last section) checks them before it starts.
+    pub fn check(&self) -> Result<(), TrainError> {
+        if !(1..=MAX_DOWNSAMPLE).contains(&self.downsample) {
+            return Err(TrainError::Downsample(self.downsample));
+        }
+        if !(0.0..=MAX_UNKNOWN_RATE).contains(&self.unknown_rate) {
+            return Err(TrainError::UnknownRate(self.unknown_rate));
+        }
+        if self.train == 0 || self.train >= self.per_class {
+            return Err(TrainError::BadSplit {
+                train: self.train,
+                per_class: self.per_class,
+            });
+        }
+        Ok(())
+    }
+}
+
+/// PCA dimensions of a model.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Dims {
+    /// The number that classifies the validation images best (section 4.2; it varies with the
+    /// split, from 8 to 52 on the same data).
+    Accuracy,
+    /// As many as the samples support, up to the paper's 52.
+    Max,
+}
+
+/// One combination of the unknown-ground options: what `train` compares and a model keeps.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct Candidate {
+    /// The novelty score.
+    pub score: NoveltyScore,
+    /// Each image scaled to the training set's mean load before its features.
+    pub normalize_load: bool,
+    /// PCA dimensions.
+    pub dims: Dims,
+    /// The load check.
+    pub load: bool,
+    /// The texture check.
+    pub texture: bool,
+}
+
+impl Candidate {
+    /// Today's model when nothing is chosen: the combined score, no normalisation, dimensions
+    /// by accuracy, no extra check (what `train` did before it chose).
+    pub const PLAIN: Candidate = Candidate {
+        score: NoveltyScore::KnnResidual,
+        normalize_load: false,
+        dims: Dims::Accuracy,
+        load: false,
+        texture: false,
+    };
+
+    /// Extra checks it carries (0-2): fewer is preferred where the figures tie.
+    pub fn extra_checks(&self) -> usize {
+        self.load as usize + self.texture as usize
+    }
+}
+
+/// `knn,normalize-load,dims-max,texture`: the list `--unknown-checks` takes and `train` prints.
+impl std::fmt::Display for Candidate {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self.score {
+            NoveltyScore::KnnResidual => "knn-residual",
+            NoveltyScore::Knn => "knn",
+        })?;
+        for (on, name) in [
+            (self.normalize_load, "normalize-load"),
+            (self.dims == Dims::Max, "dims-max"),
+            (self.load, "load"),
+            (self.texture, "texture"),
+        ] {
+            if on {
+                write!(f, ",{name}")?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// How the unknown-ground checks are chosen (`--unknown-checks`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum UnknownChecks {
+    /// Measured on the training and calibration runs (`crate::training::choice`).
+    #[default]
+    Auto,
+    /// An expert's choice.
+    Fixed(Candidate),
+}
+
+/// An `--unknown-checks` list that names something else.
+#[derive(Debug, thiserror::Error, Clone, PartialEq, Eq)]
+#[error(
+    "`{0}` is not an --unknown-checks item: use auto, or a score (knn-residual or knn) with any \
+     of normalize-load, dims-max, load, texture, comma-separated"
+)]
+pub struct ParseUnknownChecksError(pub String);
+
+impl std::str::FromStr for UnknownChecks {
+    type Err = ParseUnknownChecksError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        if s.trim() == "auto" {
+            return Ok(UnknownChecks::Auto);
+        }
+        let mut c = Candidate::PLAIN;
+        for item in s.split(',').map(str::trim) {
+            match item {
+                "knn-residual" => c.score = NoveltyScore::KnnResidual,
+                "knn" => c.score = NoveltyScore::Knn,
+                "normalize-load" => c.normalize_load = true,
+                "dims-max" => c.dims = Dims::Max,
+                "load" => c.load = true,
+                "texture" => c.texture = true,
+                other => return Err(ParseUnknownChecksError(other.to_string())),
+            }
+        }
+        Ok(UnknownChecks::Fixed(c))
+    }
+}
+
+impl TrainOptions {
+    /// The options for one candidate: its parts, with the flags' pins on top.
+    pub fn with_candidate(&self, c: &Candidate) -> TrainOptions {
+        let mut o = self.clone();
+        o.normalize_load |= c.normalize_load;
+        o.check_load |= c.load;
+        o.check_texture |= c.texture;
+        if o.h.is_none() && c.dims == Dims::Max {
+            o.h = Some(MAX_DIMS);
+        }
+        o.unknown_checks = UnknownChecks::Fixed(*c);
+        o
+    }
+
+    /// The novelty score these options train with.
+    pub fn score(&self) -> NoveltyScore {
+        match self.unknown_checks {
+            UnknownChecks::Fixed(c) => c.score,
+            UnknownChecks::Auto => NoveltyScore::KnnResidual,
+        }
+    }
+}
+
+/// The paper's number of PCA dimensions, the most a model takes unless `--dims` says more.
+pub const MAX_DIMS: usize = 52;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn unknown_checks_parse_and_print_the_same_list() {
+        assert_eq!("auto".parse(), Ok(UnknownChecks::Auto));
+        for list in [
+            "knn-residual",
+            "knn,normalize-load,dims-max,load,texture",
+            "knn,texture",
+        ] {
+            let Ok(UnknownChecks::Fixed(c)) = list.parse::<UnknownChecks>() else {
+                panic!("{list}");
+            };
+            assert_eq!(c.to_string(), list);
+        }
+        let e = "knn,sand".parse::<UnknownChecks>().unwrap_err();
+        assert!(e.to_string().contains("`sand`"), "{e}");
+    }
+
+    #[test]
+    fn the_flags_pin_their_part_of_a_candidate() {
+        let o = TrainOptions {
+            normalize_load: true,
+            h: Some(8),
+            ..TrainOptions::default()
+        };
+        let c = Candidate {
+            dims: Dims::Max,
+            texture: true,
+            ..Candidate::PLAIN
+        };
+        let w = o.with_candidate(&c);
+        assert!(w.normalize_load && w.check_texture && !w.check_load);
+        assert_eq!(w.h, Some(8));
+        assert_eq!(w.unknown_checks, UnknownChecks::Fixed(c));
+    }
+}

@@ -1,0 +1,547 @@
+//! How `train` chooses a model's unknown-ground checks: by measurement on the lab's own runs,
+//! not by flags the lab would have to know to set.
+//!
+//! Each known terrain is left out in turn and plays the unknown ground. A model of the others
+//! is trained on the training run for every combination of the options that change the
+//! features (load normalisation, PCA dimensions) and calibrated on half of the calibration run
+//! (the next run of known ground) for each novelty score; the other half is judged as known
+//! ground, the left-out terrain's images of both runs as new ground, with and without the load
+//! and texture checks. The candidate that finds the most left-out ground (an extra check must
+//! add [`CHECK_COST`] to count) while calling at most [`BUDGET_FACTOR`] times `--unknown-rate`
+//! of the judged known images unknown is kept (ties: fewer extra checks, then the AUROC). With one run only, the training run's images
+//! the model does not store are the known ground judged, and [`Choice`] says so.
+//!
+//! The table is printed by `train` and kept in the model ([`crate::unknown::ChoiceRecord`]), so that the lab
+//! sees what its ground needed and why. Why this rule: docs/decisions/unknown-choice.md.
+
+use std::fmt;
+
+use crate::classifier::options::TrainOptions;
+use crate::classifier::options::{Candidate, Dims, UnknownChecks};
+use crate::classifier::texture::roughness;
+use crate::classifier::train::{
+    CalibrateError, Labelled, TrainError, add_load_check_on, add_texture_check, calibrate_on_runs,
+    preprocess, rescore, train_with_max_dims,
+};
+use crate::classifier::{ClassInfo, Classifier, Model, PressureImage};
+use crate::stats::auroc;
+use crate::unknown::novelty::NoveltyScore;
+use crate::unknown::{self, Bands, ChoiceRecord, Measured};
+
+/// The most of the judged known images a kept candidate may call unknown, as a multiple of
+/// `--unknown-rate`: 5% at the default 2%, the share of a fresh run's known images the
+/// project holds itself to.
+pub const BUDGET_FACTOR: f64 = 2.5;
+
+/// What an extra check (load, texture) must add to the share of left-out ground found to be
+/// kept: a band drawn on two runs costs more on the next one than on the calibration run's
+/// other half (measured: a load check within the budget there called 13% of a fresh run on
+/// another sensor unknown), so a check pays for itself or stays off.
+pub const CHECK_COST: f64 = 0.05;
+
+/// Left-out shares (less [`CHECK_COST`] per check) closer than this are a tie: fewer extra
+/// checks, then the larger AUROC, decide.
+pub const TIE: f64 = 0.01;
+
+/// What one candidate measured, over every terrain left out.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Outcome {
+    /// The candidate.
+    pub candidate: Candidate,
+    /// The novelty score's AUROC, new ground against known, mean over the left-out terrains.
+    pub auroc: f64,
+    /// The share of the left-out terrain's images called unknown, mean over the terrains.
+    pub found: f64,
+    /// Per left-out terrain (in the model's class order), its share.
+    pub found_per_class: Vec<f64>,
+    /// The share of the judged known images called unknown, pooled.
+    pub known_unknown: f64,
+}
+
+/// Which images were judged as known ground.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum JudgedOn {
+    /// Half of the calibration run (the other half calibrated).
+    CalibrationRun,
+    /// The training run's images the models do not store: the same recording, so its figure
+    /// says less of the robot's next run.
+    TrainingRun,
+}
+
+/// `train`'s choice and the table it chose from.
+#[derive(Clone, Debug)]
+pub struct Choice {
+    /// Every candidate measured, in the grid's order.
+    pub outcomes: Vec<Outcome>,
+    /// Index of the kept one in `outcomes`; `None` when nothing could be measured (see `why`).
+    pub chosen: Option<usize>,
+    /// The candidate the model is trained with.
+    pub candidate: Candidate,
+    /// The known-image budget the choice was held to.
+    pub budget: f64,
+    /// Which images were judged as known ground.
+    pub judged_on: JudgedOn,
+    /// Why no candidate was measured, when none was.
+    pub why: Option<String>,
+    /// The terrains, in `found_per_class`'s order.
+    pub classes: Vec<String>,
+}
+
+impl Choice {
+    /// The record a model keeps.
+    pub fn record(&self) -> ChoiceRecord {
+        ChoiceRecord {
+            chosen: self.candidate.to_string(),
+            how: match (&self.why, self.judged_on) {
+                (Some(w), _) => w.clone(),
+                (None, JudgedOn::CalibrationRun) => {
+                    "measured: each terrain left out, judged on half the calibration run".into()
+                }
+                (None, JudgedOn::TrainingRun) => {
+                    "measured: each terrain left out, judged on the training run's unused images"
+                        .into()
+                }
+            },
+            budget: self.budget,
+            table: self
+                .outcomes
+                .iter()
+                .map(|o| (o.candidate.to_string(), o.auroc, o.found, o.known_unknown))
+                .collect(),
+        }
+    }
+}
+
+/// The table `train` prints: each candidate's figures, the kept one marked, and how it was
+/// judged.
+impl fmt::Display for Choice {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if let Some(why) = &self.why {
+            return writeln!(f, "unknown-ground checks: {} ({why})", self.candidate);
+        }
+        writeln!(
+            f,
+            "unknown-ground checks, each of {} terrains left out in turn as new ground; known \
+             ground judged on {}:",
+            self.classes.len(),
+            match self.judged_on {
+                JudgedOn::CalibrationRun =>
+                    "half of the calibration run (the other half calibrated)",
+                JudgedOn::TrainingRun => {
+                    "the training run's unused images (one run only: the next run will scatter \
+                     more; record a second run and pass it with --calibrate, or capture two runs)"
+                }
+            }
+        )?;
+        writeln!(
+            f,
+            "  {:<50} {:>6} {:>10} {:>14}",
+            "candidate (--unknown-checks)", "AUROC", "left out", "known unknown"
+        )?;
+        for (i, o) in self.outcomes.iter().enumerate() {
+            let mark = if Some(i) == self.chosen { "*" } else { " " };
+            writeln!(
+                f,
+                "{mark} {:<50} {:>6.3} {:>9.1}% {:>13.1}%",
+                o.candidate.to_string(),
+                o.auroc,
+                100.0 * o.found,
+                100.0 * o.known_unknown
+            )?;
+        }
+        if let Some(o) = self.chosen.map(|i| &self.outcomes[i]) {
+            let per: Vec<String> = self
+                .classes
+                .iter()
+                .zip(&o.found_per_class)
+                .map(|(c, v)| format!("{c} {:.0}%", 100.0 * v))
+                .collect();
+            writeln!(
+                f,
+                "kept * ({}): the most left-out ground found (less {:.0} points per extra \
+                 check) with at most {:.1}% of known images unknown; per terrain left out: {}",
+                self.candidate,
+                100.0 * CHECK_COST,
+                100.0 * self.budget,
+                per.join(", ")
+            )?;
+        }
+        Ok(())
+    }
+}
+
+/// Why the choice could not be measured.
+#[derive(Debug, thiserror::Error)]
+pub enum ChoiceError {
+    /// Training a candidate failed.
+    #[error(transparent)]
+    Train(#[from] TrainError),
+    /// Calibrating a candidate failed.
+    #[error(transparent)]
+    Calibrate(#[from] CalibrateError),
+}
+
+/// One judged image: known ground or the left-out terrain.
+struct Judged {
+    novel: bool,
+    /// `None`: no contact (unknown under every candidate).
+    measured: Option<Measured>,
+    roughness: f64,
+}
+
+/// The grid `opts` leaves open: a part a flag pins is not searched.
+fn grid(opts: &TrainOptions) -> Vec<Candidate> {
+    let both = [false, true];
+    let pinned = |on: bool| if on { &both[1..] } else { &both[..] };
+    let dims: &[Dims] = if opts.h.is_some() {
+        &[Dims::Accuracy]
+    } else {
+        &[Dims::Accuracy, Dims::Max]
+    };
+    let mut out = Vec::new();
+    for &normalize_load in pinned(opts.normalize_load) {
+        for &d in dims {
+            for score in [NoveltyScore::KnnResidual, NoveltyScore::Knn] {
+                for &load in pinned(opts.check_load) {
+                    for &texture in pinned(opts.check_texture) {
+                        out.push(Candidate {
+                            score,
+                            normalize_load,
+                            dims: d,
+                            load,
+                            texture,
+                        });
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Chooses the unknown-ground checks for a model of `classes` trained on `training` (class
+/// indices into `classes`), with `calibration` the next run of the same terrains (empty: one
+/// run only). `opts.unknown_checks` `Fixed` is kept as given (with the flags' pins); `Auto`
+/// is measured as the module docs say.
+pub fn choose(
+    training: &[Labelled<'_>],
+    calibration: &[Labelled<'_>],
+    classes: &[ClassInfo],
+    opts: &TrainOptions,
+) -> Result<Choice, ChoiceError> {
+    let budget = (BUDGET_FACTOR * opts.unknown_rate).min(crate::unknown::MAX_UNKNOWN_RATE);
+    let judged_on = if calibration.is_empty() {
+        JudgedOn::TrainingRun
+    } else {
+        JudgedOn::CalibrationRun
+    };
+    let names: Vec<String> = classes.iter().map(|c| c.name.clone()).collect();
+    let unmeasured = |candidate: Candidate, why: &str| Choice {
+        outcomes: Vec::new(),
+        chosen: None,
+        candidate,
+        budget,
+        judged_on,
+        why: Some(why.to_string()),
+        classes: names.clone(),
+    };
+    let pins = Candidate {
+        normalize_load: opts.normalize_load,
+        load: opts.check_load,
+        texture: opts.check_texture,
+        ..Candidate::PLAIN
+    };
+    if let UnknownChecks::Fixed(c) = opts.unknown_checks {
+        return Ok(unmeasured(c, "as --unknown-checks gives it"));
+    }
+    if opts.unknown_rate <= 0.0 {
+        return Ok(unmeasured(pins, "--unknown-rate 0: no rejection"));
+    }
+    if classes.len() < 3 {
+        return Ok(unmeasured(
+            pins,
+            "two terrains: leaving one out leaves a model of one, so nothing was measured; the \
+             flags' checks as given",
+        ));
+    }
+    let grid = grid(opts);
+    let n_classes = classes.len();
+    // The folds are independent: on the machine's cores, merged in their order, so that the
+    // figures do not depend on how many cores there are.
+    let threads = std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .min(n_classes);
+    let mut tallies: Vec<Option<Result<Vec<Tally>, ChoiceError>>> = Vec::new();
+    tallies.resize_with(n_classes, || None);
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..threads)
+            .map(|t| {
+                let grid = &grid;
+                scope.spawn(move || {
+                    (t..n_classes)
+                        .step_by(threads)
+                        .map(|k| (k, fold(k, training, calibration, classes, opts, grid)))
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        for h in handles {
+            // A fold that panicked is a bug; it ends `train` as a panic would have.
+            for (k, r) in h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)) {
+                tallies[k] = Some(r);
+            }
+        }
+    });
+    // Per candidate: per left-out terrain its share found; pooled known counts; per-fold AUROC.
+    let mut found = vec![vec![f64::NAN; n_classes]; grid.len()];
+    let mut known = vec![[0usize; 2]; grid.len()];
+    let mut aurocs = vec![Vec::new(); grid.len()];
+    for (out_k, t) in tallies.into_iter().enumerate() {
+        let Some(t) = t else { continue };
+        for (ci, t) in t?.into_iter().enumerate() {
+            if let Some(f) = t.found {
+                found[ci][out_k] = f;
+            }
+            known[ci][0] += t.known[0];
+            known[ci][1] += t.known[1];
+            aurocs[ci].extend(t.auroc);
+        }
+    }
+    let mean = |v: &[f64]| {
+        let f: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
+        if f.is_empty() {
+            f64::NAN
+        } else {
+            f.iter().sum::<f64>() / f.len() as f64
+        }
+    };
+    let outcomes: Vec<Outcome> = grid
+        .iter()
+        .enumerate()
+        .map(|(i, c)| Outcome {
+            candidate: *c,
+            auroc: mean(&aurocs[i]),
+            found: mean(&found[i]),
+            found_per_class: found[i].clone(),
+            known_unknown: known[i][1] as f64 / known[i][0].max(1) as f64,
+        })
+        .collect();
+    let chosen = pick(&outcomes, budget);
+    Ok(Choice {
+        candidate: chosen.map_or(pins, |i| outcomes[i].candidate),
+        chosen,
+        outcomes,
+        budget,
+        judged_on,
+        why: None,
+        classes: names,
+    })
+}
+
+/// What one fold measured of one candidate.
+#[derive(Clone, Copy, Default)]
+struct Tally {
+    /// The share of the left-out terrain's images called unknown.
+    found: Option<f64>,
+    /// Known images judged, and of them called unknown.
+    known: [usize; 2],
+    /// The novelty's AUROC.
+    auroc: Option<f64>,
+}
+
+/// One fold: terrain `out_k` left out; per candidate of `grid`, its tally.
+fn fold(
+    out_k: usize,
+    training: &[Labelled<'_>],
+    calibration: &[Labelled<'_>],
+    classes: &[ClassInfo],
+    opts: &TrainOptions,
+    grid: &[Candidate],
+) -> Result<Vec<Tally>, ChoiceError> {
+    let n_classes = classes.len();
+    let mut tally = vec![Tally::default(); grid.len()];
+    let keep: Vec<usize> = (0..n_classes).filter(|&k| k != out_k).collect();
+    let relabel = |k: usize| keep.iter().position(|&c| c == k);
+    let fold_classes: Vec<ClassInfo> = keep.iter().map(|&k| classes[k].clone()).collect();
+    let train_k: Vec<Labelled<'_>> = training
+        .iter()
+        .filter_map(|l| {
+            relabel(l.class).map(|class| Labelled {
+                image: l.image,
+                class,
+            })
+        })
+        .collect();
+    // The calibration run's known images alternate per terrain: A calibrates, B is judged.
+    let (mut cal_a, mut cal_b) = (Vec::new(), Vec::new());
+    let mut seen = vec![0usize; n_classes];
+    for l in calibration {
+        if let Some(k) = relabel(l.class) {
+            seen[l.class] += 1;
+            let side = if seen[l.class] % 2 == 1 {
+                &mut cal_a
+            } else {
+                &mut cal_b
+            };
+            side.push((l.image, fold_classes[k].name.as_str(), k));
+        }
+    }
+    let novel: Vec<&PressureImage> = training
+        .iter()
+        .chain(calibration)
+        .filter(|l| l.class == out_k)
+        .map(|l| l.image)
+        .collect();
+    // The load and texture bands over the images the fold's model may meet as known.
+    let band_images: Vec<(&PressureImage, usize)> = train_k
+        .iter()
+        .map(|l| (l.image, l.class))
+        .chain(cal_a.iter().map(|&(img, _, k)| (img, k)))
+        .collect();
+    let mut fits: Vec<((bool, Dims), Model, Vec<&PressureImage>)> = Vec::new();
+    let mut norms: Vec<bool> = grid.iter().map(|c| c.normalize_load).collect();
+    norms.dedup();
+    let want_max = grid.iter().any(|c| c.dims == Dims::Max);
+    for normalize_load in norms {
+        let mut o = opts.clone();
+        o.normalize_load = normalize_load;
+        o.check_load = false;
+        o.check_texture = false;
+        o.unknown_checks = UnknownChecks::Fixed(Candidate::PLAIN);
+        // Both dimension choices from one PCA.
+        let (by_accuracy, most, split) = train_with_max_dims(&train_k, &fold_classes, &o)?;
+        let judged_known: Vec<&PressureImage> = if cal_a.is_empty() {
+            split.test.iter().map(|&i| train_k[i].image).collect()
+        } else {
+            cal_b.iter().map(|&(img, _, _)| img).collect()
+        };
+        let variants = [(Dims::Accuracy, Some(by_accuracy)), (Dims::Max, most)];
+        for (dims, m) in variants {
+            let Some(mut m) = m.filter(|_| dims == Dims::Accuracy || want_max) else {
+                continue;
+            };
+            if !cal_a.is_empty() {
+                let imgs: Vec<(&PressureImage, &str)> =
+                    cal_a.iter().map(|&(img, n, _)| (img, n)).collect();
+                calibrate_on_runs(&mut m, &imgs, &["calibration run, half".to_string()])?;
+            }
+            add_load_check_on(&mut m, band_images.iter().copied());
+            add_texture_check(&mut m, band_images.iter().copied());
+            fits.push(((normalize_load, dims), m, judged_known.clone()));
+        }
+    }
+    for (key, base, judged_known) in &fits {
+        for score in [NoveltyScore::KnnResidual, NoveltyScore::Knn] {
+            let of_this = |c: &Candidate| (c.normalize_load, c.dims) == *key && c.score == score;
+            if !grid.iter().any(of_this) {
+                continue;
+            }
+            let mut m = base.clone();
+            if score != NoveltyScore::KnnResidual {
+                rescore(&mut m, score);
+            }
+            // The bands are held here, per candidate; the classifier judges the novelty.
+            let (load_bands, texture_bands) = (m.load_ranges.take(), m.texture_ranges.take());
+            let judged = judge(m, judged_known, &novel);
+            let ratio = |j: &Judged| {
+                j.measured
+                    .map_or(f64::INFINITY, |x| x.novelty / x.threshold.abs().max(1e-12))
+            };
+            let neg: Vec<f64> = judged.iter().filter(|j| !j.novel).map(ratio).collect();
+            let pos: Vec<f64> = judged.iter().filter(|j| j.novel).map(ratio).collect();
+            let a = auroc(&neg, &pos);
+            for (ci, c) in grid.iter().enumerate().filter(|(_, c)| of_this(c)) {
+                let bands = Bands {
+                    load: load_bands.as_deref().filter(|_| c.load),
+                    texture: texture_bands.as_deref().filter(|_| c.texture),
+                };
+                let (mut n_novel, mut novel_unknown) = (0usize, 0usize);
+                for j in &judged {
+                    let is_unknown = j
+                        .measured
+                        .is_none_or(|x| unknown::image_verdict(x, bands, || j.roughness).is_some());
+                    if j.novel {
+                        n_novel += 1;
+                        novel_unknown += is_unknown as usize;
+                    } else {
+                        tally[ci].known[0] += 1;
+                        tally[ci].known[1] += is_unknown as usize;
+                    }
+                }
+                if n_novel > 0 {
+                    tally[ci].found = Some(novel_unknown as f64 / n_novel as f64);
+                }
+                if a.is_finite() {
+                    tally[ci].auroc = Some(a);
+                }
+            }
+        }
+    }
+    Ok(tally)
+}
+
+/// The kept candidate: within the budget, the most left-out ground found less [`CHECK_COST`]
+/// per extra check; ties (within [`TIE`]) go to fewer extra checks, then to the larger AUROC,
+/// then to the grid's order. With none within the budget, the one that calls the fewest known
+/// images unknown.
+fn pick(outcomes: &[Outcome], budget: f64) -> Option<usize> {
+    let finite = |v: f64| if v.is_finite() { v } else { f64::NEG_INFINITY };
+    let within: Vec<usize> = (0..outcomes.len())
+        .filter(|&i| outcomes[i].known_unknown <= budget + 1e-12)
+        .collect();
+    if within.is_empty() {
+        return (0..outcomes.len()).min_by(|&a, &b| {
+            outcomes[a]
+                .known_unknown
+                .total_cmp(&outcomes[b].known_unknown)
+        });
+    }
+    let worth = |o: &Outcome| finite(o.found) - CHECK_COST * o.candidate.extra_checks() as f64;
+    let best = within
+        .iter()
+        .map(|&i| worth(&outcomes[i]))
+        .fold(f64::NEG_INFINITY, f64::max);
+    within
+        .into_iter()
+        .filter(|&i| worth(&outcomes[i]) >= best - TIE)
+        .min_by(|&a, &b| {
+            let (x, y) = (&outcomes[a], &outcomes[b]);
+            x.candidate
+                .extra_checks()
+                .cmp(&y.candidate.extra_checks())
+                .then(finite(y.auroc).total_cmp(&finite(x.auroc)))
+                .then(a.cmp(&b))
+        })
+}
+
+/// Classifies `known` and `novel` with `model` and keeps what the verdict needs.
+fn judge(model: Model, known: &[&PressureImage], novel: &[&PressureImage]) -> Vec<Judged> {
+    let (crop, down) = (model.crop, model.downsample);
+    let mut cls = Classifier::new(model);
+    let mut out = Vec::with_capacity(known.len() + novel.len());
+    for (img, is_novel) in known
+        .iter()
+        .map(|i| (*i, false))
+        .chain(novel.iter().map(|i| (*i, true)))
+    {
+        let d = cls.classify(&img.pixels, img.rows, img.cols, false);
+        let work = preprocess(img, &crop, down);
+        let (load, rough) = work.as_ref().map_or((0.0, f64::NAN), |w| {
+            (
+                w.pixels.iter().map(|&p| p as f64).sum(),
+                roughness(&w.pixels, w.rows, w.cols),
+            )
+        });
+        out.push(Judged {
+            novel: is_novel,
+            measured: d.ok().filter(|d| d.contact).map(|d| Measured {
+                best: d.best,
+                novelty: d.novelty,
+                threshold: d.threshold,
+                load,
+            }),
+            roughness: rough,
+        });
+    }
+    out
+}
