@@ -15,8 +15,9 @@ pub struct ExperimentArgs {
     /// all, static, resolution, dynamic, gaits, damage, lifespan, adaptation or open-set.
     #[arg(value_name = "EXPERIMENT")]
     pub which: Selection,
-    /// Output directory: results.md (or WHICH.md) and figures/.
-    #[arg(long, default_value = "docs")]
+    /// Output directory: results.md (or WHICH.md) and figures/. (Not `docs` by default: run in
+    /// a checkout, that overwrote the project's own docs/results.md; pass `--out docs` to.)
+    #[arg(long, default_value = "results")]
     pub out: PathBuf,
     /// Fewer images and steps: a check that everything runs, not results to quote.
     #[arg(long)]

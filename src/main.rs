@@ -58,8 +58,9 @@ enum Cmd {
     Energy(energy_cmd::EnergyArgs),
     /// The simulated hopper and foot on a CAN interface, in real time.
     Sim(sim_cmd::SimArgs),
-    /// A candump log to an MCAP file (Foxglove, PlotJuggler, rosbag2): each message on its
-    /// own channel per foot, each pressure image a foxglove.RawImage.
+    /// A candump log to an MCAP file (Foxglove, PlotJuggler, any MCAP reader): each message on
+    /// its own JSON channel per foot, each pressure image a foxglove.RawImage. (`ros2 bag`
+    /// cannot play its JSON channels.)
     Mcap(mcap_cmd::McapArgs),
     /// A recording at a glance: a foot's pressure image beside terrain, gait and speed (PNG).
     View(mcap_cmd::ViewArgs),

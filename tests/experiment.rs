@@ -218,6 +218,20 @@ fn open_set_takes_the_models_split_and_rate_and_refuses_ones_that_cannot_work() 
         .unwrap_or_default()
         .split_once("Fresh known images called unknown, by the gait")
         .unwrap_or_default();
+    // Last, the default against one option fixed by hand, per source.
+    let (by_gait, options) = by_gait
+        .split_once("The default against one option fixed by hand")
+        .unwrap_or_default();
+    let option_rows: Vec<&str> = options
+        .lines()
+        .filter(|l| l.starts_with("| simulator"))
+        .collect();
+    assert_eq!(option_rows.len(), 3, "{options}");
+    for r in option_rows {
+        // A candidate by its `--unknown-checks` list, and nine columns.
+        assert!(r.contains(" | `knn"), "{r}");
+        assert_eq!(r.matches(" | ").count(), 8, "{r}");
+    }
     // Only the hopping stances carry more than one gait.
     let gait_rows: Vec<&str> = by_gait.lines().filter(|l| l.starts_with("| ")).collect();
     assert_eq!(gait_rows.len(), 2, "{by_gait}");

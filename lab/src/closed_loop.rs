@@ -367,6 +367,21 @@ pub fn run_recorded(
         }
         reported = sim.records().len();
     }
+    // The same lifecycle as the other runners: each part stops, the leg bridge's motors first
+    // (their stop frames go on the bus and into the log, as `presrs leg` sends them).
+    if let Some(b) = bridge.as_mut() {
+        bus.stop(3, b, &mut sent)?;
+    }
+    if let Some(c) = ctrl.as_mut() {
+        bus.stop(2, c, &mut sent)?;
+    }
+    if let Some(n) = node.as_mut() {
+        bus.stop(1, n, &mut sent)?;
+    }
+    bus.stop(0, &mut sim, &mut sent)?;
+    if let Some(e) = log_error.take() {
+        return Err(LabError::Log(e));
+    }
     let truth = sim
         .robot()
         .steps

@@ -17,6 +17,9 @@ use node::classifier::pwe::Classifier;
 use node::classifier::train::TrainOptions;
 use node::classifier::{Model, PressureImage};
 
+use node::classifier::options::{Candidate, Dims, UnknownChecks};
+use node::unknown::novelty::NoveltyScore;
+
 use crate::LabError;
 use crate::simdata::TrainingSet;
 
@@ -420,6 +423,42 @@ pub fn leave_one_class_out(src: &OpenSetSource) -> Result<Vec<OpenSetRow>, LabEr
         });
     }
     Ok(rows)
+}
+
+/// The single options the default (`train` choosing its checks) is compared with: the plain
+/// model of issue 25 and each option alone on top of it.
+pub const SINGLE_OPTIONS: [Candidate; 6] = {
+    let p = Candidate::PLAIN;
+    [
+        p,
+        Candidate {
+            score: NoveltyScore::Knn,
+            ..p
+        },
+        Candidate {
+            normalize_load: true,
+            ..p
+        },
+        Candidate {
+            dims: Dims::Max,
+            ..p
+        },
+        Candidate { load: true, ..p },
+        Candidate { texture: true, ..p },
+    ]
+};
+
+/// Leave-one-class-out on `src` with each of [`SINGLE_OPTIONS`] fixed instead of chosen (the
+/// source's own pins stay on): what a user who picks one flag gets.
+pub fn single_options(src: &OpenSetSource) -> Result<Vec<(Candidate, Vec<OpenSetRow>)>, LabError> {
+    SINGLE_OPTIONS
+        .iter()
+        .map(|c| {
+            let mut s = src.clone();
+            s.opts.unknown_checks = UnknownChecks::Fixed(*c);
+            Ok((*c, leave_one_class_out(&s)?))
+        })
+        .collect()
 }
 
 /// One image's scores, each larger = more novel.

@@ -17,8 +17,11 @@ pub struct ViewSummary {
     pub span_s: f64,
     /// Pressure images of the foot.
     pub images: usize,
-    /// TerrainClass of the foot.
+    /// TerrainClass of the foot on the bus (`/footN/terrain`).
     pub steps: usize,
+    /// TerrainClass a model decided while recording (`/footN/terrain/model`, `presrs mcap
+    /// --model`).
+    pub model_steps: usize,
     /// Time of the image shown, s from the start.
     pub image_t_s: Option<f64>,
     /// Whether the recording holds the simulator's truth (speed, true terrain).
@@ -31,11 +34,16 @@ impl std::fmt::Display for ViewSummary {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "{:.1} s, {} images, {} TerrainClass of foot {}{}; image at ",
+            "{:.1} s, {} images, {} TerrainClass of foot {}{}{}; image at ",
             self.span_s,
             self.images,
             self.steps,
             self.foot,
+            if self.model_steps > 0 {
+                format!(" and {} decided by the model", self.model_steps)
+            } else {
+                String::new()
+            },
             if self.has_truth {
                 ", with the simulator's truth"
             } else {
@@ -305,6 +313,7 @@ pub fn render(
         span_s: span,
         images: images.len(),
         steps: classes.len(),
+        model_steps: model.len(),
         image_t_s: cursor,
         has_truth: !truth.is_empty(),
         foot,
@@ -327,6 +336,7 @@ mod tests {
             span_s: 12.34,
             images: 1200,
             steps: 40,
+            model_steps: 0,
             image_t_s: Some(11.5),
             has_truth: true,
             foot: 1,
@@ -338,5 +348,13 @@ mod tests {
         );
         (s.has_truth, s.image_t_s) = (false, None);
         assert!(s.to_string().ends_with("of foot 1; image at -"), "{s}");
+        // A recording of a log with a model's decisions beside it (`presrs mcap --model`)
+        // counts those too: it used to say 0 while it plotted them.
+        (s.steps, s.model_steps) = (0, 15);
+        assert!(
+            s.to_string()
+                .contains("0 TerrainClass of foot 1 and 15 decided by the model;"),
+            "{s}"
+        );
     }
 }

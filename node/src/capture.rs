@@ -211,7 +211,7 @@ pub fn parse_labels(
                 format!("end_s {} is not after start_s {}", f[1], f[0]),
             ));
         }
-        let terrain = catalog.known(f[2]).map_err(|e| bad(line, e))?;
+        let terrain = catalog.known(f[2]).map_err(|e| bad(line, e.to_string()))?;
         let foot = match f.get(3) {
             None | Some(&"") => None,
             Some(s) => Some(
@@ -261,9 +261,9 @@ impl Labelling {
                 catalog
                     .known(name)
                     .map(Labelling::All)
-                    .map_err(|reason| CaptureError::Label {
+                    .map_err(|e| CaptureError::Label {
                         name: name.to_string(),
-                        reason,
+                        reason: e.to_string(),
                     })
             }
             (None, Some(p)) => {

@@ -185,6 +185,16 @@ pub enum LogFileError {
         /// The line and what is wrong with it.
         source: LogError,
     },
+    /// Not a regular file (a pipe, `<(candump ...)`, a device): the log is read twice.
+    #[error(
+        "{path} is not a file (a pipe or a device): a log is read twice, checked to its end and \
+         then replayed, so save it first, e.g. `timeout 5 candump -L can0 > bringup.log`, and \
+         give that file"
+    )]
+    NotAFile {
+        /// The path given.
+        path: String,
+    },
     /// The file no longer holds what [`LogFile::check`] read: it was cut short or rewritten
     /// between the check and the records' pass.
     #[error(
@@ -295,6 +305,12 @@ pub struct LogFile {
 impl LogFile {
     /// Reads the log at `path` from end to end; the error names the file and the first bad line.
     pub fn check(path: &std::path::Path) -> Result<Self, LogFileError> {
+        // A pipe would be empty on the second pass: refused, naming the fix.
+        if std::fs::metadata(path).is_ok_and(|m| !m.file_type().is_file()) {
+            return Err(LogFileError::NotAFile {
+                path: path.display().to_string(),
+            });
+        }
         let mut reader = LogReader::new(open(path)?);
         let (mut records, mut span_us) = (0, None);
         for rec in reader.by_ref() {
@@ -663,5 +679,16 @@ mod tests {
         let mut recs = log.records().unwrap();
         assert_eq!(recs.by_ref().count(), 100);
         recs.finish().unwrap();
+    }
+
+    #[test]
+    fn a_pipe_is_refused_naming_the_fix_not_replayed_empty() {
+        // /dev/null stands in for `<(candump ...)`: not a regular file.
+        let e = LogFile::check(std::path::Path::new("/dev/null")).unwrap_err();
+        assert!(matches!(e, LogFileError::NotAFile { .. }), "{e}");
+        assert!(
+            e.to_string().contains("candump -L can0 > bringup.log"),
+            "{e}"
+        );
     }
 }

@@ -215,6 +215,21 @@ impl TerrainsArg {
     }
 }
 
+/// A terrain name a catalog does not have ([`TerrainCatalog::known`]): the message lists the
+/// catalog and names the fix.
+#[derive(Debug, thiserror::Error, Clone, PartialEq, Eq)]
+#[error(
+    "`{name}` is not a terrain of the catalog (known: {}); add it with a terrains file \
+     (--terrains)",
+    known.join(", ")
+)]
+pub struct NotInCatalog {
+    /// The name given.
+    pub name: String,
+    /// The catalog's names.
+    pub known: Vec<String>,
+}
+
 impl TerrainCatalog {
     /// The paper's twelve terrains (ids 0-11).
     pub fn paper() -> Self {
@@ -311,16 +326,12 @@ impl TerrainCatalog {
 
     /// The known terrain (never [`Terrain::UNKNOWN`]) with this name, or why not: the error
     /// lists the catalog and names the fix, for a label a user typed.
-    pub fn known(&self, name: &str) -> Result<Terrain, String> {
+    pub fn known(&self, name: &str) -> Result<Terrain, NotInCatalog> {
         self.by_name(name)
             .filter(|t| !t.is_unknown())
-            .ok_or_else(|| {
-                let names: Vec<&str> = self.iter().map(|t| t.name).collect();
-                format!(
-                    "`{name}` is not a terrain of the catalog (known: {}); add it with a terrains \
-                 file (--terrains)",
-                    names.join(", ")
-                )
+            .ok_or_else(|| NotInCatalog {
+                name: name.to_string(),
+                known: self.iter().map(|t| t.name.to_string()).collect(),
             })
     }
 

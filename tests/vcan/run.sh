@@ -108,10 +108,17 @@ elif [ "$runner" = uml ]; then
   # 1247 s in the VM.
   "$root/scripts/install-deps.sh" --uml
   init="$work/uml-init.sh"
+  # A tmpfs on /tmp keeps the tests' scratch files off hostfs, but it hides the host's /tmp:
+  # a checkout (or its target directory) under /tmp then cannot be reached ("can't cd").
+  # There the host's /tmp stays as it is.
+  tmp_mount="mount -t tmpfs tmpfs /tmp"
+  for p in "$root" "$work" "$bin" "$PRESRS_BIN" "$PRESRS_MODEL" "$PRESRS_FIRMWARE" "$PRESRS_DBC_CACHE"; do
+    case "$p" in /tmp|/tmp/*) tmp_mount=": the checkout is under /tmp: the host's /tmp stays visible" ;; esac
+  done
   cat > "$init" <<INIT
 #!/bin/sh
 # PID 1 of the User-mode Linux run (written by tests/vcan/run.sh): never exits but by halt.
-mount -t proc proc /proc; mount -t sysfs sys /sys; mount -t tmpfs tmpfs /tmp
+mount -t proc proc /proc; mount -t sysfs sys /sys; $tmp_mount
 mkdir -p /dev/shm && mount -t tmpfs tmpfs /dev/shm
 # What udev would make: bash's process substitution reads /dev/fd/N.
 ln -sf /proc/self/fd /dev/fd
@@ -132,7 +139,12 @@ $guest_env
 export PRESRS_SYSTEM_SPEED='${PRESRS_SYSTEM_SPEED:-0.5}' PRESRS_SLOW_SPEED='${PRESRS_SLOW_SPEED:-0.35}'
 export PRESRS_BENCH_FEET='${PRESRS_BENCH_FEET:-1}'
 export PRESRS_BENCH_LABEL='User-mode Linux: vcan in a UML kernel, one CPU'
-cd '$root' && tests/vcan/lanes.sh '$bin' '${PRESRS_VCAN_FILTER:-}'
+if ! cd '$root'; then
+  echo "uml: cannot enter the checkout $root inside User-mode Linux"
+  echo "VCAN_SUMMARY passed=0 failed=0 expected=0 exit=1"
+  halt -f
+fi
+tests/vcan/lanes.sh '$bin' '${PRESRS_VCAN_FILTER:-}'
 halt -f
 INIT
   chmod +x "$init"

@@ -57,6 +57,22 @@ impl LockStep {
         self.send(i, sent)
     }
 
+    /// Part `i` stops, as the other runners stop a part: [`Component::stop`] now, and what it
+    /// sends last (a node's `Stopping` status, a leg bridge's motor stop frames) goes on the
+    /// bus.
+    pub fn stop(
+        &mut self,
+        i: usize,
+        part: &mut dyn Component,
+        sent: &mut dyn FnMut(u64, &CanFrame),
+    ) -> Result<(), BusError> {
+        if i >= self.endpoints.len() {
+            return Ok(());
+        }
+        part.stop(self.t_us, &mut self.out);
+        self.send(i, sent)
+    }
+
     /// While the link is down every frame sent is lost, as on an interface that is down (the
     /// observer of [`LockStep::step`] still sees it: the sender did send it).
     pub fn set_link(&mut self, up: bool) {
