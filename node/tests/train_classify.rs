@@ -750,3 +750,43 @@ fn the_texture_check_holds_each_image_to_its_best_classs_band() {
         );
     }
 }
+
+/// Issue 47: a model file of format version 1, written by `presrs train` before version 2 (the
+/// build at 27d1bca: `presrs dataset static --n 16 --seed 3`, `presrs train --crop 2,2,2,2
+/// --downsample 4 --per-class 10 --train 6`), loads and decides every image as that build did
+/// (`decisions.jsonl` is its `presrs classify --json`): the same terrain, unknown where it was,
+/// the same novelty and threshold. New files are version 2, which that build refuses.
+#[test]
+fn a_version_1_model_file_decides_as_the_build_that_wrote_it() {
+    use presrs_node::classifier::dataset::read_image;
+    use presrs_node::classifier::{Classifier, Model};
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/model-v1");
+    let model = Model::load(&dir.join("model.json")).unwrap();
+    assert_eq!(model.version, 1);
+    let names: Vec<String> = model.classes.iter().map(|c| c.name.clone()).collect();
+    let mut cls = Classifier::new(model);
+    let text = std::fs::read_to_string(dir.join("decisions.jsonl")).unwrap();
+    let mut unknown = 0;
+    for line in text.lines() {
+        let then: serde_json::Value = serde_json::from_str(line).unwrap();
+        let file = then["file"].as_str().unwrap();
+        let img = read_image(&dir.join(file)).unwrap();
+        let d = cls.classify_image(&img, false).unwrap();
+        let now = d.to_json(file, &names);
+        assert_eq!(now["terrain"], then["terrain"], "{file}");
+        assert_eq!(now["best"], then["best"], "{file}");
+        for key in ["novelty", "threshold", "confidence"] {
+            let (a, b) = (now[key].as_f64().unwrap(), then[key].as_f64().unwrap());
+            assert!(
+                (a - b).abs() <= 1e-9 * b.abs().max(1.0),
+                "{file} {key}: {a} {b}"
+            );
+        }
+        if then["terrain"] == "unknown" {
+            unknown += 1;
+            assert_eq!(now["reason"], "novelty", "{file}");
+        }
+    }
+    assert_eq!(unknown, 4, "the fixture's new ground");
+    assert_eq!(presrs_node::classifier::model::MODEL_VERSION, 2);
+}

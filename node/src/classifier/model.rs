@@ -8,8 +8,13 @@ use serde::{Deserialize, Serialize};
 
 use super::image::Crop;
 
-/// Format version written by this build; a model with another version is refused.
-pub const MODEL_VERSION: u32 = 1;
+/// Format version written by this build. 2 (issue 47): the novelty score may be `knn`, and the
+/// file keeps how its unknown-ground checks were chosen (`unknown_choice`); a build that reads
+/// only version 1 refuses it, naming the retrain, rather than misread it.
+pub const MODEL_VERSION: u32 = 2;
+/// The oldest format version this build reads: version 1 files load with the decisions they
+/// had (`node/tests/fixtures/model-v1`, written by the build before version 2, checks it).
+pub const OLDEST_MODEL_VERSION: u32 = 1;
 /// Largest downsampling factor (a 44x44 image at 8 keeps 6x6 pixels).
 pub const MAX_DOWNSAMPLE: usize = 8;
 
@@ -236,7 +241,7 @@ pub enum ModelError {
         msg: String,
     },
     #[error(
-        "model {path} has format version {found}; this build reads version {MODEL_VERSION}. Retrain it with `presrs train`"
+        "model {path} has format version {found}; this build reads versions {OLDEST_MODEL_VERSION} to {MODEL_VERSION}. Retrain it with `presrs train`"
     )]
     /// The file has another format version.
     Version {
@@ -598,7 +603,7 @@ impl Model {
                 path: path.into(),
                 msg: "no `version` field".into(),
             })?;
-        if found != MODEL_VERSION as u64 {
+        if !(OLDEST_MODEL_VERSION as u64..=MODEL_VERSION as u64).contains(&found) {
             return Err(ModelError::Version {
                 path: path.into(),
                 found,
