@@ -432,7 +432,14 @@ impl Classifier {
         }
         sq_dists(&self.samples, &self.q, &mut self.log_kernel, self.avx2_fma);
         let n_classes = m.classes.len();
-        if let Some(nv) = &m.novelty {
+        let knn_only = m
+            .novelty
+            .as_ref()
+            .is_some_and(|nv| nv.score == crate::unknown::novelty::NoveltyScore::Knn);
+        if knn_only {
+            // The kNN ratio alone: the residual is not part of the score, and not computed.
+            self.parts.1 = 0.0;
+        } else if let Some(nv) = &m.novelty {
             // The part of F - mean outside the rows' span: |F - mean|^2 less the squared length
             // of its projection, Q^T G^-1 Q with G = U U^T of the weights the kernel used. The
             // half-precision rows are not orthonormal enough for |Q|^2 alone: measured on the
