@@ -32,35 +32,7 @@ const PERIODS: [usize; 3] = [4, 7, 11];
 const NAMES: [&str; 3] = ["wood", "carpet", "grass"];
 
 fn model() -> Model {
-    let mut rng = rand::rngs::StdRng::seed_from_u64(1);
-    let imgs: Vec<(PressureImage, usize)> = (0..3)
-        .flat_map(|k| (0..30).map(move |_| k))
-        .map(|k| {
-            (
-                PressureImage::new(44, 44, 8, texture(&mut rng, PERIODS[k])),
-                k,
-            )
-        })
-        .collect();
-    let data: Vec<Labelled> = imgs
-        .iter()
-        .map(|(image, class)| Labelled {
-            image,
-            class: *class,
-        })
-        .collect();
-    let classes: Vec<ClassInfo> = NAMES
-        .iter()
-        .map(|n| ClassInfo {
-            name: n.to_string(),
-            terrain_id: TerrainCatalog::paper().by_name(n).unwrap().id(),
-        })
-        .collect();
-    let opts = TrainOptions {
-        crop: "2,2,2,2".parse::<Crop>().unwrap(),
-        ..TrainOptions::default()
-    };
-    train(&data, &classes, &opts).unwrap().0
+    model_of(&[0, 1, 2])
 }
 
 /// One foot that steps on a terrain: FootContact every 5 ms, a tactile image every 10 ms

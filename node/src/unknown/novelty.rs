@@ -229,19 +229,6 @@ impl Novelty {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::stats::{median, upper_quantile};
-
-    #[test]
-    fn quantiles_count_from_the_top() {
-        let mut v: Vec<f64> = (1..=50).map(f64::from).collect();
-        // 2% of 50 = 1 value may lie above: the 49th.
-        assert_eq!(upper_quantile(&mut v, 0.98), 49.0);
-        assert_eq!(upper_quantile(&mut v, 1.0), 50.0);
-        assert_eq!(upper_quantile(&mut [3.0], 0.98), 3.0);
-        assert!(upper_quantile(&mut [], 0.5).is_nan());
-        assert_eq!(median(&mut [3.0, 1.0, 2.0]), 2.0);
-        assert_eq!(median(&mut [4.0, 1.0, 2.0, 3.0]), 2.5);
-    }
 
     #[test]
     fn the_score_is_the_larger_ratio() {
