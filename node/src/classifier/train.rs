@@ -1149,16 +1149,26 @@ pub fn add_texture_check<'a>(
     m: &mut Model,
     images: impl IntoIterator<Item = (&'a PressureImage, usize)>,
 ) {
+    m.texture_ranges = Some(bands_of(m, images, |w| {
+        super::texture::roughness(&w.pixels, w.rows, w.cols)
+    }));
+}
+
+/// Per class of `m`, the band of `value` over `images` (each with its class index) through
+/// the model's crop and downsampling, calibrated with its `unknown_rate`: the load and texture
+/// checks' bands.
+fn bands_of<'a>(
+    m: &Model,
+    images: impl IntoIterator<Item = (&'a PressureImage, usize)>,
+    value: impl Fn(&PressureImage) -> f64,
+) -> Vec<[f64; 2]> {
     let mut per: Vec<Vec<f64>> = vec![Vec::new(); m.classes.len()];
     for (img, k) in images {
         if let (Some(v), Some(w)) = (per.get_mut(k), preprocess(img, &m.crop, m.downsample)) {
-            v.push(super::texture::roughness(&w.pixels, w.rows, w.cols));
+            v.push(value(&w));
         }
     }
-    m.texture_ranges = Some(crate::stats::class_bands(
-        per,
-        m.unknown_rate.unwrap_or(0.0),
-    ));
+    crate::stats::class_bands(per, m.unknown_rate.unwrap_or(0.0))
 }
 
 /// Adds the load check to `m` with bands drawn over `images` (each with its class index),
@@ -1169,16 +1179,9 @@ pub fn add_load_check_on<'a>(
     m: &mut Model,
     images: impl IntoIterator<Item = (&'a PressureImage, usize)>,
 ) {
-    let mut per: Vec<Vec<f64>> = vec![Vec::new(); m.classes.len()];
-    for (img, k) in images {
-        if let (Some(v), Some(w)) = (per.get_mut(k), preprocess(img, &m.crop, m.downsample)) {
-            v.push(w.pixels.iter().map(|&p| p as f64).sum());
-        }
-    }
-    m.load_ranges = Some(crate::stats::class_bands(
-        per,
-        m.unknown_rate.unwrap_or(0.0),
-    ));
+    m.load_ranges = Some(bands_of(m, images, |w| {
+        w.pixels.iter().map(|&p| p as f64).sum()
+    }));
 }
 
 /// Adds the load check (`TrainOptions::check_load`) to a trained model from its stored images,
