@@ -6,6 +6,7 @@
 //! - [`machine`]: the state machine that runs the laws and switches gait per terrain;
 //! - [`service`]: its loop on a bus, as `presrs controller` runs it.
 
+pub mod config;
 pub mod gait;
 pub mod laws;
 pub mod machine;

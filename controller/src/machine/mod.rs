@@ -15,194 +15,19 @@
 
 use std::collections::BTreeMap;
 
-use protocol::config::{ConfigFileError, Invalid};
 use protocol::messages::{
     GaitReason, GaitStatus, LegCommand, LegMode, Message, Phase, TERRAIN_UNKNOWN,
 };
-use protocol::terrain::{CatalogError, TerrainCatalog};
-use serde::{Deserialize, Serialize};
+use protocol::terrain::TerrainCatalog;
 
 use crate::gait::Gait;
 use crate::laws;
 
-/// The controller's config file: gaits, the terrain -> gait table and the switching policy.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct ControllerConfig {
-    /// The gaits the controller may run (default: the paper's G1-G3).
-    pub gaits: Vec<Gait>,
-    /// Terrain name (the catalog's) -> gait id. A terrain not listed gets the safe gait.
-    pub terrain_gaits: BTreeMap<String, u8>,
-    /// A terrains file adding a lab's terrains to the paper's (see `protocol::terrain`), for
-    /// `terrain_gaits` keys beyond the paper's twelve.
-    pub terrains: Option<std::path::PathBuf>,
-    /// The gait at start.
-    pub initial_gait: u8,
-    /// Gait for unknown terrain and a lost node.
-    pub safe_gait: u8,
-    /// Consecutive steps of a new terrain before switching.
-    pub switch_after_steps: u32,
-    /// Minimum confidence of a TerrainClass that counts, percent.
-    pub min_confidence_pct: f64,
-    /// Node heartbeat timeout, ms.
-    pub heartbeat_timeout_ms: u64,
-    /// Bumpless start: how long the controller listens before it commands, ms (0: command at
-    /// once). A controller (re)started on a bus where the leg already hops takes over at the
-    /// next touchdown it hears, from what the bus says (see [`Controller`]); when no
-    /// touchdown comes within this time it starts as on a fresh robot. A leg of motors whose
-    /// bridge says nobody commands it is taken at once.
-    pub takeover_ms: u64,
-    /// LegCommand rate, Hz.
-    pub command_hz: f64,
-    /// GaitStatus rate, Hz (and at every switch).
-    pub status_hz: f64,
-    /// The foot this controller runs.
-    pub foot: u8,
-    /// Switch edges closer than this to the last accepted edge are bounce, µs.
-    pub lockout_us: u64,
-    /// CAN identifier map (the same `[ids]` table as the node's and the DBC's).
-    pub ids: protocol::ids::IdConfig,
-}
+mod takeover;
 
-impl Default for ControllerConfig {
-    fn default() -> Self {
-        let terrain_gaits = [
-            ("wood", 3),
-            ("carpet", 3),
-            ("grass", 2),
-            ("clay", 1),
-            ("aluminum", 2),
-            ("sand", 1),
-            ("pine_needles", 1),
-            ("gravel", 1),
-        ]
-        .into_iter()
-        .map(|(t, g)| (t.to_string(), g))
-        .collect();
-        Self {
-            gaits: Gait::paper_gaits(),
-            terrain_gaits,
-            terrains: None,
-            initial_gait: 2,
-            safe_gait: 1,
-            switch_after_steps: 2,
-            min_confidence_pct: 60.0,
-            heartbeat_timeout_ms: 500,
-            takeover_ms: 2000,
-            command_hz: 500.0,
-            status_hz: 10.0,
-            foot: 0,
-            lockout_us: 20_000,
-            ids: protocol::ids::IdConfig::default(),
-        }
-    }
-}
-
-impl ControllerConfig {
-    /// The catalog the `terrains` key names (the paper's twelve without it).
-    pub fn catalog(&self) -> Result<TerrainCatalog, CatalogError> {
-        TerrainCatalog::load(self.terrains.as_deref())
-    }
-
-    /// Checks every field; the error names the field and the allowed range. `terrain_gaits`
-    /// keys must be names in `catalog`.
-    pub fn validate(&self, catalog: &TerrainCatalog) -> Result<(), Invalid> {
-        if self.gaits.is_empty() {
-            return Err(Invalid::new("gaits", "gaits: at least one gait is needed"));
-        }
-        for (i, g) in self.gaits.iter().enumerate() {
-            g.validate(&format!("gaits[{i}]"))?;
-        }
-        let has = |id: u8| self.gaits.iter().any(|g| g.id == id);
-        let ids: Vec<u8> = self.gaits.iter().map(|g| g.id).collect();
-        if let Some(dup) = ids
-            .iter()
-            .find(|&&id| ids.iter().filter(|&&j| j == id).count() > 1)
-        {
-            return Err(Invalid::new(
-                "gaits",
-                format!("gaits: two gaits have id {dup}; each needs its own"),
-            ));
-        }
-        for (name, id) in [
-            ("initial_gait", self.initial_gait),
-            ("safe_gait", self.safe_gait),
-        ] {
-            if !has(id) {
-                return Err(Invalid::range(name, id, format!("gait ids {ids:?}")));
-            }
-        }
-        for (t, g) in &self.terrain_gaits {
-            let key = format!("terrain_gaits.{t}");
-            if catalog.by_name(t).is_none_or(|t| t.is_unknown()) {
-                return Err(Invalid::new(
-                    &key,
-                    format!(
-                        "{key}: `{t}` is not a terrain in the catalog; add it to a terrains file \
-                         ([[terrain]] id = N, name = \"{t}\") and set `terrains = \"FILE\"`"
-                    ),
-                ));
-            }
-            if !has(*g) {
-                return Err(Invalid::range(&key, g, format!("gait ids {ids:?}")));
-            }
-        }
-        let range = |name: &str, v: f64, lo: f64, hi: f64| {
-            if v.is_finite() && (lo..=hi).contains(&v) {
-                Ok(())
-            } else {
-                Err(Invalid::range(name, v, format!("{lo}..={hi}")))
-            }
-        };
-        range(
-            "switch_after_steps",
-            self.switch_after_steps as f64,
-            1.0,
-            100.0,
-        )?;
-        range("min_confidence_pct", self.min_confidence_pct, 0.0, 100.0)?;
-        range(
-            "heartbeat_timeout_ms",
-            self.heartbeat_timeout_ms as f64,
-            50.0,
-            60_000.0,
-        )?;
-        range("takeover_ms", self.takeover_ms as f64, 0.0, 10_000.0)?;
-        range("command_hz", self.command_hz, 10.0, 5_000.0)?;
-        // Longer than a stance, every edge would be taken for bounce.
-        range("lockout_us", self.lockout_us as f64, 0.0, 100_000.0)?;
-        range("status_hz", self.status_hz, 0.1, 100.0)?;
-        range(
-            "foot",
-            self.foot as f64,
-            0.0,
-            (protocol::ids::MAX_FEET - 1) as f64,
-        )?;
-        self.ids
-            .validate()
-            .map_err(|e| Invalid::new("ids", format!("ids: {e}")))?;
-        Ok(())
-    }
-
-    /// Parses TOML or JSON (by the file's extension) and validates it against the catalog its
-    /// `terrains` key names.
-    pub fn parse(text: &str, path: &str) -> Result<Self, ConfigFileError> {
-        let c: Self = protocol::config::parse(text, path)?;
-        let catalog = c.catalog().map_err(|source| ConfigFileError::Terrains {
-            path: path.to_string(),
-            source,
-        })?;
-        c.validate(&catalog)
-            .map_err(|e| ConfigFileError::invalid(path, e))?;
-        Ok(c)
-    }
-
-    /// Reads and validates a config file (see [`ControllerConfig::parse`]).
-    pub fn load(path: &std::path::Path) -> Result<Self, ConfigFileError> {
-        let (text, name) = protocol::config::read_text(path)?;
-        Self::parse(&text, &name)
-    }
-}
+pub use crate::config::ControllerConfig;
+use takeover::Listen;
+pub use takeover::{TAKEOVER_FIT_RAD, Takeover};
 
 /// Unwraps a 32-bit µs timestamp (wrapping every 71 min) on `clock`, relative to its latest
 /// (a step of up to +-35 min either way), and moves the clock on when it is newer.
@@ -229,48 +54,11 @@ pub const MAX_ANGLE_FROM_DESIRED: f64 = 0.35;
 /// liftoff: G1 -> G3 (0.30 rad) takes 6 steps, about as many as the speed takes to follow.
 pub const BETA_DES_STEP: f64 = 0.05;
 
-/// What a starting controller has heard before it takes over (see
-/// [`ControllerConfig::takeover_ms`]).
-#[derive(Clone, Copy, Debug, Default)]
-struct Listen {
-    /// Our time when listening began.
-    since_us: Option<u64>,
-    /// The gait, reason and terrain another controller last said it ran for our foot.
-    gait: Option<(u8, GaitReason, u8)>,
-    /// The step listened to: its touchdown angle, then its liftoff angle (the law's sign).
-    td: Option<f64>,
-    lo: Option<f64>,
-}
-
-/// The largest miss, rad, of a gait's eq. (5) in predicting the listened step's next touchdown
-/// angle for that gait to be the one the leg runs. Measured in the lock-step loop: the
-/// simulated leg's own laws hit the gait they run within 0.01 rad; the paper's gaits lie
-/// 0.15 rad apart in beta_des, and eq. (5) scales that by c = 0.2 to 0.03 rad between them.
-pub const TAKEOVER_FIT_RAD: f64 = 0.012;
-
 /// LegState reports further apart than this on the foot's clock, in a stream that was regular
 /// (the leg reports at 100-500 Hz), mean that reports were lost, edges perhaps among them: the
 /// controller no longer knows the phase, µs. A stalled leg (a simulator the machine cannot keep
 /// up with) leaves no such gap: its clock stops too. See [`Controller`].
 pub const LEG_GAP_US: u64 = 50_000;
-
-/// How a controller took over a leg (see [`ControllerConfig::takeover_ms`]).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Takeover {
-    /// Our time of the takeover, µs.
-    pub at_us: u64,
-    /// The gait taken over.
-    pub gait: u8,
-    /// Where the gait came from: "gait status" (another controller's), "touchdown law" (the
-    /// gait whose eq. (5) explains the step listened to) or "initial" (the config's; the
-    /// node's terrains then switch it at a liftoff as usual).
-    pub gait_from: &'static str,
-    /// The touchdown angle the leg came down at, rad; `None` when no step was heard in
-    /// `takeover_ms` (a fresh start).
-    pub touchdown_angle_rad: Option<f64>,
-    /// The beta_des eq. (5) aims at from the takeover on, rad.
-    pub beta_des_rad: f64,
-}
 
 /// The controller.
 ///
@@ -672,75 +460,6 @@ impl Controller {
             }
             _ => {}
         }
-    }
-
-    /// Ends listening (see [`Controller`]): after a touchdown (`touchdown`) from the step
-    /// heard, otherwise (no step within `takeover_ms`) as on a fresh robot. A gait requested
-    /// from the node's terrains while listening stays pending, for a liftoff.
-    fn take_over(&mut self, touchdown: bool, now_us: u64, out: &mut impl FnMut(Message)) {
-        let Some(l) = self.listen.take() else {
-            return;
-        };
-        let b1 = self.beta_td;
-        let mut gait_from = "initial";
-        let mut beta_des = if touchdown { b1 } else { self.gait.beta_des };
-        let named = l
-            .gait
-            .and_then(|(g, reason, terrain)| Some((self.gait_by_id(g)?, reason, terrain)));
-        if let Some((g, reason, terrain)) = named {
-            beta_des = g.beta_des;
-            self.gait = g;
-            self.reason = reason;
-            self.terrain = terrain;
-            gait_from = "gait status";
-        } else if let (true, Some(td0), Some(lo0)) = (touchdown, l.td, l.lo) {
-            let miss =
-                |g: &Gait| (laws::next_touchdown_angle(lo0, td0, g.c, g.beta_des) - b1).abs();
-            let best = self
-                .cfg
-                .gaits
-                .iter()
-                .min_by(|a, b| miss(a).total_cmp(&miss(b)))
-                .filter(|g| miss(g) <= TAKEOVER_FIT_RAD && g.c > 0.0)
-                .cloned();
-            if let Some(g) = best {
-                // Eq. (5) solved for beta_des: mid-way through a walk after a switch the leg
-                // aims between two gaits' angles, and the walk goes on from there.
-                let aimed = td0 - (b1 - lo0) / g.c;
-                beta_des = if (aimed - g.beta_des).abs() <= BETA_DES_STEP {
-                    g.beta_des
-                } else {
-                    aimed.clamp(
-                        g.beta_des - MAX_ANGLE_FROM_DESIRED,
-                        g.beta_des + MAX_ANGLE_FROM_DESIRED,
-                    )
-                };
-                self.gait = g;
-                self.reason = GaitReason::Initial;
-                gait_from = "touchdown law";
-            }
-        }
-        // A terrain request heard while listening that this gait already serves.
-        if self
-            .pending
-            .as_ref()
-            .is_some_and(|p| p.0.id == self.gait.id)
-        {
-            self.pending = None;
-        }
-        self.beta_des = beta_des;
-        self.next_beta_td = if touchdown { b1 } else { beta_des };
-        if !touchdown {
-            self.beta_td = beta_des;
-        }
-        self.takeover = Some(Takeover {
-            at_us: now_us,
-            gait: self.gait.id,
-            gait_from,
-            touchdown_angle_rad: touchdown.then_some(b1),
-            beta_des_rad: beta_des,
-        });
-        out(Message::GaitStatus(self.status()));
     }
 
     fn apply_pending(&mut self, out: &mut impl FnMut(Message)) {
@@ -1413,34 +1132,5 @@ mod tests {
             out.push(m)
         });
         assert_eq!(c.gait_resets, 2);
-    }
-
-    #[test]
-    fn invalid_config_names_the_field() {
-        for (text, key) in [
-            ("lockout_us = 500000", "lockout_us"),
-            ("switch_after_steps = 0", "switch_after_steps"),
-            ("command_hz = 0.0", "command_hz"),
-        ] {
-            let e = ControllerConfig::parse(text, "c.toml")
-                .unwrap_err()
-                .to_string();
-            assert!(e.contains(key) && e.contains("c.toml"), "{text}: {e}");
-        }
-        let mut two = fresh();
-        two.gaits.push(Gait::g1());
-        let e = two
-            .validate(&TerrainCatalog::paper())
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("two gaits have id 1"), "{e}");
-        let e = ControllerConfig::parse("safe_gait = 9", "c.toml").unwrap_err();
-        assert!(e.to_string().contains("c.toml: safe_gait = 9"), "{e}");
-        let e = ControllerConfig::parse("min_confidence_pct = 120.0", "c.toml").unwrap_err();
-        let ConfigFileError::Invalid { source, .. } = &e else {
-            panic!("{e:?}");
-        };
-        assert_eq!(source.key, "min_confidence_pct");
-        assert!(source.message.contains("0..=100"), "{e}");
     }
 }

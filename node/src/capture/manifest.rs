@@ -1,0 +1,232 @@
+//! A captured set on disk: `DIR/<terrain>/<name>.pgm` and `DIR/manifest.csv`, which names each
+//! image's source and step so that a second capture of the same log adds nothing.
+
+use super::*;
+
+/// What the manifest says of one image besides its terrain folder.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ManifestEntry {
+    /// Its run: the candump log or interface it was captured from (`source`).
+    pub source: String,
+    /// The gait in force at its touchdown (`gait`, empty when the bus carried no GaitStatus,
+    /// and in manifests written before the column).
+    pub gait: Option<u8>,
+}
+
+/// One manifest line, parsed: `Ok(None)` for a header or blank line; `Err` says what is wrong.
+/// Lines have the 9 columns of [`MANIFEST_HEADER_V1`] or the 10 of [`MANIFEST_HEADER`]: a
+/// capture appends 10 to a manifest that began with 9, and both stay readable.
+pub(super) struct ManifestLine<'a> {
+    file: &'a str,
+    foot: u8,
+    step: u16,
+    touchdown_us: u64,
+    entry: ManifestEntry,
+}
+
+pub(super) fn parse_manifest_line(l: &str) -> Result<Option<ManifestLine<'_>>, String> {
+    // A manifest saved by a Windows editor ends its lines in CR LF.
+    let l = l.strip_suffix('\r').unwrap_or(l);
+    if l.is_empty() || l == MANIFEST_HEADER || l == MANIFEST_HEADER_V1 {
+        return Ok(None);
+    }
+    let f: Vec<&str> = l.split(',').collect();
+    if !(9..=10).contains(&f.len()) {
+        return Err(format!(
+            "{} fields; want the 10 of `{MANIFEST_HEADER}` (or 9, without gait)",
+            f.len()
+        ));
+    }
+    let gait = match f.get(9) {
+        None | Some(&"") => None,
+        Some(g) => Some(
+            g.parse::<u8>()
+                .ok()
+                .filter(|&g| g != 0)
+                .ok_or_else(|| format!("gait `{g}` is not 1..255 or empty"))?,
+        ),
+    };
+    Ok(Some(ManifestLine {
+        file: f[0],
+        foot: f[2].parse().map_err(|_| format!("foot `{}`", f[2]))?,
+        step: f[3].parse().map_err(|_| format!("step `{}`", f[3]))?,
+        touchdown_us: parse_seconds(f[4]).ok_or_else(|| format!("touchdown_s `{}`", f[4]))?,
+        entry: ManifestEntry {
+            source: f[8].to_string(),
+            gait,
+        },
+    }))
+}
+
+/// Each image's manifest entry (its run, its gait), by its path relative to the training-set
+/// folder (`terrain/name.pgm`). `Ok(None)` when `dir` has no manifest (a folder not written by
+/// `presrs capture`); a manifest line that is not one is an error naming it.
+pub fn read_manifest(
+    dir: &Path,
+) -> Result<Option<std::collections::HashMap<PathBuf, ManifestEntry>>, CaptureError> {
+    let path = dir.join("manifest.csv");
+    let text = match std::fs::read_to_string(&path) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(io("read", &path, e)),
+    };
+    let mut entries = std::collections::HashMap::new();
+    for (i, l) in text.lines().enumerate() {
+        match parse_manifest_line(l) {
+            Ok(Some(m)) => {
+                entries.insert(PathBuf::from(m.file), m.entry);
+            }
+            Ok(None) => {}
+            Err(reason) => {
+                return Err(CaptureError::Manifest {
+                    path,
+                    line: i + 1,
+                    reason,
+                });
+            }
+        }
+    }
+    Ok(Some(entries))
+}
+
+/// The manifest's header line.
+pub const MANIFEST_HEADER: &str =
+    "file,terrain,foot,step,touchdown_s,sample_s,load_sum,damage_pct,source,gait";
+
+/// The header of manifests written before the `gait` column; still read.
+pub const MANIFEST_HEADER_V1: &str =
+    "file,terrain,foot,step,touchdown_s,sample_s,load_sum,damage_pct,source";
+
+/// A training-set folder being filled: `DIR/<terrain>/<name>.pgm` plus `DIR/manifest.csv`.
+/// Steps already in the manifest (same source, foot, step and touchdown) are not added again.
+pub struct CaptureSet {
+    dir: PathBuf,
+    manifest_path: PathBuf,
+    manifest: std::fs::File,
+    keys: HashSet<(String, u8, u16, u64)>,
+    /// Images written by this set.
+    pub written: u64,
+    /// Of those, per terrain name.
+    pub written_per_terrain: std::collections::BTreeMap<String, u64>,
+    /// Of those, per gait in force at touchdown (`None`: no GaitStatus on the bus).
+    pub written_per_gait: std::collections::BTreeMap<Option<u8>, u64>,
+    /// Steps already in the manifest.
+    pub duplicates: u64,
+}
+
+impl CaptureSet {
+    /// Opens (creating) `dir` and its manifest; reads the steps it already holds.
+    pub fn open(dir: &Path) -> Result<Self, CaptureError> {
+        std::fs::create_dir_all(dir).map_err(|e| io("create the folder", dir, e))?;
+        let manifest_path = dir.join("manifest.csv");
+        let mut keys = HashSet::new();
+        let existing = match std::fs::read_to_string(&manifest_path) {
+            Ok(t) => t,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => String::new(),
+            Err(e) => return Err(io("read", &manifest_path, e)),
+        };
+        for (i, l) in existing.lines().enumerate() {
+            match parse_manifest_line(l) {
+                Ok(Some(m)) => {
+                    keys.insert((m.entry.source, m.foot, m.step, m.touchdown_us));
+                }
+                Ok(None) => {}
+                Err(reason) => {
+                    return Err(CaptureError::Manifest {
+                        path: manifest_path,
+                        line: i + 1,
+                        reason,
+                    });
+                }
+            }
+        }
+        let mut manifest = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&manifest_path)
+            .map_err(|e| io("open", &manifest_path, e))?;
+        if existing.is_empty() {
+            writeln!(manifest, "{MANIFEST_HEADER}").map_err(|e| io("write", &manifest_path, e))?;
+        }
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            manifest_path,
+            manifest,
+            keys,
+            written: 0,
+            written_per_terrain: Default::default(),
+            written_per_gait: Default::default(),
+            duplicates: 0,
+        })
+    }
+
+    /// Writes one step's image and its manifest line; `false` when the manifest has it already.
+    /// The image is written to a temporary name and renamed, and the manifest line appended
+    /// after it, so a failure (a full disk) leaves every earlier image and line intact.
+    pub fn add(&mut self, c: &CapturedStep, source: &str) -> Result<bool, CaptureError> {
+        // Commas would break the manifest's columns.
+        let source = source.replace([',', '\n'], "_");
+        let key = (source.clone(), c.foot, c.step, c.touchdown_us);
+        if self.keys.contains(&key) {
+            self.duplicates += 1;
+            return Ok(false);
+        }
+        let class_dir = self.dir.join(c.terrain.name());
+        std::fs::create_dir_all(&class_dir).map_err(|e| io("create the folder", &class_dir, e))?;
+        let stem: String = Path::new(&source)
+            .file_stem()
+            .map(|s| s.to_string_lossy().to_string())
+            .unwrap_or_else(|| "run".into())
+            .chars()
+            .map(|ch| {
+                if ch.is_ascii_alphanumeric() || ch == '-' {
+                    ch
+                } else {
+                    '_'
+                }
+            })
+            .collect();
+        let name = format!("{stem}_f{}_s{:05}_{}.pgm", c.foot, c.step, c.touchdown_us);
+        let path = class_dir.join(&name);
+        let tmp = class_dir.join(format!(".{name}.tmp"));
+        if let Err(e) = write_pgm(&c.image, &tmp) {
+            let _ = std::fs::remove_file(&tmp);
+            return Err(io("write", &path, e));
+        }
+        std::fs::rename(&tmp, &path).map_err(|e| io("write", &path, e))?;
+        let line = format!(
+            "{}/{name},{},{},{},{},{},{},{:.1},{source},{}\n",
+            c.terrain.name(),
+            c.terrain.name(),
+            c.foot,
+            c.step,
+            format_seconds(c.touchdown_us),
+            format_seconds(c.sample_us),
+            c.load_sum,
+            c.damage_pct,
+            c.gait.map(|g| g.to_string()).unwrap_or_default(),
+        );
+        self.manifest
+            .write_all(line.as_bytes())
+            .and_then(|_| self.manifest.flush())
+            .map_err(|e| io("append to", &self.manifest_path, e))?;
+        self.keys.insert(key);
+        self.written += 1;
+        *self
+            .written_per_terrain
+            .entry(c.terrain.name().to_string())
+            .or_default() += 1;
+        *self.written_per_gait.entry(c.gait).or_default() += 1;
+        Ok(true)
+    }
+
+    /// Steps the folder's manifest holds (earlier captures included).
+    pub fn len(&self) -> usize {
+        self.keys.len()
+    }
+
+    /// The manifest holds no step.
+    pub fn is_empty(&self) -> bool {
+        self.keys.is_empty()
+    }
+}

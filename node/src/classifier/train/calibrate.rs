@@ -1,0 +1,539 @@
+//! Calibrating the rejection on images the fit never saw: the novelty score's threshold per
+//! class, from a second run or held-out images of the training run.
+
+use super::*;
+
+/// Most calibration images per class kept in a model file (each is a working image: 41x38
+/// pixels are about 6 kB of JSON).
+pub const MAX_CALIBRATION_PER_CLASS: usize = 40;
+
+/// Fewest unused images of the training run per class for `SameRun` calibration; below, the
+/// stored samples calibrate, each left out of its own neighbours.
+pub const MIN_SAME_RUN_PER_CLASS: usize = 5;
+
+/// Why calibration images cannot calibrate a model.
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+pub enum CalibrateError {
+    /// No images.
+    #[error(
+        "calibration run {run} holds no images of the model's terrains: give a run (a capture \
+         folder or candump capture) of terrains the model knows"
+    )]
+    Empty {
+        /// The run(s), as named by the caller.
+        run: String,
+    },
+    /// An image of a terrain the model does not know.
+    #[error(
+        "calibration run {run} has images of `{class}`, which the model was not trained on: \
+         calibrate only on terrains the model knows (remove that folder, or retrain with it)"
+    )]
+    UnknownClass {
+        /// The run(s).
+        run: String,
+        /// The class.
+        class: String,
+    },
+    /// An image of another size or depth.
+    #[error(
+        "calibration run {run}: a {rows}x{cols} {bits}-bit image, but the model takes \
+         {want_rows}x{want_cols} {want_bits}-bit images: calibrate on the robot's own sensor"
+    )]
+    Size {
+        /// The run(s).
+        run: String,
+        /// Rows of the image.
+        rows: usize,
+        /// Columns.
+        cols: usize,
+        /// Bits.
+        bits: u8,
+        /// Rows the model takes.
+        want_rows: usize,
+        /// Columns the model takes.
+        want_cols: usize,
+        /// Bits the model takes.
+        want_bits: u8,
+    },
+    /// No image shows contact.
+    #[error(
+        "calibration run {run}: none of its {n} images shows a foot on the ground (the model's \
+         minimum contact): are they stance images of the same foot?"
+    )]
+    NoContact {
+        /// The run(s).
+        run: String,
+        /// Images given.
+        n: usize,
+    },
+}
+
+/// Calibrates `model`'s novelty thresholds on images of other runs than its stored samples (the
+/// robot's next recording of the same terrains): `images` with their class names, `runs` the
+/// runs' names (kept in the model and named in errors). The thresholds are the model's
+/// `unknown_rate` quantile of these images' novelty and of the training run's unused ones, with
+/// no margin; at most [`MAX_CALIBRATION_PER_CLASS`] images per terrain are used (the model
+/// file keeps them), the first ones given. Returns the calibration's check (the share of the
+/// images classified right that are called unknown).
+///
+/// Measured and not taken: the cap's images spread evenly through the run instead of its
+/// first ones (a run is recorded in time, and a lab may walk its gaits in blocks). On
+/// `scripts/unseen_gait.sh`'s runs (seeds 1-3, nine models of two gaits each) with the
+/// calibration run's stances in two gait blocks, so that the first 40 per terrain are all of
+/// the first gait: the next run's known stances called unknown 0.6-2.9% (mean 2.0%) with the
+/// first ones, 0.2-5.0% (2.3%) spread; the unseen gait's 0.4-3.3% (2.0%) against 0.4-4.2%
+/// (2.3%). Load-normalised, one gait's stances calibrate the others'.
+pub fn calibrate_on_runs(
+    model: &mut Model,
+    images: &[(&PressureImage, &str)],
+    runs: &[String],
+) -> Result<f64, CalibrateError> {
+    let run = if runs.is_empty() {
+        "(unnamed)".to_string()
+    } else {
+        runs.join(", ")
+    };
+    if images.is_empty() {
+        return Err(CalibrateError::Empty { run });
+    }
+    let want_bits = model.bits.unwrap_or(images[0].0.bits);
+    let mut pixels = Vec::with_capacity(images.len());
+    let mut classes = Vec::with_capacity(images.len());
+    let mut per_class = vec![0usize; model.classes.len()];
+    for (img, name) in images {
+        let k = model
+            .classes
+            .iter()
+            .position(|c| c.name == *name)
+            .ok_or_else(|| CalibrateError::UnknownClass {
+                run: run.clone(),
+                class: name.to_string(),
+            })?;
+        let size_err = || CalibrateError::Size {
+            run: run.clone(),
+            rows: img.rows,
+            cols: img.cols,
+            bits: img.bits,
+            want_rows: model.input_rows,
+            want_cols: model.input_cols,
+            want_bits,
+        };
+        if (img.rows, img.cols, img.bits) != (model.input_rows, model.input_cols, want_bits) {
+            return Err(size_err());
+        }
+        if per_class[k] >= MAX_CALIBRATION_PER_CLASS {
+            continue;
+        }
+        per_class[k] += 1;
+        pixels.push(
+            preprocess(img, &model.crop, model.downsample)
+                .ok_or_else(size_err)?
+                .pixels,
+        );
+        classes.push(k);
+    }
+    let held_out = pixels.len();
+    // With the training run's unused images too: more images for the tails, and both kinds
+    // of spread (within a run, across runs) in one calibration. (Not again after an earlier
+    // calibration on runs: those images would count twice.)
+    if let Some(nv) = model
+        .novelty
+        .as_ref()
+        .filter(|n| n.calibration.source == CalibrationSource::SameRun)
+    {
+        pixels.extend(nv.calibration.pixels.iter().cloned());
+        classes.extend(nv.calibration.classes.iter().copied());
+    }
+    let n = pixels.len();
+    let score = model
+        .novelty
+        .as_ref()
+        .map_or(NoveltyScore::KnnResidual, |nv| nv.score);
+    set_novelty(
+        model,
+        pixels,
+        classes,
+        CalibrationSource::HeldOutRuns,
+        runs.to_vec(),
+        1.0,
+        held_out,
+        score,
+    );
+    match &model.novelty {
+        Some(nv) => Ok(nv.calibration.called_unknown),
+        None => Err(CalibrateError::NoContact { run, n }),
+    }
+}
+
+/// Calibrates `model`'s novelty again, on the images it was calibrated on, for another
+/// `score` (nothing without a novelty score).
+pub fn rescore(model: &mut Model, score: NoveltyScore) {
+    if let Some(nv) = model.novelty.clone() {
+        let c = nv.calibration;
+        set_novelty(
+            model,
+            c.pixels,
+            c.classes,
+            c.source,
+            c.runs,
+            c.margin,
+            c.held_out_images,
+            score,
+        );
+    }
+}
+
+/// Fits the novelty `score` of `model` (class spreads from its stored samples) and calibrates
+/// its thresholds on the working images `pixels` of classes `classes` (empty with
+/// `LeaveOneOut`: the stored images, each left out of its own neighbours). Images without
+/// contact are left out; with none left, the model keeps no novelty score (the density rule
+/// decides).
+#[allow(clippy::too_many_arguments)]
+pub(super) fn set_novelty(
+    model: &mut Model,
+    pixels: Vec<Vec<u16>>,
+    classes: Vec<usize>,
+    source: CalibrationSource,
+    runs: Vec<String>,
+    margin: f64,
+    held_out: usize,
+    score: NoveltyScore,
+) {
+    let n_classes = model.classes.len();
+    let k = NOVELTY_K;
+    let spread = class_spreads(model, k);
+    let rate = model.unknown_rate.unwrap_or(0.0);
+    let provisional = Novelty {
+        score,
+        k,
+        class_spread: spread,
+        residual_scale: vec![1.0; n_classes],
+        thresholds: vec![f64::MAX; n_classes],
+        calibration: Calibration {
+            source,
+            runs,
+            images: 0,
+            rate,
+            margin,
+            called_unknown: 0.0,
+            misclassified: 0.0,
+            pixels: Vec::new(),
+            classes: Vec::new(),
+            held_out_images: 0,
+        },
+        reference: Vec::new(),
+        reference_classes: Vec::new(),
+        nuisance: Vec::new(),
+    };
+    let mut m = model.clone();
+    m.novelty = Some(provisional.clone());
+    m.images = None;
+    let mut cls = crate::classifier::Classifier::new(m);
+    // (best class, kNN distance, residual) per calibration image in contact and classified
+    // right. A known image taken for another terrain is an error of the classifier, not a
+    // known image that looks unusual: kept, it set its wrong class's threshold (measured: a
+    // fresh sandpaper_220 run decided as sandpaper_150 raised 150's threshold from 1.0 to 2.9,
+    // and a left-out grit passed as 150 unseen).
+    let mut parts: Vec<(usize, f64, f64)> = Vec::new();
+    let mut wrong = 0usize;
+    let (mut reference, mut reference_classes) = (Vec::new(), Vec::new());
+    let mut residuals: Vec<Vec<f64>> = Vec::new();
+    let loo = source == CalibrationSource::LeaveOneOut;
+    let labels: &[usize] = if loo { &model.sample_classes } else { &classes };
+    let images: &[Vec<u16>] = match (&model.images, loo) {
+        (Some(stored), true) => &stored.pixels,
+        (None, true) => &[],
+        (_, false) => &pixels,
+    };
+    for (i, p) in images.iter().enumerate() {
+        cls.exclude_sample(loo.then_some(i));
+        let d = cls.classify_work(p);
+        if d.contact && d.best != labels[i] {
+            wrong += 1;
+        } else if d.contact {
+            let (knn, res) = cls.novelty_parts();
+            if knn.is_finite() && res.is_finite() {
+                parts.push((d.best, knn, res));
+            }
+            // A held-out run's known image: a reference for the next run (see the module docs
+            // of `novelty`). Scored above without the references: conservatively, as an image
+            // of a run the model has not seen.
+            if !loo && i < held_out && source == CalibrationSource::HeldOutRuns {
+                reference.extend_from_slice(cls.projection());
+                reference_classes.push(d.best);
+                residuals.push(residual_vector(&model.pca_matrix, model.h, cls.centred()));
+            }
+        }
+    }
+    if parts.is_empty() {
+        model.novelty = None;
+        return;
+    }
+    // Calibration images of a held-out run are scored as a run the model has never seen; the
+    // next run is scored with them as references, and comes out less novel: the quantile is
+    // taken at a measured multiple of the rate asked (see [`HELD_OUT_RATE_FACTOR`]).
+    let cal_rate = if reference_classes.is_empty() {
+        rate
+    } else {
+        (rate * HELD_OUT_RATE_FACTOR).min(crate::classifier::model::MAX_UNKNOWN_RATE)
+    };
+    let mut nv = provisional;
+    let of_class = |k: usize, f: &dyn Fn(&(usize, f64, f64)) -> f64| -> Vec<f64> {
+        parts.iter().filter(|p| p.0 == k).map(f).collect()
+    };
+    let mut all_res: Vec<f64> = parts.iter().map(|p| p.2).collect();
+    let pooled_res = median(&mut all_res);
+    for kk in 0..n_classes {
+        let mut r = of_class(kk, &|p| p.2);
+        let m = if r.len() >= 3 {
+            median(&mut r)
+        } else {
+            pooled_res
+        };
+        nv.residual_scale[kk] = positive(m, pooled_res);
+    }
+    // Each part's unit is then stretched to its own tail, so that the `1 - rate` quantile of
+    // either part alone is 1: neither decides by its tail alone. Measured (presrs experiment
+    // open-set, seeds 2-4): without it, the residual's long tail on a new sensor serial set the
+    // pooled threshold and a left-out static terrain went unnoticed (75% called unknown, 100%
+    // with it).
+    {
+        let q = 1.0 - cal_rate;
+        let mut zk: Vec<f64> = parts
+            .iter()
+            .map(|&(b, knn, _)| knn / nv.class_spread[b])
+            .collect();
+        let mut zr: Vec<f64> = parts
+            .iter()
+            .map(|&(b, _, r)| r / nv.residual_scale[b])
+            .collect();
+        let (qk, qr) = (upper_quantile(&mut zk, q), upper_quantile(&mut zr, q));
+        for v in nv.class_spread.iter_mut() {
+            *v *= positive(qk, 1.0);
+        }
+        for v in nv.residual_scale.iter_mut() {
+            *v *= positive(qr, 1.0);
+        }
+    }
+    let scores: Vec<f64> = parts
+        .iter()
+        .map(|&(b, knn, res)| nv.score_of(b, knn, res))
+        .collect();
+    let q = 1.0 - cal_rate;
+    let pooled = upper_quantile(&mut scores.clone(), q);
+    for kk in 0..n_classes {
+        let mut v: Vec<f64> = parts
+            .iter()
+            .zip(&scores)
+            .filter(|(p, _)| p.0 == kk)
+            .map(|(_, s)| *s)
+            .collect();
+        // The class's own quantile, shrunk toward the pooled one by its count: with 30
+        // images, the 98% quantile is the largest one, and a class's threshold was then as
+        // noisy as its one most unusual image (measured: per-class quantiles alone called
+        // 8.9% of a fresh static run unknown, the blend 2.5%).
+        let t = if v.is_empty() {
+            pooled
+        } else {
+            let w = v.len() as f64 / (v.len() as f64 + SHRINK_IMAGES);
+            w * upper_quantile(&mut v, q) + (1.0 - w) * pooled
+        };
+        nv.thresholds[kk] = margin * positive(t, 1.0);
+    }
+    let above = parts
+        .iter()
+        .zip(&scores)
+        .filter(|(p, s)| **s > nv.thresholds[p.0])
+        .count();
+    nv.calibration.images = parts.len() + wrong;
+    nv.calibration.called_unknown = above as f64 / parts.len() as f64;
+    nv.calibration.misclassified = wrong as f64 / (parts.len() + wrong) as f64;
+    if !loo {
+        nv.calibration.pixels = pixels;
+        nv.calibration.classes = classes;
+        nv.calibration.held_out_images = held_out;
+    }
+    nv.calibration.rate = cal_rate;
+    nv.reference = reference;
+    nv.reference_classes = reference_classes;
+    nv.nuisance = nuisance_directions(&residuals, NUISANCE_DIRECTIONS);
+    model.novelty = Some(nv);
+}
+
+/// The part of the centred feature vector `c` outside the span of the PCA rows `u` (h rows),
+/// in f64: the nuisance directions are fitted on it once per calibration.
+pub(super) fn residual_vector(u: &[f32], h: usize, c: &[f32]) -> Vec<f64> {
+    let n = c.len();
+    let mut e: Vec<f64> = c.iter().map(|&v| v as f64).collect();
+    for j in 0..h {
+        let row = &u[j * n..(j + 1) * n];
+        let a: f64 = row.iter().zip(c).map(|(&w, &v)| w as f64 * v as f64).sum();
+        for (x, &w) in e.iter_mut().zip(row) {
+            *x -= a * w as f64;
+        }
+    }
+    e
+}
+
+/// The `r` leading right singular vectors of the residual vectors (rows), as f32 rows: the
+/// directions outside the PCA subspace along which the held-out runs' known images lie (no more
+/// than there are images: their span is all they show).
+pub(super) fn nuisance_directions(residuals: &[Vec<f64>], r: usize) -> Vec<f32> {
+    if r == 0 || residuals.is_empty() {
+        return Vec::new();
+    }
+    let n = residuals[0].len();
+    let e = DMatrix::<f64>::from_fn(residuals.len(), n, |i, j| residuals[i][j]);
+    let svd = e.svd(false, true);
+    let Some(v_t) = svd.v_t else {
+        return Vec::new();
+    };
+    let mut order: Vec<usize> = (0..svd.singular_values.len()).collect();
+    order.sort_by(|&a, &b| svd.singular_values[b].total_cmp(&svd.singular_values[a]));
+    let tol = svd.singular_values.max() * 1e-9;
+    let mut out = Vec::with_capacity(r * n);
+    for &axis in order
+        .iter()
+        .take(r)
+        .take_while(|&&a| svd.singular_values[a] > tol)
+    {
+        out.extend((0..n).map(|k| v_t[(axis, k)] as f32));
+    }
+    out
+}
+
+/// `v` when it is a positive number, else `fallback` (else 1).
+pub(super) fn positive(v: f64, fallback: f64) -> f64 {
+    if v.is_finite() && v > 0.0 {
+        v
+    } else if fallback.is_finite() && fallback > 0.0 {
+        fallback
+    } else {
+        1.0
+    }
+}
+
+/// Per class, the median over its stored samples of the mean distance to the `k` nearest other
+/// stored samples of the class (the kNN ratio's unit).
+pub(super) fn class_spreads(m: &Model, k: usize) -> Vec<f64> {
+    let h = m.h;
+    let n = m.n_samples();
+    let mut per: Vec<Vec<f64>> = vec![Vec::new(); m.classes.len()];
+    let mut d = Vec::with_capacity(n);
+    for i in 0..n {
+        let c = m.sample_classes[i];
+        d.clear();
+        d.extend(
+            (0..n)
+                .filter(|&j| j != i && m.sample_classes[j] == c)
+                .map(|j| {
+                    sq_dist(
+                        &m.samples[i * h..(i + 1) * h],
+                        &m.samples[j * h..(j + 1) * h],
+                    )
+                    .sqrt()
+                }),
+        );
+        if d.is_empty() {
+            continue;
+        }
+        d.sort_by(f64::total_cmp);
+        let kk = k.min(d.len());
+        per[c].push(d[..kk].iter().sum::<f64>() / kk as f64);
+    }
+    let mut all: Vec<f64> = per.iter().flatten().copied().collect();
+    let pooled = median(&mut all);
+    per.iter_mut()
+        .map(|v| {
+            let md = median(v);
+            positive(md, pooled)
+        })
+        .collect()
+}
+
+/// The unknown thresholds, one per class, calibrated on held-out images: each stored sample's
+/// log density under its own class without it (leave-one-out: held out from the kernel sum, as
+/// a new image of its terrain would be). A class's threshold is the `unknown_rate` quantile of
+/// its samples' densities, so about that share of its images falls below it.
+///
+/// Per class, because the classes' spreads differ: measured leave-one-terrain-out on the
+/// simulator (`presrs experiment openset`), one threshold for all classes ranked a left-out
+/// terrain below the known test images no better than chance (mean AUROC 0.65 static, 0.80
+/// sandpaper, 0.52 dynamic), per-class ones 0.93, 0.84 and 0.76: a tight class's unusual image
+/// is as dense as a loose class's typical one.
+///
+/// Without a rate (0, or an older model): for every class the lowest density of any sample
+/// less 10 nats (22,000 times less dense than the least typical training image), which rejects
+/// almost nothing: the paper's classifier, which had no rejection.
+/// Returns the thresholds and their minimum (the model's overall `unknown_threshold`).
+pub(super) fn unknown_thresholds(m: &Model) -> (Vec<f64>, f64) {
+    let lo = loo_log_densities(m);
+    let mut per: Vec<Vec<f64>> = vec![Vec::new(); m.classes.len()];
+    for (d, &k) in lo.iter().zip(&m.sample_classes) {
+        if d.is_finite() {
+            per[k].push(*d);
+        }
+    }
+    let lowest = lo
+        .iter()
+        .copied()
+        .filter(|d| d.is_finite())
+        .fold(f64::INFINITY, f64::min);
+    let t: Vec<f64> = per
+        .iter_mut()
+        .enumerate()
+        .map(|(k, v)| {
+            if v.is_empty() {
+                return f64::NEG_INFINITY;
+            }
+            v.sort_by(f64::total_cmp);
+            match m.unknown_rate {
+                Some(r) if r > 0.0 => {
+                    // Images strictly below v[k] are unknown: k of n, at most the rate.
+                    let q = v[((r * v.len() as f64).floor() as usize).min(v.len() - 1)];
+                    widen(m, k, q)
+                }
+                _ => lowest - 10.0,
+            }
+        })
+        .collect();
+    let min = t.iter().copied().fold(f64::INFINITY, f64::min);
+    (
+        t,
+        if min.is_finite() {
+            min
+        } else {
+            f64::NEG_INFINITY
+        },
+    )
+}
+
+/// Each stored sample's leave-one-out log density under its own class, in the samples' order
+/// (`-inf` for a sample alone in its class).
+pub fn loo_log_densities(m: &Model) -> Vec<f64> {
+    let h = m.h;
+    let s2 = 2.0 * m.kernel_width * m.kernel_width;
+    let mut out = Vec::with_capacity(m.n_samples());
+    for i in 0..m.n_samples() {
+        let k = m.sample_classes[i];
+        let others: Vec<f64> = (0..m.n_samples())
+            .filter(|&j| j != i && m.sample_classes[j] == k)
+            .map(|j| {
+                -sq_dist(
+                    &m.samples[i * h..(i + 1) * h],
+                    &m.samples[j * h..(j + 1) * h],
+                ) / s2
+            })
+            .collect();
+        if others.is_empty() {
+            out.push(f64::NEG_INFINITY);
+            continue;
+        }
+        let mx = others.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+        let ld = mx + others.iter().map(|e| (e - mx).exp()).sum::<f64>().ln()
+            - (others.len() as f64).ln()
+            - 0.5 * h as f64 * (std::f64::consts::PI * s2).ln();
+        out.push(ld);
+    }
+    out
+}

@@ -1,0 +1,509 @@
+//! Fitting a model to labelled images: the split, PCA, the kernel width chosen on V, the stored
+//! samples (sections 4.2 and 7.2).
+
+use super::*;
+
+/// Why a training request cannot be met.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum TrainError {
+    /// A class has too few images.
+    #[error("class `{class}` has {have} images; training needs at least --per-class {need}")]
+    TooFew {
+        /// The class.
+        class: String,
+        /// Images it has.
+        have: usize,
+        /// Images needed (`per_class`).
+        need: usize,
+    },
+    #[error(
+        "--train {train} must be at least 1 and below --per-class {per_class} (the rest validate)"
+    )]
+    /// `train` is 0 or not below `per_class`.
+    BadSplit {
+        /// Images to train on.
+        train: usize,
+        /// Images per class.
+        per_class: usize,
+    },
+    /// A downsampling factor outside 1..=MAX_DOWNSAMPLE.
+    #[error("--downsample {0}: use 1 (full resolution) to {MAX_DOWNSAMPLE}")]
+    Downsample(usize),
+    /// An unknown rate outside 0..=MAX_UNKNOWN_RATE (the model file would not load).
+    #[error("--unknown-rate {0}: use a share from 0 to {MAX_UNKNOWN_RATE} (0.02 is 2%)")]
+    UnknownRate(f64),
+    /// Too few or too many classes.
+    #[error("{0} classes; a model holds 2 to {MAX_CLASSES}")]
+    Classes(usize),
+    #[error(
+        "images of {a} and {b} differ in size; give a --crop that makes them equal, or use one sensor size"
+    )]
+    /// Two images differ in size after the crop.
+    Sizes {
+        /// One image.
+        a: String,
+        /// The other.
+        b: String,
+    },
+    /// The crop removes the whole image.
+    #[error("crop {crop:?} leaves nothing of a {rows}x{cols} image")]
+    Crop {
+        /// The crop.
+        crop: Crop,
+        /// Image rows.
+        rows: usize,
+        /// Image columns.
+        cols: usize,
+    },
+    /// The PCA did not converge.
+    #[error("the PCA did not converge (are all images identical?)")]
+    Pca,
+}
+
+/// One labelled image.
+pub struct Labelled<'a> {
+    /// The image.
+    pub image: &'a PressureImage,
+    /// Its class index.
+    pub class: usize,
+}
+
+/// What was used for what, by index into the input.
+#[derive(Clone, Debug, Default)]
+pub struct Split {
+    /// Indices of the training images.
+    pub train: Vec<usize>,
+    /// Indices of the validation images.
+    pub validation: Vec<usize>,
+    /// Indices of the images left for testing.
+    pub test: Vec<usize>,
+}
+
+/// Crop, then keep every `downsample`-th row and column: the working image.
+pub(crate) fn preprocess(
+    img: &PressureImage,
+    crop: &Crop,
+    downsample: usize,
+) -> Option<PressureImage> {
+    let c = img.crop(crop)?;
+    Some(if downsample > 1 {
+        c.downsample(downsample)
+    } else {
+        c
+    })
+}
+
+/// Trains a model on `data` (the paper's section 4 and 7.2): per class `per_class` random images, `train` of them for PCA and the Parzen samples, the rest to choose the kernel width; returns the model and the split.
+pub fn train(
+    data: &[Labelled<'_>],
+    classes: &[ClassInfo],
+    o: &TrainOptions,
+) -> Result<(Model, Split), TrainError> {
+    let (m, _, split) = train_variants(data, classes, o, false)?;
+    Ok((m, split))
+}
+
+/// [`train`], and the same model at the most PCA dimensions (`Dims::Max`: `o` with `--dims
+/// 52`), from one PCA: what `crate::training::choice` compares, at the cost of one fit. The
+/// second is `None` where `o` fixes the dimensions.
+pub fn train_with_max_dims(
+    data: &[Labelled<'_>],
+    classes: &[ClassInfo],
+    o: &TrainOptions,
+) -> Result<(Model, Option<Model>, Split), TrainError> {
+    train_variants(data, classes, o, true)
+}
+
+pub(super) fn train_variants(
+    data: &[Labelled<'_>],
+    classes: &[ClassInfo],
+    o: &TrainOptions,
+    with_max: bool,
+) -> Result<(Model, Option<Model>, Split), TrainError> {
+    if classes.len() < 2 || classes.len() > MAX_CLASSES {
+        return Err(TrainError::Classes(classes.len()));
+    }
+    o.check()?;
+    // An expert's `--unknown-checks` list sets its parts (the flags' pins stay on).
+    let with_list;
+    let o = match &o.unknown_checks {
+        crate::classifier::options::UnknownChecks::Fixed(c) => {
+            with_list = o.with_candidate(c);
+            &with_list
+        }
+        crate::classifier::options::UnknownChecks::Auto => o,
+    };
+    let (rows, cols, bits) = (data[0].image.rows, data[0].image.cols, data[0].image.bits);
+    for d in data {
+        if (d.image.rows, d.image.cols, d.image.bits) != (rows, cols, bits) {
+            return Err(TrainError::Sizes {
+                a: format!("{rows}x{cols} {bits}-bit"),
+                b: format!("{}x{} {}-bit", d.image.rows, d.image.cols, d.image.bits),
+            });
+        }
+    }
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(o.seed);
+    let mut split = Split::default();
+    for (k, c) in classes.iter().enumerate() {
+        let mut idx: Vec<usize> = (0..data.len()).filter(|&i| data[i].class == k).collect();
+        if idx.len() < o.per_class {
+            return Err(TrainError::TooFew {
+                class: c.name.clone(),
+                have: idx.len(),
+                need: o.per_class,
+            });
+        }
+        idx.shuffle(&mut rng);
+        split.train.extend_from_slice(&idx[..o.train]);
+        split
+            .validation
+            .extend_from_slice(&idx[o.train..o.per_class]);
+        split.test.extend_from_slice(&idx[o.per_class..]);
+    }
+    let prep = |i: usize| {
+        preprocess(data[i].image, &o.crop, o.downsample).ok_or(TrainError::Crop {
+            crop: o.crop,
+            rows,
+            cols,
+        })
+    };
+    let tv: Vec<usize> = split
+        .train
+        .iter()
+        .chain(&split.validation)
+        .copied()
+        .collect();
+    let work: Vec<Vec<u16>> = tv
+        .iter()
+        .map(|&i| prep(i).map(|p| p.pixels))
+        .collect::<Result<_, _>>()?;
+    let labels: Vec<usize> = tv.iter().map(|&i| data[i].class).collect();
+    let fitted = fit(
+        &work,
+        &labels,
+        split.train.len(),
+        classes.len(),
+        o.normalize_load,
+        o.h,
+    );
+    let hash = |is: &[usize]| {
+        is.iter()
+            .map(|&i| data[i].image.content_hash())
+            .collect::<Vec<_>>()
+    };
+    let mut model = Model {
+        version: MODEL_VERSION,
+        classes: classes.to_vec(),
+        input_rows: rows,
+        input_cols: cols,
+        crop: o.crop,
+        downsample: o.downsample,
+        normalize_load: None,
+        n_fft: 0,
+        h: 0,
+        pca_mean: Vec::new(),
+        pca_matrix: Vec::new(),
+        samples: Vec::new(),
+        sample_classes: labels,
+        kernel_width: 1.0,
+        unknown_threshold: f64::NEG_INFINITY,
+        unknown_rate: Some(o.unknown_rate),
+        unknown_thresholds: None,
+        load_ranges: None,
+        texture_ranges: None,
+        train_hashes: hash(&split.train),
+        val_hashes: hash(&split.validation),
+        contact: Some(MinContact::of_training(&work)),
+        bits: Some(bits),
+        images: Some(StoredImages {
+            n_train: split.train.len(),
+            pixels: work,
+        }),
+        novelty: None,
+        energy: None,
+        gaits: None,
+        unknown_choice: None,
+    };
+    let (fitted, fitted_max) = fitted?;
+    let max_model = (with_max && o.h.is_none()).then(|| {
+        let mut m = model.clone();
+        fitted_max.install(&mut m);
+        m
+    });
+    fitted.install(&mut model);
+    let model = finish(model, data, classes, o, &split, &prep)?;
+    let max_model = match max_model {
+        Some(m) => Some(finish(m, data, classes, o, &split, &prep)?),
+        None => None,
+    };
+    Ok((model, max_model, split))
+}
+
+/// What [`train`] adds to a fitted model: the checks `o` asks for and the novelty's
+/// calibration on the training run's unused images (`split.test`).
+pub(super) fn finish(
+    mut model: Model,
+    data: &[Labelled<'_>],
+    classes: &[ClassInfo],
+    o: &TrainOptions,
+    split: &Split,
+    prep: &dyn Fn(usize) -> Result<PressureImage, TrainError>,
+) -> Result<Model, TrainError> {
+    if o.check_load {
+        add_load_check(&mut model);
+    }
+    if o.check_texture {
+        add_texture_check(&mut model, data.iter().map(|l| (l.image, l.class)));
+    }
+    // The paper's classifier had no rejection: a rate of 0 keeps the density rule, which
+    // rejects almost nothing.
+    if o.unknown_rate > 0.0 {
+        // The training run's images the model does not store, as many per class as fit in the
+        // file; with too few, the stored samples themselves, each left out in turn.
+        let mut per_class = vec![0usize; classes.len()];
+        let mut cal = Vec::new();
+        for &i in &split.test {
+            let k = data[i].class;
+            if per_class[k] < MAX_CALIBRATION_PER_CLASS {
+                per_class[k] += 1;
+                cal.push((prep(i)?.pixels, k));
+            }
+        }
+        let source = if per_class.iter().all(|&n| n >= MIN_SAME_RUN_PER_CLASS) {
+            CalibrationSource::SameRun
+        } else {
+            cal.clear();
+            CalibrationSource::LeaveOneOut
+        };
+        let (pixels, cls): (Vec<_>, Vec<_>) = cal.into_iter().unzip();
+        set_novelty(
+            &mut model,
+            pixels,
+            cls,
+            source,
+            Vec::new(),
+            SAME_RUN_MARGIN,
+            0,
+            o.score(),
+        );
+    }
+    Ok(model)
+}
+
+/// What [`fit`] computes: everything of a model that depends on the stored images.
+pub(super) struct Fitted {
+    normalize_load: Option<f64>,
+    n_fft: usize,
+    h: usize,
+    pca_mean: Vec<f32>,
+    pca_matrix: Vec<f32>,
+    samples: Vec<f32>,
+    kernel_width: f64,
+}
+
+impl Fitted {
+    pub(super) fn install(self, m: &mut Model) {
+        m.normalize_load = self.normalize_load;
+        m.n_fft = self.n_fft;
+        m.h = self.h;
+        m.pca_mean = self.pca_mean;
+        m.pca_matrix = self.pca_matrix;
+        m.samples = self.samples;
+        m.kernel_width = self.kernel_width;
+        let (per_class, min) = unknown_thresholds(m);
+        m.unknown_threshold = min;
+        m.unknown_thresholds = Some(per_class);
+    }
+}
+
+/// Features, PCA, and the choice of h and kernel width on V, for working images `work` (T then
+/// V; the first `n_t` are T) with class `labels`; second, the model at the most dimensions
+/// (`Dims::Max`, with its own best kernel width), from the same SVD and the same search.
+pub(super) fn fit(
+    work: &[Vec<u16>],
+    labels: &[usize],
+    n_t: usize,
+    n_classes: usize,
+    normalize: bool,
+    dims: Option<usize>,
+) -> Result<(Fitted, Fitted), TrainError> {
+    let n_px = work[0].len();
+    let total = |p: &[u16]| p.iter().map(|&v| v as f64).sum::<f64>();
+    let normalize_load =
+        normalize.then(|| work.iter().map(|p| total(p)).sum::<f64>() / work.len() as f64);
+    let mut fx = FeatureExtractor::new(n_px);
+    let n = fx.feature_len();
+    let mut x = DMatrix::<f64>::zeros(work.len(), n);
+    for (row, p) in work.iter().enumerate() {
+        let scale = match normalize_load {
+            Some(t) if total(p) > 0.0 => (t / total(p)) as f32,
+            _ => 1.0,
+        };
+        let f = fx.features(p, scale);
+        for (j, v) in f.iter().enumerate() {
+            x[(row, j)] = *v as f64;
+        }
+    }
+    let mean = x.row_mean();
+    for mut r in x.row_iter_mut() {
+        r -= &mean;
+    }
+    let svd = x.clone().svd(false, true);
+    let v_t = svd.v_t.ok_or(TrainError::Pca)?;
+    let tol = svd.singular_values.max() * 1e-9;
+    let rank = svd
+        .singular_values
+        .iter()
+        .filter(|s| **s > tol)
+        .count()
+        .max(1);
+    // PCA axes up to the paper's 52 (or --dims), as far as the rank allows.
+    let h_max = dims.unwrap_or(52).min(rank).max(1);
+    // Rows of V^T are the principal axes, sorted by singular value.
+    let mut order: Vec<usize> = (0..svd.singular_values.len()).collect();
+    order.sort_by(|&a, &b| svd.singular_values[b].total_cmp(&svd.singular_values[a]));
+    let mut u = vec![0f32; h_max * n];
+    for (j, &axis) in order.iter().take(h_max).enumerate() {
+        for k in 0..n {
+            u[j * n + k] = v_t[(axis, k)] as f32;
+        }
+    }
+    // Project T and V on all h_max axes once; a smaller h uses the leading coordinates.
+    let mut proj = vec![0f32; work.len() * h_max];
+    for row in 0..work.len() {
+        for j in 0..h_max {
+            let mut acc = 0.0f64;
+            for k in 0..n {
+                acc += x[(row, k)] * u[j * n + k] as f64;
+            }
+            proj[row * h_max + j] = acc as f32;
+        }
+    }
+    // Model selection on V (section 4.2: training determines h and the kernel): every candidate
+    // h (or only --dims), and for each a log-spaced grid of kernel widths around the typical
+    // nearest-neighbour distance in T. Score: validation accuracy, then the summed validation
+    // log-posterior of the true class; ties go to the wider kernel.
+    let candidates: Vec<usize> = match dims {
+        Some(_) => vec![h_max],
+        None => {
+            let mut c: Vec<usize> = [1, 2, 3, 4, 6, 8, 12, 16, 24, 32, 52]
+                .into_iter()
+                .filter(|&h| h < h_max)
+                .collect();
+            c.push(h_max);
+            c
+        }
+    };
+    let mut best = (f64::NEG_INFINITY, h_max, 1.0f64);
+    // The best kernel width at h_max alone: the `Dims::Max` model, from the same SVD.
+    let mut best_max = (f64::NEG_INFINITY, h_max, 1.0f64);
+    for &h in &candidates {
+        let t_proj: Vec<f32> = (0..n_t)
+            .flat_map(|r| proj[r * h_max..r * h_max + h].iter().copied())
+            .collect();
+        let nn = median_nn_distance(&t_proj, h);
+        for step in -16..=8 {
+            let sigma = nn * 2f64.powf(step as f64 / 2.0);
+            let mut correct = 0;
+            let mut margin = 0.0;
+            for v in n_t..work.len() {
+                let q = &proj[v * h_max..v * h_max + h];
+                let (best_k, lp) =
+                    parzen(&t_proj, &labels[..n_t], q, h, sigma, n_classes, labels[v]);
+                correct += (best_k == labels[v]) as usize;
+                margin += lp.max(-50.0);
+            }
+            let score = correct as f64 + margin * 1e-6;
+            if score >= best.0 {
+                best = (score, h, sigma);
+            }
+            if h == h_max && score >= best_max.0 {
+                best_max = (score, h, sigma);
+            }
+        }
+    }
+    let fitted = |(_, h, sigma): (f64, usize, f64)| Fitted {
+        normalize_load,
+        n_fft: fft_len(n_px),
+        h,
+        pca_mean: mean.iter().map(|v| *v as f32).collect(),
+        pca_matrix: u[..h * n].to_vec(),
+        // The stored samples are T and V (the paper's P has p + q columns).
+        samples: (0..work.len())
+            .flat_map(|r| proj[r * h_max..r * h_max + h].iter().copied())
+            .collect(),
+        kernel_width: sigma,
+    };
+    Ok((fitted(best), fitted(best_max)))
+}
+
+/// The Parzen decision for one projected vector `q` against stored samples `t` (equal class
+/// priors, as in [`crate::classifier::Classifier`]): the best class and the log-posterior of class `truth`.
+pub(super) fn parzen(
+    t: &[f32],
+    labels: &[usize],
+    q: &[f32],
+    h: usize,
+    sigma: f64,
+    n_classes: usize,
+    truth: usize,
+) -> (usize, f64) {
+    let inv = 1.0 / (2.0 * sigma * sigma);
+    let mut e = vec![f64::NEG_INFINITY; labels.len()];
+    let mut mx = [f64::NEG_INFINITY; MAX_CLASSES];
+    let mut cnt = [0usize; MAX_CLASSES];
+    for (i, &k) in labels.iter().enumerate() {
+        let d2 = sq_dist(&t[i * h..(i + 1) * h], q);
+        e[i] = -d2 * inv;
+        mx[k] = mx[k].max(e[i]);
+        cnt[k] += 1;
+    }
+    let mut sum = [0.0f64; MAX_CLASSES];
+    for (i, &k) in labels.iter().enumerate() {
+        sum[k] += (e[i] - mx[k]).exp();
+    }
+    let mut ld = [f64::NEG_INFINITY; MAX_CLASSES];
+    let mut best = 0;
+    for k in 0..n_classes {
+        if cnt[k] > 0 {
+            ld[k] = mx[k] + sum[k].ln() - (cnt[k] as f64).ln();
+        }
+        if ld[k] > ld[best] {
+            best = k;
+        }
+    }
+    let z: f64 = (0..n_classes).map(|k| (ld[k] - ld[best]).exp()).sum();
+    (best, ld[truth] - ld[best] - z.ln())
+}
+
+/// Squared Euclidean distance of two projected samples. (`d * d`, not `powi(2)`: this build
+/// called libgcc's `__powidf2` for it, half of `train`'s time; the same value.)
+pub(super) fn sq_dist(a: &[f32], b: &[f32]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| {
+            let d = (x - y) as f64;
+            d * d
+        })
+        .sum()
+}
+
+/// Median over stored samples of the distance to the nearest other sample.
+pub(super) fn median_nn_distance(p: &[f32], h: usize) -> f64 {
+    let m = p.len() / h;
+    let mut d: Vec<f64> = (0..m)
+        .map(|i| {
+            (0..m)
+                .filter(|&j| j != i)
+                .map(|j| sq_dist(&p[i * h..(i + 1) * h], &p[j * h..(j + 1) * h]))
+                .fold(f64::INFINITY, f64::min)
+                .sqrt()
+        })
+        .filter(|v| v.is_finite() && *v > 0.0)
+        .collect();
+    if d.is_empty() {
+        return 1.0;
+    }
+    d.sort_by(f64::total_cmp);
+    d[d.len() / 2]
+}
