@@ -27,7 +27,7 @@ fn static_set(n: usize, seed: u64) -> TrainingSet {
         sensor: sim::DEFAULT_SENSOR,
         seed,
     });
-    TrainingSet::from_samples(samples, &Kind::Static.terrains())
+    presrs::simdata::training_set(samples, &Kind::Static.terrains())
 }
 
 fn options() -> TrainOptions {

@@ -5,10 +5,10 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use lab::simdata::TrainingSet;
 use node::classifier::dataset::{load_dataset, read_image, read_images, write_pgm};
 use node::classifier::train::TrainOptions;
 use node::classifier::{Classifier, Crop, Model, repair as repair_mod};
+use node::training::TrainingSet;
 
 /// `presrs train`.
 #[derive(clap::Args)]

@@ -55,10 +55,7 @@ fn the_decision_comes_with_the_sampled_frame_not_a_frame_later() {
         sensor: sim::DEFAULT_SENSOR,
         seed: 3,
     });
-    let set = presrs::simdata::TrainingSet::from_samples(
-        samples,
-        &sim::dataset::Kind::Dynamic.terrains(),
-    );
+    let set = presrs::simdata::training_set(samples, &sim::dataset::Kind::Dynamic.terrains());
     let opts = node::classifier::train::TrainOptions {
         per_class: 20,
         train: 13,
@@ -102,10 +99,7 @@ fn g2_model(seed: u64) -> node::classifier::Model {
         sensor: sim::DEFAULT_SENSOR,
         seed,
     });
-    let set = presrs::simdata::TrainingSet::from_samples(
-        samples,
-        &sim::dataset::Kind::Dynamic.terrains(),
-    );
+    let set = presrs::simdata::training_set(samples, &sim::dataset::Kind::Dynamic.terrains());
     let opts = node::classifier::train::TrainOptions {
         per_class: 30,
         train: 20,

@@ -8,7 +8,6 @@ use node::classifier::train::TrainOptions;
 use node::classifier::{Crop, Model};
 
 use crate::LabError;
-use crate::simdata::TrainingSet;
 
 /// Bumped when training's rejection of unknown terrain changes (1: per-class thresholds
 /// calibrated to `--unknown-rate`; 2, 3: the opt-in load check; 4: the distance margin; 5: the
@@ -49,7 +48,7 @@ pub fn sim_model(seed: u64) -> Result<Model, LabError> {
             };
             samples.extend(sim::dataset::generate(&opts));
         }
-        TrainingSet::from_samples(samples, &sim::dataset::Kind::Dynamic.terrains())
+        crate::simdata::training_set(samples, &sim::dataset::Kind::Dynamic.terrains())
     };
     let set = run(seed, 30);
     // Load-normalised (the paper's intensity scaling): a gait switch or a terrain change

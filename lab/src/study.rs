@@ -38,7 +38,7 @@ pub fn dataset_on(
 ) -> TrainingSet {
     let id = gait.id;
     let mut set =
-        TrainingSet::from_samples(samples_on(kind, n, gait, seed, sensor), &kind.terrains());
+        crate::simdata::training_set(samples_on(kind, n, gait, seed, sensor), &kind.terrains());
     set.gaits = vec![Some(id); set.images.len()];
     set
 }
@@ -225,7 +225,7 @@ pub fn per_gait_sets(n: usize, seed: u64) -> Vec<(TrainingSet, Vec<Sample>)> {
         .map(|g| {
             let s = samples(Kind::Dynamic, n, g.clone(), seed + 20 + g.id as u64);
             (
-                TrainingSet::from_samples(s.clone(), &Kind::Dynamic.terrains()),
+                crate::simdata::training_set(s.clone(), &Kind::Dynamic.terrains()),
                 s,
             )
         })

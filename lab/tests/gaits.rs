@@ -7,7 +7,6 @@
 
 use node::classifier::train::TrainOptions;
 use presrs_lab::closed_loop::{LoopParams, run};
-use presrs_lab::simdata::TrainingSet;
 use sim::dataset::{Kind, Options, generate};
 use sim::runner::Track;
 
@@ -24,7 +23,7 @@ fn g2_model() -> node::classifier::Model {
             sensor: sim::DEFAULT_SENSOR,
             seed,
         });
-        TrainingSet::from_samples(samples, &Kind::Dynamic.terrains())
+        presrs_lab::simdata::training_set(samples, &Kind::Dynamic.terrains())
     };
     let opts = TrainOptions {
         per_class: 45,

@@ -299,10 +299,7 @@ pub fn small_model(dir: &std::path::Path) -> std::path::PathBuf {
         sensor: sim::DEFAULT_SENSOR,
         seed: 4,
     });
-    let set = presrs::simdata::TrainingSet::from_samples(
-        samples,
-        &sim::dataset::Kind::Dynamic.terrains(),
-    );
+    let set = presrs::simdata::training_set(samples, &sim::dataset::Kind::Dynamic.terrains());
     let opts = node::classifier::train::TrainOptions {
         crop: node::classifier::Crop {
             top: 0,

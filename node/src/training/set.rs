@@ -1,0 +1,453 @@
+//! A labelled training set: images, their terrains, runs and gaits, from a dataset folder
+//! (`presrs capture`'s layout) or built by a caller, and the model trained on it with its
+//! rejection calibrated on another run ([`TrainingSet::train_calibrated`]).
+
+use protocol::terrain::TerrainCatalog;
+
+use super::report::Trained;
+use crate::classifier::dataset::Dataset;
+use crate::classifier::train::{CalibrateError, Labelled, TrainOptions, train};
+use crate::classifier::{ClassInfo, PressureImage};
+
+/// A dataset's class folder whose name is no terrain of the catalog.
+#[derive(Debug, thiserror::Error)]
+#[error(
+    "class folder {folder}: `{name}` is not a terrain in the catalog; add it to a terrains file \
+     ([[terrain]] id = N, name = \"{name}\", with N from 12 to 254 and unused) and pass \
+     --terrains FILE, or rename the folder after a known terrain"
+)]
+pub struct NotInCatalog {
+    /// The folder.
+    pub folder: String,
+    /// Its name.
+    pub name: String,
+}
+
+/// A dataset folder that could not become a training set ([`TrainingSet::load`]).
+#[derive(Debug, thiserror::Error)]
+pub enum LoadError {
+    /// A file or folder could not be read (the error names it).
+    #[error(transparent)]
+    Read(#[from] crate::classifier::dataset::ImageError),
+    /// A class folder names no terrain.
+    #[error(transparent)]
+    NotInCatalog(#[from] NotInCatalog),
+    /// No image at all.
+    #[error(
+        "{0}: no images found; want DIR/<terrain>/<images> (PGM, CSV or TekScan ASCII), as \
+         `presrs capture` writes them"
+    )]
+    Empty(String),
+    /// The folder's capture manifest cannot be read: its runs would be lost, and with them the
+    /// calibration on the next run.
+    #[error("{0} (or delete the manifest to train without its runs and gaits)")]
+    Manifest(#[from] crate::capture::CaptureError),
+}
+
+/// Images, each one's class (an index into `classes`), and the classes in the order of the
+/// terrains given: the name and the terrain id the model puts on the bus.
+#[derive(Clone, Debug)]
+pub struct TrainingSet {
+    /// One entry per class: its name and the terrain id the model sends.
+    pub classes: Vec<ClassInfo>,
+    /// The images.
+    pub images: Vec<PressureImage>,
+    /// Each image's class, an index into `classes`.
+    pub labels: Vec<usize>,
+    /// Each image's run (the recording it came from: the capture manifest's `source`), or
+    /// `None` when not known (no manifest; simulated sets are one run each).
+    pub runs: Vec<Option<String>>,
+    /// Each image's gait at touchdown (the capture manifest's `gait`; a simulated set's gait),
+    /// or `None` when not known.
+    pub gaits: Vec<Option<u8>>,
+}
+
+/// Why [`TrainingSet::train_calibrated`] failed: training or the calibration, as they say it.
+#[derive(Debug, thiserror::Error)]
+pub enum TrainCalibratedError {
+    /// Training.
+    #[error(transparent)]
+    Train(#[from] crate::classifier::train::TrainError),
+    /// Calibrating on the other run.
+    #[error(transparent)]
+    Calibrate(#[from] crate::classifier::train::CalibrateError),
+    /// Choosing the unknown-ground checks.
+    #[error(transparent)]
+    Choice(#[from] crate::training::choice::ChoiceError),
+}
+
+/// What each run of a set is used for, per class: see [`TrainingSet::split_runs`].
+#[derive(Clone)]
+pub struct RunSplit {
+    /// The images the model is trained on.
+    pub train: TrainingSet,
+    /// Images of other runs than `train`'s, to calibrate the rejection on (may be empty).
+    pub calibration: TrainingSet,
+    /// Images of a run seen by neither (may be empty): the robot's next run.
+    pub fresh: TrainingSet,
+}
+
+impl TrainingSet {
+    /// Reads `DIR/<class>/<images>` ([`crate::classifier::dataset::load_dataset`]) and names
+    /// its classes from `catalog` ([`TrainingSet::from_dataset`]). With `skip_bad`, unreadable
+    /// files are skipped, each logged as a warning, and returned; without it the first is an
+    /// error. A folder without a single image is an error either way.
+    pub fn load(
+        dir: &std::path::Path,
+        catalog: &TerrainCatalog,
+        skip_bad: bool,
+    ) -> Result<(Self, Vec<crate::classifier::dataset::ImageError>), LoadError> {
+        let mut ds = crate::classifier::dataset::load_dataset(dir, skip_bad)?;
+        let bad = std::mem::take(&mut ds.bad);
+        for e in &bad {
+            tracing::warn!("skipped (--skip-bad): {e}");
+        }
+        let set = Self::from_dataset(ds, catalog)?;
+        if set.images.is_empty() {
+            return Err(LoadError::Empty(dir.display().to_string()));
+        }
+        Ok((set, bad))
+    }
+
+    /// A user's dataset (`DIR/<class>/<images>`): every class folder must be named after a
+    /// terrain in `catalog`, whose id the model then sends; no id is ever made up.
+    pub fn from_dataset(ds: Dataset, catalog: &TerrainCatalog) -> Result<Self, LoadError> {
+        let classes = ds
+            .classes
+            .iter()
+            .map(|n| match catalog.by_name(n).filter(|t| !t.is_unknown()) {
+                Some(t) => Ok(ClassInfo {
+                    name: t.name().to_string(),
+                    terrain_id: t.id(),
+                }),
+                None => Err(NotInCatalog {
+                    folder: ds.root.join(n).display().to_string(),
+                    name: n.clone(),
+                }),
+            })
+            .collect::<Result<_, _>>()?;
+        let manifest = crate::capture::read_manifest(&ds.root)?;
+        let entries: Vec<Option<&crate::capture::ManifestEntry>> = ds
+            .samples
+            .iter()
+            .map(|s| manifest.as_ref()?.get(s.path.strip_prefix(&ds.root).ok()?))
+            .collect();
+        let runs = entries
+            .iter()
+            .map(|e| e.map(|e| e.source.clone()))
+            .collect();
+        let gaits = entries.iter().map(|e| e.and_then(|e| e.gait)).collect();
+        let (images, labels) = ds.samples.into_iter().map(|s| (s.image, s.class)).unzip();
+        Ok(Self {
+            classes,
+            images,
+            labels,
+            runs,
+            gaits,
+        })
+    }
+
+    /// `presrs train`'s account of the gaits the set's stances touched down in (the capture
+    /// manifest's `gait`), and the terrains that lack one of them; `None` when no image has a
+    /// gait (a folder not captured from a bus that carried GaitStatus).
+    ///
+    /// Why it matters, measured (docs/real-robot.md, "A gait the model never saw"): a gait
+    /// between trained ones is known ground (real SpeedPP2D, a speed between two trained ones,
+    /// 2.5% unknown), one beyond them is not (a faster speed 34.5% unknown, a slower 19.5%).
+    pub fn gait_note(&self) -> Option<String> {
+        use std::collections::{BTreeMap, BTreeSet};
+        use std::fmt::Write;
+        if self.gaits.iter().all(Option::is_none) {
+            return None;
+        }
+        let mut all: BTreeMap<u8, usize> = BTreeMap::new();
+        let mut per_class: Vec<BTreeSet<u8>> = vec![BTreeSet::new(); self.classes.len()];
+        for (g, &k) in self.gaits.iter().zip(&self.labels) {
+            if let Some(g) = *g {
+                *all.entry(g).or_default() += 1;
+                if let Some(c) = per_class.get_mut(k) {
+                    c.insert(g);
+                }
+            }
+        }
+        let mut o = String::from("gaits at touchdown (capture manifest): ");
+        let name = |g: u8| crate::gait::gait_name(Some(g));
+        let counts: Vec<String> = all
+            .iter()
+            .map(|(&g, n)| format!("{} {n}", name(g)))
+            .collect();
+        o.push_str(&counts.join(", "));
+        let without = self.gaits.iter().filter(|g| g.is_none()).count();
+        if without > 0 {
+            let _ = write!(o, ", {without} without a GaitStatus");
+        }
+        let lacking: Vec<String> = self
+            .classes
+            .iter()
+            .zip(&per_class)
+            .flat_map(|(c, have)| {
+                all.keys()
+                    .filter(|g| !have.contains(g))
+                    .map(move |&g| format!("{} in {}", c.name, name(g)))
+            })
+            .collect();
+        if lacking.is_empty() {
+            o.push_str("; every terrain in each");
+        } else {
+            let _ = write!(o, "; not captured: {}", lacking.join(", "));
+        }
+        // The controller runs a terrain in its own gait, so a set captured from the robot's
+        // runs lacks gaits per terrain; the robot still meets them (the last terrain's gait at
+        // a crossing, the safe gait after an unknown step).
+        o.push_str(
+            ". A stance meets its terrain in the gait the robot is running (the last terrain's \
+             at a crossing, the safe gait after an unknown step), and a gait beyond those a \
+             terrain was captured in makes it look new: on real walking, a speed beyond the \
+             trained ones was 19.5-34.5% unknown, one between them 2.5% (docs/real-robot.md, \
+             \"A gait the model never saw\"). Capture each terrain in the slowest and the \
+             fastest gait the robot will run.",
+        );
+        Some(o)
+    }
+
+    /// The images at `idx`, with the same classes.
+    pub fn subset(&self, idx: &[usize]) -> TrainingSet {
+        TrainingSet {
+            classes: self.classes.clone(),
+            images: idx.iter().map(|&i| self.images[i].clone()).collect(),
+            labels: idx.iter().map(|&i| self.labels[i]).collect(),
+            runs: idx.iter().map(|&i| self.runs[i].clone()).collect(),
+            gaits: idx.iter().map(|&i| self.gaits[i]).collect(),
+        }
+    }
+
+    /// Per class, its runs sorted by name; `roles` runs at the end are set aside, the last for
+    /// `fresh` (when `roles` is 2) and the one before it for `calibration`, as far as the class
+    /// has runs to spare (the first run always trains). Images without a run are one run.
+    ///
+    /// `presrs train` sets one run aside (`roles` 1: calibration on the next recording);
+    /// `presrs experiment open-set` two (calibrate on one, judge on a run nobody saw).
+    pub fn split_runs(&self, roles: usize) -> RunSplit {
+        let (mut t, mut c, mut f) = (Vec::new(), Vec::new(), Vec::new());
+        for k in 0..self.classes.len() {
+            let idx: Vec<usize> = (0..self.labels.len())
+                .filter(|&i| self.labels[i] == k)
+                .collect();
+            let mut names: Vec<Option<&String>> =
+                idx.iter().map(|&i| self.runs[i].as_ref()).collect();
+            names.sort();
+            names.dedup();
+            let spare = roles.min(names.len().saturating_sub(1));
+            let kept = names.len() - spare;
+            for &i in &idx {
+                let r = names
+                    .iter()
+                    .position(|n| *n == self.runs[i].as_ref())
+                    .unwrap_or(0);
+                if r < kept {
+                    t.push(i);
+                } else if roles == 2 && r == names.len() - 1 {
+                    f.push(i);
+                } else {
+                    c.push(i);
+                }
+            }
+        }
+        RunSplit {
+            train: self.subset(&t),
+            calibration: self.subset(&c),
+            fresh: self.subset(&f),
+        }
+    }
+
+    /// Calibrates `model`'s unknown-terrain rejection on this set, a run (or runs) the model's
+    /// stored samples did not come from; `runs` names them (in the model and in errors).
+    /// Returns the calibration's check (the share of these images called unknown).
+    pub fn calibrate(
+        &self,
+        model: &mut crate::classifier::Model,
+        runs: &[String],
+    ) -> Result<f64, crate::classifier::train::CalibrateError> {
+        let images: Vec<(&PressureImage, &str)> = self
+            .images
+            .iter()
+            .zip(&self.labels)
+            .map(|(im, &k)| (im, self.classes[k].name.as_str()))
+            .collect();
+        crate::classifier::train::calibrate_on_runs(model, &images, runs)
+    }
+
+    /// A model trained on this set (`train` with `opts`), its unknown-terrain rejection
+    /// calibrated on another run where there is one: `calibration` (a set and its runs'
+    /// names), else, with rejection on, this set's own last run per terrain
+    /// ([`TrainingSet::split_runs`]), else the training run's unused images (`train`'s own).
+    pub fn train_calibrated(
+        &self,
+        opts: &TrainOptions,
+        calibration: Option<(&TrainingSet, &[String])>,
+    ) -> Result<Trained, TrainCalibratedError> {
+        let own;
+        let (train_set, calibration) = match calibration {
+            Some(c) => (self, Some(c)),
+            None if opts.unknown_rate > 0.0 => {
+                let s = self.split_runs(1);
+                let names = s.calibration.run_names();
+                own = (s.train, s.calibration, names);
+                let cal = (!own.1.images.is_empty()).then_some((&own.1, own.2.as_slice()));
+                (&own.0, cal)
+            }
+            None => (self, None),
+        };
+        // Which unknown-ground checks this lab's ground needs, measured on its runs.
+        let cal_labelled: Vec<Labelled<'_>> = match calibration {
+            Some((cal, names)) => cal
+                .images
+                .iter()
+                .zip(&cal.labels)
+                .map(|(image, &l)| {
+                    let name = &cal.classes[l].name;
+                    let class = train_set
+                        .classes
+                        .iter()
+                        .position(|c| &c.name == name)
+                        .ok_or_else(|| CalibrateError::UnknownClass {
+                            run: names.join(", "),
+                            class: name.clone(),
+                        })?;
+                    Ok(Labelled { image, class })
+                })
+                .collect::<Result<_, CalibrateError>>()?,
+            None => Vec::new(),
+        };
+        let choice = crate::training::choice::choose(
+            &train_set.labelled(),
+            &cal_labelled,
+            &train_set.classes,
+            opts,
+        )?;
+        let opts = &opts.with_candidate(&choice.candidate);
+        let (mut model, split) = train(&train_set.labelled(), &train_set.classes, opts)?;
+        let mut unused_calibration = 0;
+        if let Some((cal, names)) = calibration {
+            cal.calibrate(&mut model, names)?;
+            let cap = crate::classifier::train::MAX_CALIBRATION_PER_CLASS;
+            unused_calibration = (0..cal.classes.len())
+                .map(|k| {
+                    cal.labels
+                        .iter()
+                        .filter(|&&l| l == k)
+                        .count()
+                        .saturating_sub(cap)
+                })
+                .sum();
+        }
+        // The load and texture bands over the calibration run too: the next run's spread, not
+        // only the training run's.
+        if (opts.check_texture || opts.check_load)
+            && let Some((cal, _)) = calibration
+        {
+            let index = |set: &TrainingSet, l: usize| {
+                let name = &set.classes[l].name;
+                model.classes.iter().position(|c| &c.name == name)
+            };
+            let images: Vec<(&PressureImage, usize)> = [train_set, cal]
+                .into_iter()
+                .flat_map(|set| {
+                    set.images
+                        .iter()
+                        .zip(&set.labels)
+                        .filter_map(move |(img, &l)| index(set, l).map(|k| (img, k)))
+                })
+                .collect();
+            if opts.check_texture {
+                crate::classifier::train::add_texture_check(&mut model, images.iter().copied());
+            }
+            if opts.check_load {
+                crate::classifier::train::add_load_check_on(&mut model, images);
+            }
+        }
+        // The gaits the model has seen: its stored samples' and its calibration run's.
+        let mut gaits: Vec<u8> = split
+            .train
+            .iter()
+            .chain(&split.validation)
+            .filter_map(|&i| train_set.gaits.get(i).copied().flatten())
+            .chain(
+                calibration
+                    .iter()
+                    .flat_map(|(c, _)| c.gaits.iter().flatten().copied()),
+            )
+            .collect();
+        gaits.sort_unstable();
+        gaits.dedup();
+        model.gaits = (!gaits.is_empty()).then_some(gaits);
+        model.unknown_choice = (opts.unknown_rate > 0.0).then(|| choice.record());
+        Ok(Trained {
+            model,
+            split,
+            train_images: train_set.images.len(),
+            unused_calibration,
+            choice,
+        })
+    }
+
+    /// The distinct runs of the set's images (named ones only), sorted.
+    pub fn run_names(&self) -> Vec<String> {
+        let mut v: Vec<String> = self.runs.iter().flatten().cloned().collect();
+        v.sort();
+        v.dedup();
+        v
+    }
+
+    /// The images with their classes, as `crate::classifier::train::train` takes them.
+    pub fn labelled(&self) -> Vec<Labelled<'_>> {
+        self.images
+            .iter()
+            .zip(&self.labels)
+            .map(|(image, &class)| Labelled { image, class })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::classifier::dataset::write_pgm;
+
+    #[test]
+    fn a_dataset_folder_loads_with_its_catalog_and_says_what_is_wrong() {
+        let dir = std::env::temp_dir().join(format!("presrs-lab-load-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let catalog = TerrainCatalog::paper();
+        std::fs::create_dir_all(dir.join("sand")).unwrap();
+        // A class folder without an image: refused, naming the folder.
+        let e = TrainingSet::load(&dir, &catalog, true).unwrap_err();
+        assert!(matches!(e, LoadError::Empty(_)), "{e}");
+        assert!(e.to_string().contains(&dir.display().to_string()), "{e}");
+        for (class, v) in [("sand", 10u16), ("clay", 200)] {
+            std::fs::create_dir_all(dir.join(class)).unwrap();
+            let img = PressureImage::new(4, 4, 8, vec![v; 16]);
+            write_pgm(&img, &dir.join(class).join("0.pgm")).unwrap();
+        }
+        std::fs::write(dir.join("sand").join("1.pgm"), b"not an image").unwrap();
+        // A bad file stops the load unless skipped; skipped, it is returned, not lost.
+        assert!(TrainingSet::load(&dir, &catalog, false).is_err());
+        let (set, bad) = TrainingSet::load(&dir, &catalog, true).unwrap();
+        assert_eq!(bad.len(), 1);
+        assert!(bad[0].path.ends_with("1.pgm"), "{:?}", bad[0]);
+        let names: Vec<&str> = set.classes.iter().map(|c| c.name.as_str()).collect();
+        assert_eq!(names, ["clay", "sand"]);
+        assert_eq!(set.labels, [0, 1]);
+        assert_eq!(set.images[1].pixels[0], 10);
+        // A folder named after no terrain: refused with the fix.
+        std::fs::create_dir_all(dir.join("asphalt")).unwrap();
+        write_pgm(
+            &PressureImage::new(4, 4, 8, vec![1; 16]),
+            &dir.join("asphalt").join("0.pgm"),
+        )
+        .unwrap();
+        let e = TrainingSet::load(&dir, &catalog, true).unwrap_err();
+        assert!(e.to_string().contains("--terrains FILE"), "{e}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
