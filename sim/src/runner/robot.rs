@@ -1,196 +1,6 @@
-//! The simulated robot on a bus: the hopper on a circular track of terrains, its foot switch
-//! (with bounce), its leg state and its PreSRS images, obeying `LegCommand` when a controller
-//! sends them and running the gait's laws itself when none does (the start gait, then the last
-//! gait a controller's `GaitStatus` named).
-//!
-//! [`SimRobot::advance_to`] moves simulated time forward and emits the frames the robot sends in
-//! that time, in order; the caller decides whether time runs in real time (a CAN process) or as
-//! fast as possible (the demo, tests).
+//! The simulated robot: the hopper, its foot switch, leg state and skin, on the bus's frames.
 
-use controller::Gait;
-use protocol::messages::{FootContact, LegCommand, LegState, Message, Phase};
-use protocol::tactile::{ImageRef, Segmenter, Variant};
-use protocol::{CanFrame, IdConfig};
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
-use serde::Deserialize;
-
-use crate::faults::FaultParams;
-use crate::fixed_gait::FixedGait;
-use crate::hopper::{Event, Hopper, HopperParams, LegCommands};
-use crate::skin::{Contact, FRAME_PERIOD_US, Footprint, Skin, SkinParams};
-use crate::terrain::{CannotSimulate, Physics, Terrain};
-use protocol::config::{ConfigFileError, Invalid};
-use protocol::terrain::TerrainCatalog;
-
-/// One stretch of the track: a catalog terrain the simulator has a model for.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Segment {
-    terrain: Terrain,
-    physics: Physics,
-    /// Length along the track, m.
-    pub length_m: f64,
-}
-
-impl Segment {
-    /// A stretch of `terrain`; an error when the simulator cannot simulate it.
-    pub fn new(terrain: Terrain, length_m: f64) -> Result<Self, CannotSimulate> {
-        Ok(Self {
-            terrain,
-            physics: Physics::of(terrain)?,
-            length_m,
-        })
-    }
-
-    fn of(physics: Physics, length_m: f64) -> Self {
-        Self {
-            terrain: physics.terrain(),
-            physics,
-            length_m,
-        }
-    }
-
-    /// The terrain of this stretch.
-    pub fn terrain(&self) -> Terrain {
-        self.terrain
-    }
-}
-
-/// The paper's circular track (2.8 m diameter) made of terrain segments.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Track {
-    /// Diameter of the circle, m (the paper's: 2.8).
-    pub diameter_m: f64,
-    /// The terrains in order along the track.
-    pub segments: Vec<Segment>,
-}
-
-/// A track file: `diameter_m` and `[[segments]]` with `terrain` (a catalog name) and `length_m`.
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct TrackFile {
-    #[serde(default = "default_diameter")]
-    diameter_m: f64,
-    segments: Vec<SegmentFile>,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct SegmentFile {
-    terrain: String,
-    length_m: f64,
-}
-
-fn default_diameter() -> f64 {
-    2.8
-}
-
-impl Default for Track {
-    /// Wood, grass, clay and carpet, a quarter of the circle each.
-    fn default() -> Self {
-        let q = std::f64::consts::PI * 2.8 / 4.0;
-        Self {
-            diameter_m: 2.8,
-            segments: [
-                Physics::Wood,
-                Physics::Grass,
-                Physics::Clay,
-                Physics::Carpet,
-            ]
-            .into_iter()
-            .map(|p| Segment::of(p, q))
-            .collect(),
-        }
-    }
-}
-
-impl Track {
-    /// Reads and checks a track file (see [`Track::from_toml`]).
-    pub fn load(path: &std::path::Path, catalog: &TerrainCatalog) -> Result<Self, ConfigFileError> {
-        let (text, name) = protocol::config::read_text(path)?;
-        Self::from_toml(&text, &name, catalog)
-    }
-
-    /// The track of the file at `path` (a process's `--track`), or the default track (wood,
-    /// grass, clay, carpet quarters) without one.
-    pub fn load_or_default(
-        path: Option<&std::path::Path>,
-        catalog: &TerrainCatalog,
-    ) -> Result<Self, ConfigFileError> {
-        path.map_or_else(|| Ok(Self::default()), |p| Self::load(p, catalog))
-    }
-
-    /// Parses a TOML track file (`path` names it in errors) and checks it: every terrain a name
-    /// in `catalog` that the simulator can simulate, every length positive.
-    pub fn from_toml(
-        text: &str,
-        path: &str,
-        catalog: &TerrainCatalog,
-    ) -> Result<Self, ConfigFileError> {
-        let t: TrackFile = protocol::config::parse(text, path)?;
-        let invalid = |key: String, message: String| {
-            ConfigFileError::invalid(path, Invalid::new(key, message))
-        };
-        if t.segments.is_empty() {
-            return Err(invalid(
-                "segments".into(),
-                "segments: at least one segment is needed".into(),
-            ));
-        }
-        let mut segments = Vec::with_capacity(t.segments.len());
-        for (i, s) in t.segments.iter().enumerate() {
-            if s.length_m.is_nan() || s.length_m <= 0.0 {
-                let key = format!("segments[{i}].length_m");
-                let message = format!("{key} = {}: must be > 0", s.length_m);
-                return Err(invalid(key, message));
-            }
-            let key = format!("segments[{i}].terrain");
-            let terrain = catalog
-                .by_name(&s.terrain)
-                .filter(|t| !t.is_unknown())
-                .ok_or_else(|| {
-                    let message = format!(
-                        "{key} = \"{}\": not a terrain in the catalog (a terrains file adds one: \
-                         --terrains FILE)",
-                        s.terrain
-                    );
-                    invalid(key.clone(), message)
-                })?;
-            let segment = Segment::new(terrain, s.length_m)
-                .map_err(|e| invalid(key.clone(), format!("{key}: {e}")))?;
-            segments.push(segment);
-        }
-        Ok(Self {
-            diameter_m: t.diameter_m,
-            segments,
-        })
-    }
-
-    /// Length of the track's centre line, m.
-    pub fn length(&self) -> f64 {
-        self.segments.iter().map(|s| s.length_m).sum()
-    }
-
-    /// The stretch at distance `x` m along the track (wrapping).
-    pub fn segment_at(&self, x: f64) -> Segment {
-        let mut x = x.rem_euclid(self.length().max(1e-9));
-        for s in &self.segments {
-            if x < s.length_m {
-                return *s;
-            }
-            x -= s.length_m;
-        }
-        self.segments
-            .last()
-            .copied()
-            .unwrap_or(Segment::of(Physics::Wood, 1.0))
-    }
-
-    /// The terrain at distance `x` m along the track (wrapping).
-    pub fn terrain_at(&self, x: f64) -> Terrain {
-        self.segment_at(x).terrain
-    }
-}
+use super::*;
 
 /// The simulated robot: track, legs, sensors, identifiers.
 #[derive(Clone, Debug, PartialEq)]
@@ -250,7 +60,7 @@ impl Default for SimConfig {
 
 /// The leg's commands: the controller's when fresh, its own laws' otherwise; or, for a leg of
 /// motors, what the motors were told.
-struct Commands {
+pub(super) struct Commands {
     fixed: FixedGait,
     last: Option<(LegCommand, u64)>,
     now_us: u64,
@@ -302,7 +112,7 @@ impl LegCommands for Commands {
 }
 
 /// One leg with its foot sensor.
-struct Leg {
+pub(super) struct Leg {
     hopper: Hopper,
     cmd: Commands,
     skin: Skin,
@@ -347,7 +157,7 @@ pub struct SimRobot {
     motor_out: protocol::component::Outbox,
 }
 
-const FRAME_US: u64 = FRAME_PERIOD_US;
+pub(super) const FRAME_US: u64 = FRAME_PERIOD_US;
 
 impl SimRobot {
     /// A robot for `cfg`; `seed` fixes the terrains' random patches and the sensor noise.
@@ -679,7 +489,7 @@ impl SimRobot {
     }
 }
 
-fn send_leg_state(
+pub(super) fn send_leg_state(
     ids: &IdConfig,
     foot: u8,
     angle: f64,
@@ -699,7 +509,7 @@ fn send_leg_state(
 
 /// A micro-switch edge with contact bounce: the final state at `t`, then 1-3 short reversals
 /// within the next 2 ms (typical for a small snap-action switch).
-fn bounce(edges: &mut Vec<(u64, bool)>, t: u64, state: bool, rng: &mut impl Rng) {
+pub(super) fn bounce(edges: &mut Vec<(u64, bool)>, t: u64, state: bool, rng: &mut impl Rng) {
     edges.push((t, state));
     let mut at = t;
     for _ in 0..rng.random_range(1..=3) {
@@ -707,271 +517,5 @@ fn bounce(edges: &mut Vec<(u64, bool)>, t: u64, state: bool, rng: &mut impl Rng)
         edges.push((at, !state));
         at += rng.random_range(100..400);
         edges.push((at, state));
-    }
-}
-
-/// The log's clock at simulated time 0 for [`record`]: 2023-11-14, a plausible candump time.
-pub const LOG_EPOCH_US: u64 = 1_700_000_000_000_000;
-
-/// Runs the robot alone (no controller: each leg holds its gait) for `duration_us` of simulated
-/// time and hands every frame it sends to `emit`, stamped on a log clock starting at
-/// [`LOG_EPOCH_US`], as `candump -L` would have recorded it. Returns the ground truth of every
-/// step, touchdown times on the same log clock. `observe` sees the robot every 10 ms, with
-/// the log clock's time.
-pub fn record(
-    cfg: SimConfig,
-    seed: u64,
-    duration_us: u64,
-    observe: &mut dyn FnMut(u64, &SimRobot),
-    emit: &mut dyn FnMut(protocol::Stamped),
-) -> Vec<StepTruth> {
-    let mut robot = SimRobot::new(cfg, seed);
-    let mut t = 0;
-    while t < duration_us {
-        t = (t + 1000).min(duration_us);
-        if t.is_multiple_of(10_000) {
-            observe(LOG_EPOCH_US + t, &robot);
-        }
-        robot.advance_to(t, &mut |frame| {
-            emit(protocol::Stamped {
-                t_us: LOG_EPOCH_US + t,
-                frame,
-            })
-        });
-    }
-    robot
-        .steps
-        .iter()
-        .map(|s| StepTruth {
-            touchdown_us: LOG_EPOCH_US + s.touchdown_us,
-            ..*s
-        })
-        .collect()
-}
-
-/// [`record`] as a candump log (`candump -L` lines, interface `can0`) written to `w`, every
-/// frame also handed to `tap` (a live recording). Returns the frames written and the steps'
-/// truth; the first write error stops the writing and is returned.
-pub fn record_candump(
-    cfg: SimConfig,
-    seed: u64,
-    duration_us: u64,
-    observe: &mut dyn FnMut(u64, &SimRobot),
-    tap: &mut dyn FnMut(&protocol::Stamped),
-    mut w: &mut dyn std::io::Write,
-) -> std::io::Result<(u64, Vec<StepTruth>)> {
-    let mut err = None;
-    let mut frames = 0u64;
-    let steps = record(cfg, seed, duration_us, observe, &mut |st| {
-        tap(&st);
-        if err.is_none() {
-            match protocol::candump::write_record(&mut w, "can0", &st) {
-                Ok(()) => frames += 1,
-                Err(e) => err = Some(e),
-            }
-        }
-    });
-    match err {
-        Some(e) => Err(e),
-        None => w.flush().map(|()| (frames, steps)),
-    }
-}
-
-/// Labels (`start_s,end_s,terrain,foot` lines, the format `presrs capture --labels` reads) for
-/// the steps of a [`record`]: one range per run of steps on one terrain, from the first
-/// touchdown to the next terrain's first touchdown (the last to `end_us`).
-pub fn truth_labels(steps: &[StepTruth], end_us: u64) -> String {
-    let mut out = String::from("start_s,end_s,terrain,foot\n");
-    let feet = steps.iter().map(|s| s.foot).max().map_or(0, |m| m + 1);
-    for foot in 0..feet {
-        let mine: Vec<&StepTruth> = steps.iter().filter(|s| s.foot == foot).collect();
-        let mut i = 0;
-        while i < mine.len() {
-            let mut j = i;
-            while j + 1 < mine.len() && mine[j + 1].terrain == mine[i].terrain {
-                j += 1;
-            }
-            let end = mine.get(j + 1).map_or(end_us, |s| s.touchdown_us);
-            out += &format!(
-                "{},{},{},{foot}\n",
-                protocol::candump::format_seconds(mine[i].touchdown_us),
-                protocol::candump::format_seconds(end),
-                mine[i].terrain.name()
-            );
-            i = j + 1;
-        }
-    }
-    out
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// Writes into a buffer, failing from the `fail_at`-th write on (a disk that fills).
-    struct Filling {
-        buf: Vec<u8>,
-        writes: usize,
-        fail_at: usize,
-    }
-
-    impl std::io::Write for Filling {
-        fn write(&mut self, b: &[u8]) -> std::io::Result<usize> {
-            self.writes += 1;
-            if self.writes >= self.fail_at {
-                return Err(std::io::Error::other("disk full"));
-            }
-            self.buf.extend_from_slice(b);
-            Ok(b.len())
-        }
-        fn flush(&mut self) -> std::io::Result<()> {
-            Ok(())
-        }
-    }
-
-    #[test]
-    fn a_candump_record_reads_back_frame_for_frame_and_a_write_error_is_returned() {
-        let run = |w: &mut Filling| {
-            let mut tapped = 0u64;
-            let r = record_candump(
-                SimConfig::default(),
-                1,
-                1_000_000,
-                &mut |_, _| {},
-                &mut |_| tapped += 1,
-                w,
-            );
-            (r, tapped)
-        };
-        let mut ok = Filling {
-            buf: Vec::new(),
-            writes: 0,
-            fail_at: usize::MAX,
-        };
-        let (r, tapped) = run(&mut ok);
-        let (frames, _) = r.unwrap();
-        // 1 s of 100 Hz images, about 31 FD segments each, besides the leg's own frames.
-        assert!(frames > 3000, "{frames} frames");
-        assert_eq!(tapped, frames, "the tap sees every frame written");
-        let back = protocol::candump::read_log(ok.buf.as_slice()).unwrap();
-        assert_eq!(back.len() as u64, frames);
-        assert_eq!(back[0].iface, "can0");
-        assert!(back[0].stamped.t_us >= LOG_EPOCH_US);
-
-        let mut full = Filling {
-            buf: Vec::new(),
-            writes: 0,
-            fail_at: 100,
-        };
-        let (r, tapped) = run(&mut full);
-        assert_eq!(r.unwrap_err().to_string(), "disk full");
-        assert!(tapped > 3000, "the robot ran on: {tapped} frames tapped");
-    }
-
-    /// Median stance (switch closed, ms) and falls of a 6 s G2 run carrying `payload_kg`,
-    /// from the FootContact frames the robot sends.
-    fn stances_with(payload_kg: f64) -> (f64, usize) {
-        let cfg = SimConfig {
-            payload_kg,
-            ..Default::default()
-        };
-        let ids = cfg.ids.clone();
-        let mut edges: Vec<(u64, bool)> = Vec::new();
-        let mut falls = 0;
-        record(
-            cfg,
-            5,
-            6_000_000,
-            &mut |_, r| falls = r.falls.len(),
-            &mut |st| {
-                if let Ok(Some((_, protocol::messages::Message::FootContact(c)))) =
-                    protocol::messages::decode(&st.frame, &ids)
-                    && edges.last().is_none_or(|e| e.1 != c.stance)
-                {
-                    edges.push((st.t_us, c.stance));
-                }
-            },
-        );
-        let mut stances: Vec<f64> = edges
-            .windows(2)
-            .filter(|w| w[0].1 && !w[1].1)
-            .map(|w| (w[1].0 - w[0].0) as f64 / 1e3)
-            .filter(|&ms| ms > 50.0)
-            .collect();
-        assert!(stances.len() >= 8, "{payload_kg} kg: {stances:?}");
-        stances.sort_by(f64::total_cmp);
-        (stances[stances.len() / 2], falls)
-    }
-
-    #[test]
-    fn a_payload_lengthens_the_stance_as_the_springs_period_says() {
-        // The body on the leg spring: stance time grows as sqrt(mass); 2.0 -> 2.2 kg: x1.049
-        // (measured x1.054, 168 -> 177 ms). Heavier loads make the fixed gait fall (0.5 kg:
-        // 6 falls in these 6 s; 0.8 kg: 27): eq. (4)'s omega is tuned to the bare body.
-        let (bare, f0) = stances_with(0.0);
-        let (loaded, f1) = stances_with(0.2);
-        let ratio = loaded / bare;
-        assert!(
-            (1.02..=1.09).contains(&ratio),
-            "stance {bare:.0} ms -> {loaded:.0} ms (x{ratio:.3})"
-        );
-        assert_eq!((f0, f1), (0, 0), "falls");
-        assert_eq!(crate::check_payload(0.5), Ok(0.5));
-        for bad in [-0.1, 2.5, f64::NAN] {
-            let e = crate::check_payload(bad).unwrap_err().to_string();
-            assert!(e.contains("--payload") && e.contains("0..=2"), "{e}");
-        }
-    }
-
-    #[test]
-    fn a_track_names_catalog_terrains_and_refuses_what_it_cannot_simulate() {
-        let paper = TerrainCatalog::paper();
-        let t = Track::from_toml(
-            "[[segments]]\nterrain = \"sand\"\nlength_m = 2.0\n[[segments]]\nterrain = \"wood\"\nlength_m = 1.0\n",
-            "t.toml",
-            &paper,
-        )
-        .unwrap();
-        assert_eq!(t.terrain_at(0.5), Terrain::SAND);
-        assert_eq!(t.terrain_at(2.5), Terrain::WOOD);
-        assert_eq!(t.terrain_at(3.5), Terrain::SAND, "wraps");
-        assert_eq!(t.segment_at(0.5).physics, Physics::Sand);
-
-        let text = "[[segments]]\nterrain = \"asphalt\"\nlength_m = 1.0\n";
-        let e = Track::from_toml(text, "t.toml", &paper)
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("asphalt") && e.contains("--terrains"), "{e}");
-        let lab =
-            TerrainCatalog::from_toml("[[terrain]]\nid = 20\nname = \"asphalt\"\n", "x").unwrap();
-        let e = Track::from_toml(text, "t.toml", &lab)
-            .unwrap_err()
-            .to_string();
-        assert!(
-            e.contains("cannot simulate terrain `asphalt` (id 20)"),
-            "{e}"
-        );
-        let e = Track::from_toml(
-            "[[segments]]\nterrain = \"wood\"\nlength_m = 0\n",
-            "t",
-            &paper,
-        )
-        .unwrap_err();
-        let ConfigFileError::Invalid { source, .. } = &e else {
-            panic!("{e:?}");
-        };
-        assert_eq!(source.key, "segments[0].length_m");
-    }
-
-    #[test]
-    fn every_model_maps_to_its_own_catalog_terrain_by_name() {
-        for p in Physics::ALL {
-            assert_eq!(Physics::of(p.terrain()), Ok(p));
-        }
-        let ids: Vec<u8> = Physics::ALL.iter().map(|p| p.terrain().id()).collect();
-        let mut sorted = ids.clone();
-        sorted.sort();
-        sorted.dedup();
-        assert_eq!(sorted.len(), 12, "{ids:?}");
     }
 }
