@@ -1,0 +1,45 @@
+//! A process's CPU time and resident memory, read from `/proc`.
+
+/// CPU time (ns) of a process's threads (`pid` or "self"), all or those named in `names`: from
+/// schedstat, or from stat's utime+stime (10 ms ticks) where schedstat is missing.
+pub fn task_cpu_ns(pid: &str, names: Option<&[&str]>) -> Option<u64> {
+    let dir = std::fs::read_dir(format!("/proc/{pid}/task")).ok()?;
+    let mut total = 0u64;
+    for e in dir.flatten() {
+        let p = e.path();
+        if let Some(names) = names {
+            let comm = std::fs::read_to_string(p.join("comm")).unwrap_or_default();
+            if !names.contains(&comm.trim()) {
+                continue;
+            }
+        }
+        if let Some(ns) = std::fs::read_to_string(p.join("schedstat"))
+            .ok()
+            .and_then(|s| s.split_whitespace().next()?.parse::<u64>().ok())
+        {
+            total += ns;
+            continue;
+        }
+        let stat = std::fs::read_to_string(p.join("stat")).ok()?;
+        // Fields after the ")" of comm: state is field 3, utime 14, stime 15.
+        let rest = stat.rsplit_once(')')?.1;
+        let f: Vec<&str> = rest.split_whitespace().collect();
+        let ticks = f.get(11)?.parse::<u64>().ok()? + f.get(12)?.parse::<u64>().ok()?;
+        total += ticks * 10_000_000;
+    }
+    Some(total)
+}
+
+/// VmRSS and VmHWM (peak) of a process (`pid` or "self"), MB.
+pub fn memory_mb(pid: &str) -> (Option<f64>, Option<f64>) {
+    let Ok(s) = std::fs::read_to_string(format!("/proc/{pid}/status")) else {
+        return (None, None);
+    };
+    let field = |k: &str| {
+        s.lines()
+            .find(|l| l.starts_with(k))
+            .and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
+            .map(|kb| kb / 1024.0)
+    };
+    (field("VmRSS:"), field("VmHWM:"))
+}

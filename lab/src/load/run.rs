@@ -1,0 +1,184 @@
+//! A bench run: the node in this process or as a process, under the feet's load.
+
+use super::*;
+
+/// What a bench run measured, and of what (for [`BenchReport`]).
+pub struct BenchRun {
+    /// Per-step latencies and the node's CPU time.
+    pub tally: Tally,
+    /// Resident memory (now, peak), MB.
+    pub memory_mb: (Option<f64>, Option<f64>),
+    /// Whose memory `memory_mb` is.
+    pub memory_scope: &'static str,
+    /// Run-specific figures (the in-process node's counters, the recording's).
+    pub extra: serde_json::Value,
+}
+
+/// The node's own receive/pipeline/send threads ([`node::NodeService::start`]) on an
+/// in-process bus in this process, under `feet` for `total_us` (warm-up included); its frames
+/// recorded to the MCAP file `mcap` when given. CPU counts the node's three threads; memory
+/// is the whole process (node and load generator), an upper bound for the node.
+pub fn bench_inproc(
+    model: node::classifier::Model,
+    feet: Feet,
+    total_us: u64,
+    mcap: Option<&std::path::Path>,
+) -> Result<BenchRun, LoadError> {
+    use protocol::bus::{BusSource, InProcBus};
+    let ids = feet.ids.clone();
+    let cfg = node::NodeConfig {
+        feet: feet.feet.len() as u8,
+        ..node::NodeConfig::default()
+    };
+    let bus = InProcBus::new();
+    let recording = record::LiveOptions {
+        mcap: mcap.map(|p| p.to_path_buf()),
+        foxglove: None,
+    }
+    .start(&ids, &protocol::TerrainCatalog::paper());
+    if let (Some(p), None) = (mcap, &recording) {
+        return Err(LoadError::Recording(p.display().to_string()));
+    }
+    let node = node::NodeService::new(cfg, model)?.start_with_tap(
+        BusSource::InProc(bus.clone()),
+        recording.as_ref().map(|r| r.bus_tap()),
+    )?;
+    let rec_cpu_start = task_cpu_ns("self", Some(&["record"]));
+    let cpu = || task_cpu_ns("self", Some(&["receive", "pipeline", "send"]));
+    let result = measure(
+        &mut bus.endpoint(),
+        &mut bus.endpoint(),
+        &ids,
+        feet,
+        total_us,
+        &cpu,
+    );
+    let rec_cpu_end = task_cpu_ns("self", Some(&["record"]));
+    let stats = node.stop();
+    let memory_mb = memory_mb("self");
+    let tally = result?;
+    let recorded = recording.map(|r| {
+        let s = r.finish();
+        serde_json::json!({
+            "file": mcap,
+            "messages": s.stats.messages,
+            "images": s.stats.images,
+            "dropped": s.dropped,
+            "failed": s.failed,
+            "recorder_cpu_pct_of_one_core": rec_cpu_start.zip(rec_cpu_end)
+                .map(|(a0, a1)| a1.saturating_sub(a0) as f64 * 1e-9 / (total_us as f64 * 1e-6) * 100.0),
+        })
+    });
+    Ok(BenchRun {
+        tally,
+        memory_mb,
+        memory_scope: "whole process: node threads and load generator",
+        extra: serde_json::json!({
+            "node_rx_frames": stats.rx_frames,
+            "node_rx_dropped": stats.rx_dropped,
+            "bus_overruns": bus.overruns(),
+            "mcap": recorded,
+        }),
+    })
+}
+
+/// `presrs node` started from the executable `exe` as a child process on `iface` (the model
+/// and a config for `feet` feet handed over in a temporary folder, removed after), under
+/// `feet` for `total_us`; CPU and memory are the child's alone.
+pub fn bench_process(
+    exe: &std::path::Path,
+    iface: &str,
+    model: &node::classifier::Model,
+    feet: Feet,
+    total_us: u64,
+    mcap: Option<&std::path::Path>,
+) -> Result<BenchRun, LoadError> {
+    use protocol::bus::SocketCanBus;
+    use protocol::ids::MessageKind;
+    let ids = feet.ids.clone();
+    let dir = std::env::temp_dir().join(format!("presrs-bench-{}", std::process::id()));
+    std::fs::create_dir_all(&dir)?;
+    let model_path = dir.join("model.json");
+    model.save(&model_path)?;
+    let cfg_path = dir.join("node.toml");
+    std::fs::write(&cfg_path, format!("feet = {}\n", feet.feet.len()))?;
+    let mut tx = SocketCanBus::open(iface)?;
+    let mut rx = SocketCanBus::open(iface)?;
+    rx.set_filters(&ids.filters(&[MessageKind::TerrainClass, MessageKind::NodeStatus]))?;
+    let mut cmd = std::process::Command::new(exe);
+    cmd.args(["node", "--iface", iface, "--model"])
+        .arg(&model_path)
+        .arg("--config")
+        .arg(&cfg_path);
+    if let Some(p) = mcap {
+        cmd.arg("--mcap").arg(p);
+    }
+    let mut node = NodeProcess(cmd.stdout(std::process::Stdio::null()).spawn()?);
+    let result = node
+        .wait_for_heartbeat(&mut rx, &ids, Duration::from_secs(20))
+        .and_then(|()| {
+            let pid = node.pid();
+            let cpu = || task_cpu_ns(&pid, None);
+            measure(&mut tx, &mut rx, &ids, feet, total_us, &cpu)
+        });
+    let memory_mb = memory_mb(&node.pid());
+    node.stop();
+    let _ = std::fs::remove_dir_all(&dir);
+    Ok(BenchRun {
+        tally: result?,
+        memory_mb,
+        memory_scope: "the presrs node process",
+        extra: serde_json::json!({}),
+    })
+}
+
+/// A node process under test (`presrs node` started by the caller): its first heartbeat
+/// awaited, and stopped with SIGTERM (the node's graceful stop), killed if it has not ended
+/// 5 s later.
+pub struct NodeProcess(pub std::process::Child);
+
+impl NodeProcess {
+    /// Waits up to `within` for the node's first NodeStatus on `rx`.
+    pub fn wait_for_heartbeat(
+        &mut self,
+        rx: &mut dyn CanBus,
+        ids: &IdConfig,
+        within: std::time::Duration,
+    ) -> Result<(), LoadError> {
+        let end = std::time::Instant::now() + within;
+        while std::time::Instant::now() < end {
+            if let Some(status) = self.0.try_wait()? {
+                return Err(LoadError::NodeExited(status));
+            }
+            if let Some(st) = rx.recv(std::time::Duration::from_millis(50))?
+                && let Ok(Some((_, protocol::Message::NodeStatus(_)))) =
+                    protocol::messages::decode(&st.frame, ids)
+            {
+                return Ok(());
+            }
+        }
+        Err(LoadError::NoHeartbeat(within))
+    }
+
+    /// Its process id, for [`task_cpu_ns`] and [`memory_mb`].
+    pub fn pid(&self) -> String {
+        self.0.id().to_string()
+    }
+
+    /// SIGTERM, then SIGKILL after 5 s.
+    pub fn stop(mut self) {
+        // SAFETY: kill(2) on our own child's pid.
+        unsafe {
+            libc::kill(self.0.id() as i32, libc::SIGTERM);
+        }
+        let end = std::time::Instant::now() + std::time::Duration::from_secs(5);
+        while std::time::Instant::now() < end {
+            if let Ok(Some(_)) = self.0.try_wait() {
+                return;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
