@@ -1,0 +1,261 @@
+//! The checks a model file passes before a node runs it: sizes, indexes, finite numbers; each
+//! names the field at fault.
+
+use super::*;
+
+impl Model {
+    /// Checks that the model's parts fit together (sizes, indexes, finite numbers).
+    pub fn validate(&self) -> Result<(), Invalid> {
+        if let Some(b) = self.bits
+            && b != 8
+            && b != 16
+        {
+            return Err(Invalid::range("bits", b, "8 or 16"));
+        }
+        let n = self.feature_len();
+        if self.classes.is_empty() || self.classes.len() > MAX_CLASSES {
+            return Err(Invalid::new(
+                "classes",
+                format!("{} classes (1..={MAX_CLASSES} allowed)", self.classes.len()),
+            ));
+        }
+        if !(1..=MAX_DOWNSAMPLE).contains(&self.downsample) {
+            return Err(Invalid::range(
+                "downsample",
+                self.downsample,
+                format!("1..={MAX_DOWNSAMPLE} (1 = full resolution)"),
+            ));
+        }
+        if !(1..=64).contains(&self.input_rows) || !(1..=64).contains(&self.input_cols) {
+            return Err(Invalid::new(
+                "input_rows",
+                format!(
+                    "input_rows x input_cols = {}x{}: the protocol carries 1x1 to 64x64 images",
+                    self.input_rows, self.input_cols
+                ),
+            ));
+        }
+        let (r, c) = self
+            .work_size()
+            .ok_or_else(|| Invalid::new("crop", "crop leaves no pixels"))?;
+        if crate::classifier::features::fft_len(r * c) != self.n_fft {
+            return Err(Invalid::new(
+                "n_fft",
+                format!("n_fft {} does not fit {r}x{c} images", self.n_fft),
+            ));
+        }
+        if self.pca_mean.len() != n {
+            return Err(Invalid::new(
+                "pca_mean",
+                format!("pca_mean has {} values, expected {n}", self.pca_mean.len()),
+            ));
+        }
+        if self.h == 0 || self.pca_matrix.len() != self.h * n {
+            return Err(Invalid::new(
+                "pca_matrix",
+                format!(
+                    "pca_matrix has {} values, expected h x n = {} x {n}",
+                    self.pca_matrix.len(),
+                    self.h
+                ),
+            ));
+        }
+        if self.samples.len() != self.n_samples() * self.h || self.n_samples() == 0 {
+            return Err(Invalid::new(
+                "samples",
+                format!(
+                    "samples has {} values for {} labels and h = {}",
+                    self.samples.len(),
+                    self.n_samples(),
+                    self.h
+                ),
+            ));
+        }
+        if let Some(bad) = self
+            .sample_classes
+            .iter()
+            .find(|&&k| k >= self.classes.len())
+        {
+            return Err(Invalid::new(
+                "sample_classes",
+                format!("sample class {bad} is not a class index"),
+            ));
+        }
+        // Values that would not fail loudly but disable the model: every decision unknown
+        // (a NaN or +inf threshold), every image scaled to nothing, a class sent as "unknown".
+        if self.unknown_threshold.is_nan() || self.unknown_threshold == f64::INFINITY {
+            return Err(Invalid::new(
+                "unknown_threshold",
+                format!(
+                    "unknown_threshold {} would make every decision unknown",
+                    self.unknown_threshold
+                ),
+            ));
+        }
+        if let Some(t) = &self.unknown_thresholds {
+            if t.len() != self.classes.len() {
+                return Err(Invalid::new(
+                    "unknown_thresholds",
+                    format!("{} thresholds for {} classes", t.len(), self.classes.len()),
+                ));
+            }
+            if let Some(v) = t.iter().find(|v| v.is_nan() || **v == f64::INFINITY) {
+                return Err(Invalid::new(
+                    "unknown_thresholds",
+                    format!("a threshold of {v} would make every decision of its class unknown"),
+                ));
+            }
+        }
+        for (key, bands) in [
+            ("load_ranges", &self.load_ranges),
+            ("texture_ranges", &self.texture_ranges),
+        ] {
+            if let Some(l) = bands
+                && (l.len() != self.classes.len()
+                    || l.iter().any(|[a, b]| a.is_nan() || b.is_nan() || a > b))
+            {
+                return Err(Invalid::new(
+                    key,
+                    format!(
+                        "{key}: want one [low, high] pair per class ({}), low <= high",
+                        self.classes.len()
+                    ),
+                ));
+            }
+        }
+        if let Some(e) = &self.energy
+            && (e.len() != self.classes.len() || e.iter().flatten().any(|m| !m.is_valid()))
+        {
+            return Err(Invalid::new(
+                "energy",
+                format!(
+                    "want one return map (or null) per class ({}), finite, residual_s low <= high; fit it again with `presrs energy`",
+                    self.classes.len()
+                ),
+            ));
+        }
+        if let Some(g) = &self.gaits
+            && (g.contains(&0) || g.windows(2).any(|w| w[0] >= w[1]))
+        {
+            return Err(Invalid::new(
+                "gaits",
+                format!(
+                    "gaits {g:?}: want gait numbers 1..=255, sorted, each once; or drop the field"
+                ),
+            ));
+        }
+        if let Some(r) = self.unknown_rate
+            && !(0.0..=MAX_UNKNOWN_RATE).contains(&r)
+        {
+            return Err(Invalid::new(
+                "unknown_rate",
+                format!("unknown_rate {r} is not a share in 0..={MAX_UNKNOWN_RATE}"),
+            ));
+        }
+        if let Some(v) = self.normalize_load
+            && !(v.is_finite() && v > 0.0)
+        {
+            return Err(Invalid::new(
+                "normalize_load",
+                format!("normalize_load {v} must be a positive total intensity"),
+            ));
+        }
+        if let Some(c) = self
+            .classes
+            .iter()
+            .find(|c| c.terrain_id == protocol::messages::TERRAIN_UNKNOWN)
+        {
+            return Err(Invalid::new(
+                "classes",
+                format!(
+                    "class `{}` sends terrain id 255, which means unknown",
+                    c.name
+                ),
+            ));
+        }
+        if !(self.kernel_width.is_finite() && self.kernel_width > 0.0) {
+            return Err(Invalid::new(
+                "kernel_width",
+                format!("kernel_width {} must be positive", self.kernel_width),
+            ));
+        }
+        let finite = self
+            .pca_mean
+            .iter()
+            .chain(&self.pca_matrix)
+            .chain(&self.samples)
+            .all(|v| v.is_finite());
+        if !finite {
+            return Err(Invalid::new(
+                "pca_matrix",
+                "non-finite numbers in the PCA or samples",
+            ));
+        }
+        if let Some(nv) = &self.novelty {
+            nv.validate(self.classes.len())
+                .map_err(|e| Invalid::new("novelty", e.0))?;
+            let n_feat = self.pca_mean.len();
+            if n_feat == 0 || !nv.nuisance.len().is_multiple_of(n_feat) {
+                return Err(Invalid::new(
+                    "novelty",
+                    format!(
+                        "novelty.nuisance has {} values: not whole rows of {n_feat} features",
+                        nv.nuisance.len()
+                    ),
+                ));
+            }
+            if nv.nuisance.iter().any(|v| !v.is_finite()) {
+                return Err(Invalid::new(
+                    "novelty",
+                    "non-finite numbers in novelty.nuisance",
+                ));
+            }
+            if nv.reference.len() != nv.reference_classes.len() * self.h {
+                return Err(Invalid::new(
+                    "novelty",
+                    format!(
+                        "novelty.reference has {} values for {} images of h = {}",
+                        nv.reference.len(),
+                        nv.reference_classes.len(),
+                        self.h
+                    ),
+                ));
+            }
+            if let Some(i) = nv.calibration.pixels.iter().position(|p| p.len() != r * c) {
+                return Err(Invalid::new(
+                    "novelty",
+                    format!(
+                        "calibration image {i} has {} pixels, expected {r}x{c}",
+                        nv.calibration.pixels[i].len()
+                    ),
+                ));
+            }
+        }
+        if let Some(im) = &self.images {
+            if im.pixels.len() != self.n_samples()
+                || im.n_train == 0
+                || im.n_train >= im.pixels.len()
+            {
+                return Err(Invalid::new(
+                    "images",
+                    format!(
+                        "images holds {} images ({} for training) for {} stored samples",
+                        im.pixels.len(),
+                        im.n_train,
+                        self.n_samples()
+                    ),
+                ));
+            }
+            if let Some(i) = im.pixels.iter().position(|p| p.len() != r * c) {
+                return Err(Invalid::new(
+                    "images",
+                    format!(
+                        "stored image {i} has {} pixels, expected {r}x{c}",
+                        im.pixels[i].len()
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
