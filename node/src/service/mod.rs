@@ -20,6 +20,12 @@
 //!
 //! Receive and send each open their own handle with retry and backoff: a missing interface, or
 //! one that goes down, shows as `Degraded` in NodeStatus and in the log, never as an exit.
+mod running;
+mod stats;
+
+pub use running::RunningNode;
+pub use stats::NodeStats;
+use stats::Shared;
 
 use crate::unknown::{Reason, ReasonCounts};
 use std::path::Path;
@@ -92,121 +98,6 @@ impl Output {
         match *self {
             Output::Class { foot, class, .. } => Message::TerrainClass(class).to_frame(ids, foot),
             Output::Status(s) => Message::NodeStatus(s).to_frame(ids, 0),
-        }
-    }
-}
-
-/// The counters a running node shares between its threads, written without locks: the
-/// runner's (frames in and out, bus errors, the link's state) and the pipeline's.
-#[derive(Debug, Default)]
-struct Shared {
-    link: Arc<LinkStats>,
-    model_id: AtomicU64,
-    damage_bits: AtomicU64,
-    steps: AtomicU64,
-    classified: AtomicU64,
-    no_sample: AtomicU64,
-    images: AtomicU64,
-    crc_failures: AtomicU64,
-    incomplete: AtomicU64,
-    decode_errors: AtomicU64,
-    unknown: AtomicU64,
-    unknown_by_reason: [AtomicU64; Reason::ALL.len()],
-}
-
-/// A node's counters at one moment.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct NodeStats {
-    /// As NodeStatus reports it.
-    pub state: NodeState,
-    /// The loaded model's content hash ([`Model::id`]).
-    pub model_id: u64,
-    /// Largest learned sensor damage over the feet, percent.
-    pub damage_pct: f64,
-    /// Frames read from the bus.
-    pub rx_frames: u64,
-    /// Frames the receive thread dropped because the pipeline was behind.
-    pub rx_dropped: u64,
-    /// Frames written to the bus.
-    pub tx_frames: u64,
-    /// Frames not sent (send queue full, or a bus error).
-    pub tx_dropped: u64,
-    /// Bus errors on receive or send.
-    pub bus_errors: u64,
-    /// Touchdowns.
-    pub steps: u64,
-    /// Steps decided from an image.
-    pub classified: u64,
-    /// Steps decided unknown (TerrainClass 0xFF): not like any trained terrain, or outside
-    /// its return map ([`NodeService::gait_tally`] counts them per gait).
-    pub unknown: u64,
-    /// Unknown steps per reason: the image's check (novelty, load, texture), the energy
-    /// check, no contact or no sample, as each TerrainClass says.
-    pub unknown_by_reason: ReasonCounts,
-    /// Steps that ended without an image.
-    pub no_sample: u64,
-    /// Tactile images reassembled.
-    pub images: u64,
-    /// Tactile transfers that failed their CRC.
-    pub crc_failures: u64,
-    /// Tactile transfers never completed.
-    pub incomplete: u64,
-    /// Frames with our ids that did not decode.
-    pub decode_errors: u64,
-    /// Frames a recorder tap dropped because it was behind (0 without one).
-    pub record_dropped: u64,
-}
-
-impl Shared {
-    fn publish(&self, c: &Counters, r: &ReassemblyStats, damage_pct: f64, unknown: u64) {
-        let r_ = Ordering::Relaxed;
-        self.unknown.store(unknown, r_);
-        for (a, &v) in self.unknown_by_reason.iter().zip(&c.unknown_by_reason.0) {
-            a.store(v, r_);
-        }
-        self.steps.store(c.steps, r_);
-        self.classified.store(c.classified, r_);
-        self.no_sample.store(c.no_sample, r_);
-        self.decode_errors.store(c.decode_errors, r_);
-        self.images.store(r.delivered, r_);
-        self.crc_failures.store(r.crc_failures, r_);
-        self.incomplete.store(r.incomplete, r_);
-        self.damage_bits.store(damage_pct.to_bits(), r_);
-    }
-
-    fn snapshot(&self) -> NodeStats {
-        let l = |a: &AtomicU64| a.load(Ordering::Relaxed);
-        NodeStats {
-            state: self.state(),
-            model_id: l(&self.model_id),
-            damage_pct: f64::from_bits(l(&self.damage_bits)),
-            rx_frames: l(&self.link.rx_frames),
-            rx_dropped: l(&self.link.rx_dropped),
-            tx_frames: l(&self.link.tx_frames),
-            tx_dropped: l(&self.link.tx_dropped),
-            bus_errors: l(&self.link.bus_errors),
-            steps: l(&self.steps),
-            classified: l(&self.classified),
-            unknown: l(&self.unknown),
-            unknown_by_reason: ReasonCounts(std::array::from_fn(|i| l(&self.unknown_by_reason[i]))),
-            no_sample: l(&self.no_sample),
-            images: l(&self.images),
-            crc_failures: l(&self.crc_failures),
-            incomplete: l(&self.incomplete),
-            decode_errors: l(&self.decode_errors),
-            record_dropped: 0,
-        }
-    }
-
-    /// The node's state, the CAN controller's error state first: a bus-off or error-passive
-    /// controller explains whatever else the node sees.
-    fn state(&self) -> NodeState {
-        match (self.link.controller(), self.link.link()) {
-            (ControllerState::BusOff, _) => NodeState::BusOff,
-            (ControllerState::Passive, _) => NodeState::ErrorPassive,
-            (_, Link::Starting) => NodeState::Starting,
-            (_, Link::Open) => NodeState::Running,
-            (_, Link::Failing) => NodeState::Degraded,
         }
     }
 }
@@ -480,76 +371,6 @@ impl NodeService {
             shared,
             tap,
         })
-    }
-}
-
-/// A node running on its threads (from [`NodeService::start`]).
-pub struct RunningNode {
-    threads: Threaded<NodeService>,
-    catalog: TerrainCatalog,
-    shared: Arc<Shared>,
-    tap: Option<Arc<dyn Tap>>,
-}
-
-impl RunningNode {
-    /// Loads and checks the model at `path` on the caller's thread, then hands it to the
-    /// pipeline, which installs it between two frames; returns its id. A bad file is an error
-    /// here and the running model stays.
-    pub fn reload_model(&self, path: &Path) -> Result<u64, ServiceError> {
-        let model = Model::load(path)?;
-        model.check_catalog(&self.catalog)?;
-        let id = model.id();
-        let installed = self.threads.call(move |node| match node.set_model(model) {
-            Ok(id) => tracing::info!(model_id = id, "model reloaded"),
-            Err(e) => tracing::error!("{e}; keeping the model already loaded"),
-        });
-        if !installed {
-            return Err(ServiceError::Stopped);
-        }
-        Ok(id)
-    }
-
-    /// The terrains the node reports.
-    pub fn catalog(&self) -> &TerrainCatalog {
-        &self.catalog
-    }
-
-    /// The counters now.
-    pub fn stats(&self) -> NodeStats {
-        NodeStats {
-            record_dropped: self.tap.as_ref().map_or(0, |t| t.dropped()),
-            ..self.shared.snapshot()
-        }
-    }
-
-    /// True while every thread runs.
-    pub fn is_running(&self) -> bool {
-        self.threads.is_running()
-    }
-
-    /// Stops the threads (a last NodeStatus says `Stopping`), joins them and returns the final
-    /// counters.
-    pub fn stop(self) -> NodeStats {
-        let node = self.threads.stop();
-        let s = NodeStats {
-            record_dropped: self.tap.as_ref().map_or(0, |t| t.dropped()),
-            ..self.shared.snapshot()
-        };
-        tracing::info!(
-            rx_frames = s.rx_frames,
-            rx_dropped = s.rx_dropped,
-            tx_frames = s.tx_frames,
-            tx_dropped = s.tx_dropped,
-            bus_errors = s.bus_errors,
-            steps = s.steps,
-            classified = s.classified,
-            unknown = s.unknown,
-            unknown_by_reason = %s.unknown_by_reason,
-            unknown_by_gait = %node.as_ref().map(|n| n.describe_gaits()).unwrap_or_default(),
-            record_dropped = s.record_dropped,
-            "presrs node stopped"
-        );
-        s
     }
 }
 

@@ -1,0 +1,73 @@
+//! A node running on its threads, and what can be done to it while it runs.
+
+use super::*;
+
+/// A node running on its threads (from [`NodeService::start`]).
+pub struct RunningNode {
+    pub(super) threads: Threaded<NodeService>,
+    pub(super) catalog: TerrainCatalog,
+    pub(super) shared: Arc<Shared>,
+    pub(super) tap: Option<Arc<dyn Tap>>,
+}
+
+impl RunningNode {
+    /// Loads and checks the model at `path` on the caller's thread, then hands it to the
+    /// pipeline, which installs it between two frames; returns its id. A bad file is an error
+    /// here and the running model stays.
+    pub fn reload_model(&self, path: &Path) -> Result<u64, ServiceError> {
+        let model = Model::load(path)?;
+        model.check_catalog(&self.catalog)?;
+        let id = model.id();
+        let installed = self.threads.call(move |node| match node.set_model(model) {
+            Ok(id) => tracing::info!(model_id = id, "model reloaded"),
+            Err(e) => tracing::error!("{e}; keeping the model already loaded"),
+        });
+        if !installed {
+            return Err(ServiceError::Stopped);
+        }
+        Ok(id)
+    }
+
+    /// The terrains the node reports.
+    pub fn catalog(&self) -> &TerrainCatalog {
+        &self.catalog
+    }
+
+    /// The counters now.
+    pub fn stats(&self) -> NodeStats {
+        NodeStats {
+            record_dropped: self.tap.as_ref().map_or(0, |t| t.dropped()),
+            ..self.shared.snapshot()
+        }
+    }
+
+    /// True while every thread runs.
+    pub fn is_running(&self) -> bool {
+        self.threads.is_running()
+    }
+
+    /// Stops the threads (a last NodeStatus says `Stopping`), joins them and returns the final
+    /// counters.
+    pub fn stop(self) -> NodeStats {
+        let node = self.threads.stop();
+        let s = NodeStats {
+            record_dropped: self.tap.as_ref().map_or(0, |t| t.dropped()),
+            ..self.shared.snapshot()
+        };
+        tracing::info!(
+            rx_frames = s.rx_frames,
+            rx_dropped = s.rx_dropped,
+            tx_frames = s.tx_frames,
+            tx_dropped = s.tx_dropped,
+            bus_errors = s.bus_errors,
+            steps = s.steps,
+            classified = s.classified,
+            unknown = s.unknown,
+            unknown_by_reason = %s.unknown_by_reason,
+            unknown_by_gait = %node.as_ref().map(|n| n.describe_gaits()).unwrap_or_default(),
+            record_dropped = s.record_dropped,
+            "presrs node stopped"
+        );
+        s
+    }
+}
