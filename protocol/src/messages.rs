@@ -4,6 +4,9 @@
 //! rad/s, percent, µs) in the structs and scaled to integers on the wire; out-of-range values
 //! saturate at the field's limits rather than wrap. `docs/protocol.md` has the bit layouts and
 //! `presrs.dbc` describes the same layouts for third-party tools.
+//!
+//! One concept in one file (over 600 lines): the message set, each message's struct beside its
+//! encoding, so that the wire layout reads in one place.
 
 use crate::error::DecodeError;
 use crate::frame::{CanFrame, make_id};

@@ -1,6 +1,9 @@
 //! The classifier at run time: crop, downsample, (repair), feature vector, PCA projection and the
 //! Parzen-window (Gaussian kernel density) decision. Every buffer is allocated when the
 //! classifier is built; classifying an image allocates nothing.
+//!
+//! One concept in one file (over 600 lines): the run-time classifier's buffers and the steps that
+//! share them; split, each step would reach into the others' buffers.
 
 use super::Kernels;
 use super::features::FeatureExtractor;

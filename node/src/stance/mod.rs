@@ -6,6 +6,9 @@
 //! thread; [`crate::NodeService`] drives them live, in a replay and in the demo. All times in the decision are the foot's own timestamps (FootContact and the
 //! tactile header), so a replay decides exactly as the live run did. Nothing here allocates per
 //! frame: buffers are sized when the model is installed.
+//!
+//! One concept in one file (over 600 lines): the pipeline's per-foot state machine; its parts
+//! (debounce, sample, decision, adapt) are already the submodules.
 
 mod adapt;
 mod debounce;
