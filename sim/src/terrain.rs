@@ -478,14 +478,7 @@ fn segment(f: &mut Field, cy: f64, cx: f64, a: f64, len: f64, rad: f64, base: f6
 /// then the grains' texture at one to two sensels, which a 40x40 image resolves and a 10x10
 /// one (5.08 mm pitch) aliases into the backing's pattern: the paper's section 5.
 ///
-/// Measured with the paper's protocol (`lab::study::resolution`, what `presrs experiment
-/// resolution` prints): without the backing, sandpaper 98.4 % at 40x40 and 90.4 % at 10x10
-/// (seeds 1-3); with this value, 94.3 % and 64.4 % (seeds 1-5). At 10x10 the loss is the
-/// middle grits': aluminum and 60 grit keep 100 % and 90 %, 220, 150 and 100 grit fall from
-/// 81-99 % to 41-48 %. The value is an estimate of the cloth's relief, not a measurement of
-/// the paper's sheet. How much the result hangs on it (these two constants changed by hand, 5
-/// seeds each): 50-100 um over 1.5-3.5 mm gave 88-94 % and 56-71 %; 30 um, a 10x10 loss of
-/// only 16-21 points.
+/// The value is an estimate of the cloth's relief; measured: docs/decisions/sandpaper-backing-relief.md.
 pub const BACKING_RELIEF_MM: f64 = 0.05;
 /// Correlation length of the backing's relief (the Gaussian smoothing of white noise), mm.
 pub const BACKING_CORR_MM: f64 = 2.0;

@@ -63,9 +63,7 @@ pub const LEG_GAP_US: u64 = 50_000;
 /// The controller.
 ///
 /// **Bumpless start.** A controller restarted in mid-hop knows nothing of the leg it takes
-/// over; measured on vcan before this existed, a restarted controller sent its initial gait's
-/// touchdown angle (G2, +0.420 rad) to a leg running G3 at +0.260 rad, and the hopper fell 1.85 s
-/// later. So a starting controller first listens (no LegCommand, no GaitStatus) to one step of
+/// over (the initial gait's angle sent to a leg running another gait felled it). So a starting controller first listens (no LegCommand, no GaitStatus) to one step of
 /// the leg (touchdown, liftoff, next touchdown, after a first report of the phase) and takes
 /// over at the second touchdown, running the gait the leg runs:
 /// - another controller's GaitStatus for the foot names it, when one was heard;
@@ -76,18 +74,15 @@ pub const LEG_GAP_US: u64 = 50_000;
 ///   gait's beta_des by [`BETA_DES_STEP`] per step, as after any switch.
 ///
 /// The node's TerrainClass reports are counted while listening, so a terrain it has confirmed
-/// switches the gait at a liftoff after the takeover, in flight as always. Measured in the
-/// lock-step loop with the controller dead from 6 s to 7 s, 60 steps on clay (G1), grass (G2)
-/// and carpet (G3): starting afresh fell 1-2 times per run; taking over in the terrain's gait
-/// at the first touchdown fell 9-15 times (at t = 0 the leg still ran the simulator's G2 while
-/// the node already said wood: G3's stance law at G2's speed left at 1.1 m/s instead of 0.5).
+/// switches the gait at a liftoff after the takeover, in flight as always. What each
+/// alternative cost in falls: docs/decisions/controller-takeover.md.
 ///
 /// No touchdown within `takeover_ms`: a fresh start.
 ///
 /// **Gaps in the leg's reports.** After reports were lost (an interface down, a stalled
 /// process: [`LEG_GAP_US`]) the controller may have missed an edge, and a missed liftoff made
 /// it take the next touchdown for more of the old stance and run eq. (4) from a touchdown
-/// long past (measured in the lock-step loop with the bus silent 0.3 s: 4 falls). So after a
+/// long past. So after a
 /// gap the next FootContact gives the phase only, as at a takeover, and a stance whose
 /// touchdown was not heard is left to the leg (a flight command: the leg holds its rest
 /// length); eq. (5) restarts from beta_des at its liftoff. The foot's own reports lost for
@@ -250,9 +245,8 @@ impl Controller {
                 // Commands were lost as well, and the leg's own laws ran it meanwhile: the
                 // controller knows as little of it as a restarted one. A leg of motors has no
                 // laws of its own: silence would leave it in its damped stop for the step
-                // listened to, and the hopper falls (measured in the lock-step loop, the bus
-                // silent 60-300 ms, leg of MIT, moteus or ODrive motors: 1-9 falls in each of
-                // 60 runs of 40 steps, 0 after this). It is commanded on, phase unknown:
+                // listened to, and the hopper falls (docs/decisions/controller-takeover.md).
+                // It is commanded on, phase unknown:
                 // flight commands until the next FootContact gives the phase.
                 if self.cfg.takeover_ms > 0 && self.listen.is_none() && !self.leg_needs_commands {
                     self.listen = Some(Listen {
@@ -348,9 +342,8 @@ impl Controller {
                 let t = self.foot_time(fc.timestamp_us, now_us);
                 // Reports lost (a sequence number skipped) for longer than the shortest stance:
                 // a whole phase, its two edges, may be among them. A shorter loss holds one
-                // edge at most, taken at this report (up to that loss late). Measured in the
-                // lock-step loop with a leg of motors and the bus silent 30 ms: taking every
-                // loss as an unknown phase felled the hopper in 9 of 15 runs, 0 before.
+                // edge at most, taken at this report (up to that loss late); taking every loss
+                // as an unknown phase felled the hopper (docs/decisions/controller-takeover.md).
                 // Only a foot whose numbers have counted is judged (a foot that leaves them at
                 // 0 loses nothing).
                 let next = self

@@ -19,9 +19,7 @@ pub(super) struct Listen {
 }
 
 /// The largest miss, rad, of a gait's eq. (5) in predicting the listened step's next touchdown
-/// angle for that gait to be the one the leg runs. Measured in the lock-step loop: the
-/// simulated leg's own laws hit the gait they run within 0.01 rad; the paper's gaits lie
-/// 0.15 rad apart in beta_des, and eq. (5) scales that by c = 0.2 to 0.03 rad between them.
+/// angle for that gait to be the one the leg runs (why 0.012: docs/decisions/controller-takeover.md).
 pub const TAKEOVER_FIT_RAD: f64 = 0.012;
 
 /// How a controller took over a leg (see [`ControllerConfig::takeover_ms`]).

@@ -78,13 +78,7 @@ pub(super) fn load_ranges(work: &[Vec<u16>], labels: &[usize], rate: f64) -> Vec
 /// so a distance scaled by `1 + m` moves `c - q` by `(1 + m)^2`.
 ///
 /// Why: held-out training images come from the same recording as the stored samples; the
-/// robot's next run does not. Measured: 4 terrains captured from 14 s simulator logs, models
-/// trained on 30 images per terrain, a fresh mixed run of 73 steps: 6 of 73 known steps fell
-/// below the unscaled thresholds (8%, against the 2% asked), 4 with a 10% distance margin, 3
-/// with 20% (with 40 images per terrain and 10%: 2). What it costs, leave-one-terrain-out
-/// (`presrs experiment openset`), unscaled -> 10% -> 20%: a left-out terrain called unknown
-/// 99.6 -> 97.5 -> 95.8% (static), 97.0 -> 91.3 -> 84.7% (sandpaper); known dynamic images
-/// called unknown 5.8 -> 4.8 -> 4.0%.
+/// robot's next run does not. Measured: docs/decisions/calibration-distance-margin.md.
 pub(super) fn widen(m: &Model, k: usize, q: f64) -> f64 {
     let n_k = m.sample_classes.iter().filter(|&&c| c == k).count().max(1) as f64;
     let s2 = 2.0 * m.kernel_width * m.kernel_width;
