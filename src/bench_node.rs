@@ -46,6 +46,19 @@ pub struct BenchNodeArgs {
     /// the report adds the recorder's CPU, what it wrote and what it dropped.
     #[arg(long, value_name = "FILE")]
     pub mcap: Option<PathBuf>,
+    /// The in-process node's threads: 1 (the default, as `presrs node` runs) or 3 (receive,
+    /// pipeline and send), to measure one against the other (docs/decisions/node-threads.md).
+    #[arg(long, default_value = "1")]
+    pub node_threads: NodeThreadsArg,
+}
+
+/// `--node-threads`.
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub enum NodeThreadsArg {
+    #[value(name = "1")]
+    One,
+    #[value(name = "3")]
+    Three,
 }
 
 pub fn run(a: BenchNodeArgs) -> Result<ExitCode> {
@@ -66,7 +79,16 @@ pub fn run(a: BenchNodeArgs) -> Result<ExitCode> {
     let (bus, run) = match &a.iface {
         None => (
             "inproc",
-            load::bench_inproc(model, feet, total_us, a.mcap.as_deref())?,
+            load::bench_inproc(
+                model,
+                feet,
+                total_us,
+                a.mcap.as_deref(),
+                match a.node_threads {
+                    NodeThreadsArg::One => node::NodeThreads::One,
+                    NodeThreadsArg::Three => node::NodeThreads::Three,
+                },
+            )?,
         ),
         Some(iface) => (
             iface.as_str(),

@@ -48,5 +48,7 @@ pub mod training;
 pub mod unknown;
 
 pub use config::{NodeConfig, RefitMode, RepairMode};
-pub use service::{NodeService, NodeStats, Output, RunningNode, ServiceError};
+pub use service::{
+    NodeService, NodeStats, NodeThreads, Output, RunningNode, ServiceError, StageTimes,
+};
 pub use stance::StancePipeline;

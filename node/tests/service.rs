@@ -380,8 +380,17 @@ fn a_model_outside_the_catalog_is_refused_and_a_bad_reload_keeps_the_model() {
 /// reload through the handle; a last NodeStatus that says Stopping.
 #[test]
 fn started_on_a_bus_it_answers_each_step_and_says_when_it_stops() {
+    for threads in [presrs_node::NodeThreads::One, presrs_node::NodeThreads::Three] {
+        started_on(threads);
+    }
+}
+
+fn started_on(threads: presrs_node::NodeThreads) {
     let m = model();
-    let dir = std::env::temp_dir().join(format!("presrs-service-bus-{}", std::process::id()));
+    let dir = std::env::temp_dir().join(format!(
+        "presrs-service-bus-{}-{threads:?}",
+        std::process::id()
+    ));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("model.json");
     m.save(&path).unwrap();
@@ -389,7 +398,7 @@ fn started_on_a_bus_it_answers_each_step_and_says_when_it_stops() {
     let mut robot = bus.endpoint();
     let running = NodeService::new(NodeConfig::default(), m)
         .unwrap()
-        .start(BusSource::InProc(bus.clone()))
+        .start_on(BusSource::InProc(bus.clone()), None, threads)
         .unwrap();
     let ids = IdConfig::default();
     let mut foot = FakeFoot::new();
@@ -435,9 +444,18 @@ fn started_on_a_bus_it_answers_each_step_and_says_when_it_stops() {
     assert_eq!(
         (stats.steps, stats.classified, stats.unknown),
         (2, 2, 1),
-        "{stats:?}"
+        "{threads:?}: {stats:?}"
     );
     assert!(stats.tx_frames >= 2);
+    // Every frame the pipeline took is timed; the two steps' last frames are the decided ones.
+    let st = stats.stages;
+    assert!(
+        st.frames > 0 && st.frames <= stats.rx_frames,
+        "{threads:?}: {st:?}, {} frames read",
+        stats.rx_frames
+    );
+    assert_eq!(st.decided, 2, "{threads:?}: {st:?}");
+    assert!(st.decided_ns > 0 && st.frame_ns >= st.decided_ns, "{st:?}");
     let mut last = None;
     while let Ok(Some(st)) = robot.recv(Duration::from_millis(50)) {
         if let Ok(Some((_, Message::NodeStatus(s)))) = messages::decode(&st.frame, &ids) {

@@ -44,6 +44,15 @@ impl BenchReport<'_> {
         }
     }
 
+    /// The node's CPU per 1,000 CAN frames, µs: what a lab scales to its own bus and board.
+    fn cpu_us_per_1000_frames(&self) -> Option<f64> {
+        let frames = self.frames_per_s() * self.seconds;
+        self.tally
+            .cpu_ns
+            .filter(|_| frames > 0.0)
+            .map(|ns| ns as f64 * 1e-3 / (frames / 1000.0))
+    }
+
     fn frames_per_s(&self) -> f64 {
         self.feet as f64
             * (1e6 / FRAME_US as f64)
@@ -80,6 +89,7 @@ impl BenchReport<'_> {
                 "max": lat.last(),
             },
             "node_cpu_pct_of_one_core": self.cpu_pct(),
+            "node_cpu_us_per_1000_frames": self.cpu_us_per_1000_frames(),
             "rss_mb": self.memory_mb.0,
             "peak_rss_mb": self.memory_mb.1,
             "memory_scope": self.memory_scope,
@@ -119,8 +129,9 @@ impl std::fmt::Display for BenchReport<'_> {
         )?;
         writeln!(
             f,
-            "node CPU {}% of one core; memory ({}) {} MB, peak {} MB",
+            "node CPU {}% of one core ({} us per 1,000 frames); memory ({}) {} MB, peak {} MB",
             n(self.cpu_pct()),
+            n(self.cpu_us_per_1000_frames()),
             self.memory_scope,
             n(self.memory_mb.0),
             n(self.memory_mb.1)

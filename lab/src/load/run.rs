@@ -23,6 +23,7 @@ pub fn bench_inproc(
     feet: Feet,
     total_us: u64,
     mcap: Option<&std::path::Path>,
+    threads: node::NodeThreads,
 ) -> Result<BenchRun, LoadError> {
     use protocol::bus::{BusSource, InProcBus};
     let ids = feet.ids.clone();
@@ -39,9 +40,10 @@ pub fn bench_inproc(
     if let (Some(p), None) = (mcap, &recording) {
         return Err(LoadError::Recording(p.display().to_string()));
     }
-    let node = node::NodeService::new(cfg, model)?.start_with_tap(
+    let node = node::NodeService::new(cfg, model)?.start_on(
         BusSource::InProc(bus.clone()),
         recording.as_ref().map(|r| r.bus_tap()),
+        threads,
     )?;
     let rec_cpu_start = task_cpu_ns("self", Some(&["record"]));
     let cpu = || task_cpu_ns("self", Some(&["receive", "pipeline", "send"]));
@@ -74,7 +76,12 @@ pub fn bench_inproc(
         memory_mb,
         memory_scope: "whole process: node threads and load generator",
         extra: serde_json::json!({
+            "node_threads": match threads {
+                node::NodeThreads::One => 1,
+                node::NodeThreads::Three => 3,
+            },
             "node_rx_frames": stats.rx_frames,
+            "node_stages": stage_means(&stats.stages),
             "node_rx_dropped": stats.rx_dropped,
             "bus_overruns": bus.overruns(),
             "mcap": recorded,
@@ -182,3 +189,18 @@ impl NodeProcess {
         let _ = self.0.wait();
     }
 }
+
+/// The node's [`node::StageTimes`] as means, µs, over the whole run (warm-up included).
+pub fn stage_means(s: &node::StageTimes) -> serde_json::Value {
+    let per = |sum: f64, n: u64| (n > 0).then(|| sum / n as f64);
+    serde_json::json!({
+        "frames": s.frames,
+        "frame_work_us_mean": per(s.frame_ns as f64 * 1e-3, s.frames),
+        "decided": s.decided,
+        "decided_frame_work_us_mean": per(s.decided_ns as f64 * 1e-3, s.decided),
+        "decided_frame_wait_us_mean": per(s.decided_wait_us as f64, s.decided),
+        "what": "work: the pipeline's on_frame (decode, reassembly, stance, decision); \
+                 wait: the bus's receive stamp to the pipeline (wake-ups, hand-offs)",
+    })
+}
+

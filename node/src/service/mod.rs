@@ -24,7 +24,7 @@ mod running;
 mod stats;
 
 pub use running::RunningNode;
-pub use stats::NodeStats;
+pub use stats::{NodeStats, StageTimes};
 use stats::Shared;
 
 use crate::unknown::{Reason, ReasonCounts};
@@ -119,6 +119,8 @@ pub struct NodeService {
     /// Decisions and unknowns per gait since the node began.
     tally: GaitTally,
     last_logged_unknown: u64,
+    /// Where the pipeline's time went ([`NodeStats::stages`]).
+    stages: StageTimes,
 }
 
 impl NodeService {
@@ -140,6 +142,7 @@ impl NodeService {
             heartbeat: 0,
             shared,
             said: Vec::with_capacity(16),
+            stages: StageTimes::default(),
             last_log: Instant::now(),
             last_logged: Counters::default(),
             gait: GaitTrack::default(),
@@ -215,6 +218,7 @@ impl NodeService {
             &r,
             self.pipeline.damage_pct(),
             self.tally.unknown(),
+            self.stages,
         );
         self.heartbeat = self.heartbeat.wrapping_add(1);
         // The low 8 bits of the running totals, as docs/protocol.md says: a monitor takes
@@ -342,6 +346,17 @@ impl NodeService {
         bus: BusSource,
         tap: Option<Arc<dyn Tap>>,
     ) -> Result<RunningNode, ServiceError> {
+        self.start_on(bus, tap, NodeThreads::default())
+    }
+
+    /// [`NodeService::start_with_tap`] on `threads` (the default is the one measured faster:
+    /// `presrs bench-node --node-threads` measures both).
+    pub fn start_on(
+        self,
+        bus: BusSource,
+        tap: Option<Arc<dyn Tap>>,
+        threads: NodeThreads,
+    ) -> Result<RunningNode, ServiceError> {
         let mut node = self;
         let clock = bus.clock();
         node.set_clock(clock.clone());
@@ -357,13 +372,16 @@ impl NodeService {
             link: Some(shared.link.clone()),
             ..RunOptions::default()
         };
-        // About 0.4 s of one foot's FD tactile stream: room for the pipeline to fall briefly
-        // behind.
-        let threads =
-            component::spawn(node, bus, opts, 16_384).map_err(|source| ServiceError::Spawn {
-                thread: "node",
-                source,
-            })?;
+        let threads = match threads {
+            NodeThreads::One => component::spawn_one(node, bus, opts),
+            // About 0.4 s of one foot's FD tactile stream: room for the pipeline to fall
+            // briefly behind.
+            NodeThreads::Three => component::spawn(node, bus, opts, 16_384),
+        }
+        .map_err(|source| ServiceError::Spawn {
+            thread: "node",
+            source,
+        })?;
         tracing::info!(iface = %label, "presrs node started");
         Ok(RunningNode {
             threads,
@@ -372,6 +390,19 @@ impl NodeService {
             tap,
         })
     }
+}
+
+/// The threads a started node runs on. One thread reads a frame, decides and answers it;
+/// three hand each frame from a receive thread to the pipeline and its answer to a send
+/// thread, so that a slow decision never keeps the socket unread. Measured:
+/// docs/decisions/node-threads.md.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum NodeThreads {
+    /// Receive, decide and send on one thread ([`component::spawn_one`]).
+    #[default]
+    One,
+    /// Receive, pipeline and send threads ([`component::spawn`]).
+    Three,
 }
 
 /// The node as a part on the bus. [`NodeService::start`] runs it on three threads
@@ -391,10 +422,21 @@ impl Component for NodeService {
         Vec::new()
     }
 
-    fn on_frame(&mut self, st: &Stamped, _: u64, out: &mut Outbox) {
+    fn on_frame(&mut self, st: &Stamped, now_us: u64, out: &mut Outbox) {
+        let t0 = Instant::now();
         let mut said = std::mem::take(&mut self.said);
         self.process(st, &mut |o| said.push(o));
+        let decided = said.iter().any(|o| matches!(o, Output::Class { .. }));
         self.send_said(&mut said, out);
+        let ns = t0.elapsed().as_nanos() as u64;
+        let s = &mut self.stages;
+        s.frames += 1;
+        s.frame_ns += ns;
+        if decided {
+            s.decided += 1;
+            s.decided_ns += ns;
+            s.decided_wait_us += now_us.saturating_sub(st.t_us);
+        }
     }
 
     fn tick(&mut self, now_us: u64, out: &mut Outbox) {

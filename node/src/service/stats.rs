@@ -18,6 +18,48 @@ pub(super) struct Shared {
     pub(super) decode_errors: AtomicU64,
     pub(super) unknown: AtomicU64,
     pub(super) unknown_by_reason: [AtomicU64; Reason::ALL.len()],
+    /// [`StageTimes`], each field an atomic.
+    pub(super) stages: [AtomicU64; 5],
+}
+
+/// Where the node's time goes, summed since it started: every frame's work, and of the frames
+/// that ended a step with its TerrainClass, their work and how long they waited between the
+/// bus's receive stamp and the pipeline. Kept per frame in plain integers, published with each
+/// NodeStatus; `presrs bench-node --json` reports the means.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct StageTimes {
+    /// Frames the pipeline took.
+    pub frames: u64,
+    /// Their work (decode, reassembly, stance, and the decision where one was due), ns.
+    pub frame_ns: u64,
+    /// Frames whose work ended in a TerrainClass.
+    pub decided: u64,
+    /// Their work, ns.
+    pub decided_ns: u64,
+    /// Their wait from the bus's receive stamp to the pipeline (wake-ups and hand-offs), µs.
+    pub decided_wait_us: u64,
+}
+
+impl StageTimes {
+    fn to_array(self) -> [u64; 5] {
+        [
+            self.frames,
+            self.frame_ns,
+            self.decided,
+            self.decided_ns,
+            self.decided_wait_us,
+        ]
+    }
+
+    fn from_array(a: [u64; 5]) -> Self {
+        Self {
+            frames: a[0],
+            frame_ns: a[1],
+            decided: a[2],
+            decided_ns: a[3],
+            decided_wait_us: a[4],
+        }
+    }
 }
 
 /// A node's counters at one moment.
@@ -61,11 +103,23 @@ pub struct NodeStats {
     pub decode_errors: u64,
     /// Frames a recorder tap dropped because it was behind (0 without one).
     pub record_dropped: u64,
+    /// Where the pipeline's time went.
+    pub stages: StageTimes,
 }
 
 impl Shared {
-    pub(super) fn publish(&self, c: &Counters, r: &ReassemblyStats, damage_pct: f64, unknown: u64) {
+    pub(super) fn publish(
+        &self,
+        c: &Counters,
+        r: &ReassemblyStats,
+        damage_pct: f64,
+        unknown: u64,
+        stages: StageTimes,
+    ) {
         let r_ = Ordering::Relaxed;
+        for (a, v) in self.stages.iter().zip(stages.to_array()) {
+            a.store(v, r_);
+        }
         self.unknown.store(unknown, r_);
         for (a, &v) in self.unknown_by_reason.iter().zip(&c.unknown_by_reason.0) {
             a.store(v, r_);
@@ -101,6 +155,7 @@ impl Shared {
             incomplete: l(&self.incomplete),
             decode_errors: l(&self.decode_errors),
             record_dropped: 0,
+            stages: StageTimes::from_array(std::array::from_fn(|i| l(&self.stages[i]))),
         }
     }
 

@@ -67,7 +67,7 @@ mod threaded;
 pub use lockstep::LockStep;
 pub use run::{RunOptions, RunStats, run, run_opened};
 pub use signals::{SignalError, Signals};
-pub use threaded::{Link, LinkStats, Threaded, spawn};
+pub use threaded::{Link, LinkStats, Threaded, spawn, spawn_one};
 
 use crate::bus::ControllerState;
 use crate::frame::{CanFrame, Stamped};

@@ -90,10 +90,23 @@ pub fn run(
 /// the component (no early frame missed). Reopened from `source` after an error, as in [`run`].
 pub fn run_opened(
     component: &mut dyn Component,
+    opened: Option<Box<dyn CanBus>>,
+    source: &BusSource,
+    opts: &RunOptions,
+    stop: &AtomicBool,
+) -> RunStats {
+    run_with(component, opened, source, opts, stop, &mut |_| {})
+}
+
+/// [`run_opened`], calling `between` with the component before each burst of frames is taken
+/// (the one-thread [`spawn_one`](super::spawn_one) runs its callers' work there).
+pub(crate) fn run_with<C: Component + ?Sized>(
+    component: &mut C,
     mut opened: Option<Box<dyn CanBus>>,
     source: &BusSource,
     opts: &RunOptions,
     stop: &AtomicBool,
+    between: &mut dyn FnMut(&mut C),
 ) -> RunStats {
     let start = Instant::now();
     let scale = opts.time_scale;
@@ -147,6 +160,7 @@ pub fn run_opened(
         }
         let mut next_tick = Instant::now();
         while !stopping() && !component.done() {
+            between(component);
             // Everything queued (up to a burst), then the tick: a burst never waits one tick
             // per frame, and a stream never holds the tick back.
             let mut wait = next_tick.saturating_duration_since(Instant::now());
@@ -209,8 +223,8 @@ pub fn run_opened(
 }
 
 /// One received frame: counted, copied to the tap (unless the component's own), handed over.
-fn deliver(
-    component: &mut dyn Component,
+fn deliver<C: Component + ?Sized>(
+    component: &mut C,
     st: &Stamped,
     opts: &RunOptions,
     link: &LinkStats,

@@ -1,4 +1,5 @@
-//! A component on three threads: [`spawn`].
+//! A component on threads of its own: [`spawn`] (three: receive, the component, send) or
+//! [`spawn_one`] (one).
 //!
 //! The node runs this way. Its receive thread only reads the socket into a queue, so that
 //! while the component classifies one foot's image (a millisecond or more) the socket's
@@ -213,6 +214,38 @@ pub fn spawn<C: Component + Send + 'static>(
         calls: calls_tx,
         component: Some(comp),
         io,
+    })
+}
+
+/// Runs `component` on `source` on one thread until [`Threaded::stop`]: [`run`](super::run)'s
+/// loop (receive a burst, tick, send, reopen after an error), with [`Threaded::call`]'s work run
+/// between two bursts. No hand-off between threads: a frame is read, decided on and answered
+/// by the thread it woke. What it costs against [`spawn`]'s three threads:
+/// docs/decisions/node-threads.md.
+pub fn spawn_one<C: Component + Send + 'static>(
+    mut component: C,
+    source: BusSource,
+    opts: RunOptions,
+) -> std::io::Result<Threaded<C>> {
+    let stop = Arc::new(AtomicBool::new(false));
+    let (calls_tx, calls_rx) = bounded::<Call<C>>(4);
+    let name = component.name();
+    let handle = {
+        let stop = stop.clone();
+        std::thread::Builder::new().name(name.into()).spawn(move || {
+            super::run::run_with(&mut component, None, &source, &opts, &stop, &mut |c| {
+                while let Ok(f) = calls_rx.try_recv() {
+                    f(c);
+                }
+            });
+            component
+        })?
+    };
+    Ok(Threaded {
+        stop,
+        calls: calls_tx,
+        component: Some(handle),
+        io: Vec::new(),
     })
 }
 
