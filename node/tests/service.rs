@@ -380,7 +380,10 @@ fn a_model_outside_the_catalog_is_refused_and_a_bad_reload_keeps_the_model() {
 /// reload through the handle; a last NodeStatus that says Stopping.
 #[test]
 fn started_on_a_bus_it_answers_each_step_and_says_when_it_stops() {
-    for threads in [presrs_node::NodeThreads::One, presrs_node::NodeThreads::Three] {
+    for threads in [
+        presrs_node::NodeThreads::One,
+        presrs_node::NodeThreads::Three,
+    ] {
         started_on(threads);
     }
 }
@@ -1277,4 +1280,43 @@ fn multi_frame_calls_ground_the_model_never_saw_unknown_as_single_frame_does() {
             "left out {name}: known steps called unknown {single_known} / {multi_known} of 20"
         );
     }
+}
+
+/// The node reads its feet's switch and tactile frames and the controller's gait; the kernel
+/// (or the in-process bus) keeps the leg's traffic and the node's own answers from waking it.
+#[test]
+fn the_node_asks_the_bus_only_for_the_frames_it_reads() {
+    use protocol::bus::passes;
+    use protocol::component::Component;
+    use protocol::messages::{GaitReason, GaitStatus, LegState};
+    let node = NodeService::new(NodeConfig::default(), model()).unwrap();
+    let filters = node.filters();
+    assert!(!filters.is_empty());
+    let ids = IdConfig::default();
+    let frame = |m: Message| m.to_frame(&ids, 1).unwrap();
+    let contact = FootContact {
+        stance: true,
+        timestamp_us: 5,
+        seq: 0,
+    };
+    assert!(passes(&filters, &frame(Message::FootContact(contact))));
+    let tactile = FakeFoot::new().stance(1, 1_000_000, 30, |_| true);
+    assert!(tactile.iter().all(|st| passes(&filters, &st.frame)));
+    let gait = GaitStatus {
+        gait: 1,
+        terrain: 0,
+        omega_rad_s: 10.0,
+        beta_des_rad: 0.3,
+        reason: GaitReason::Terrain,
+        foot: 0,
+    };
+    assert!(passes(&filters, &frame(Message::GaitStatus(gait))));
+    let leg = LegState {
+        leg_angle_rad: 0.1,
+        leg_length_m: 0.15,
+        ..LegState::default()
+    };
+    assert!(!passes(&filters, &frame(Message::LegState(leg))));
+    let own = TerrainClass::default();
+    assert!(!passes(&filters, &frame(Message::TerrainClass(own))));
 }

@@ -203,4 +203,3 @@ pub fn stage_means(s: &node::StageTimes) -> serde_json::Value {
                  wait: the bus's receive stamp to the pipeline (wake-ups, hand-offs)",
     })
 }
-

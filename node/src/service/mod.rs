@@ -24,8 +24,8 @@ mod running;
 mod stats;
 
 pub use running::RunningNode;
-pub use stats::{NodeStats, StageTimes};
 use stats::Shared;
+pub use stats::{NodeStats, StageTimes};
 
 use crate::unknown::{Reason, ReasonCounts};
 use std::path::Path;
@@ -121,6 +121,9 @@ pub struct NodeService {
     last_logged_unknown: u64,
     /// Where the pipeline's time went ([`NodeStats::stages`]).
     stages: StageTimes,
+    /// Read every frame on the bus, not only the node's own kinds: a recorder tap keeps the
+    /// whole bus.
+    read_all: bool,
 }
 
 impl NodeService {
@@ -143,6 +146,7 @@ impl NodeService {
             shared,
             said: Vec::with_capacity(16),
             stages: StageTimes::default(),
+            read_all: false,
             last_log: Instant::now(),
             last_logged: Counters::default(),
             gait: GaitTrack::default(),
@@ -358,6 +362,7 @@ impl NodeService {
         threads: NodeThreads,
     ) -> Result<RunningNode, ServiceError> {
         let mut node = self;
+        node.read_all = tap.is_some();
         let clock = bus.clock();
         node.set_clock(clock.clone());
         let shared = node.shared.clone();
@@ -417,9 +422,19 @@ impl Component for NodeService {
         "pipeline"
     }
 
-    /// Every frame: a foot's tactile stream and switch, under the ids the config gives.
+    /// A foot's tactile stream and switch, and the controller's gait, under the ids the config
+    /// gives: the kernel keeps the rest of the bus (the leg's 500 Hz state and commands) from
+    /// waking the node. Every frame when a recorder taps it.
     fn filters(&self) -> Vec<(u32, u32)> {
-        Vec::new()
+        if self.read_all {
+            return Vec::new();
+        }
+        self.ids().filters(&[
+            MessageKind::FootContact,
+            MessageKind::TactileFrame,
+            MessageKind::TactileFrameClassic,
+            MessageKind::GaitStatus,
+        ])
     }
 
     fn on_frame(&mut self, st: &Stamped, now_us: u64, out: &mut Outbox) {

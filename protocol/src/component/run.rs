@@ -159,6 +159,8 @@ pub(crate) fn run_with<C: Component + ?Sized>(
             continue 'open;
         }
         let mut next_tick = Instant::now();
+        // Error frames of this handle already in `bus_errors`.
+        let mut counted = 0u64;
         while !stopping() && !component.done() {
             between(component);
             // Everything queued (up to a burst), then the tick: a burst never waits one tick
@@ -178,7 +180,15 @@ pub(crate) fn run_with<C: Component + ?Sized>(
                 }
             }
             let now = now_us();
-            if let Some(state) = watch.update(name, &iface, &b.health()) {
+            let health = b.health();
+            if health.error_frames != counted {
+                LinkStats::add(
+                    &link.bus_errors,
+                    health.error_frames.saturating_sub(counted),
+                );
+                counted = health.error_frames;
+            }
+            if let Some(state) = watch.update(name, &iface, &health) {
                 link.set_controller(state);
                 component.on_health(state, now);
             }

@@ -232,14 +232,16 @@ pub fn spawn_one<C: Component + Send + 'static>(
     let name = component.name();
     let handle = {
         let stop = stop.clone();
-        std::thread::Builder::new().name(name.into()).spawn(move || {
-            super::run::run_with(&mut component, None, &source, &opts, &stop, &mut |c| {
-                while let Ok(f) = calls_rx.try_recv() {
-                    f(c);
-                }
-            });
-            component
-        })?
+        std::thread::Builder::new()
+            .name(name.into())
+            .spawn(move || {
+                super::run::run_with(&mut component, None, &source, &opts, &stop, &mut |c| {
+                    while let Ok(f) = calls_rx.try_recv() {
+                        f(c);
+                    }
+                });
+                component
+            })?
     };
     Ok(Threaded {
         stop,
