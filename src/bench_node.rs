@@ -30,9 +30,10 @@ pub struct BenchNodeArgs {
     /// Model file; default: the demo's model (trained on first run, then cached).
     #[arg(long)]
     pub model: Option<PathBuf>,
-    /// Feet served, each at 100 Hz.
-    #[arg(long, default_value_t = 6)]
-    pub feet: u8,
+    /// Feet served, each at 100 Hz; a list (`1,4,8`) measures each count in turn (`--json`:
+    /// an array of reports).
+    #[arg(long, value_delimiter = ',', default_value = "6")]
+    pub feet: Vec<u8>,
     /// Measured seconds, after 1 s of warm-up.
     #[arg(long, default_value_t = 10.0)]
     pub seconds: f64,
@@ -74,13 +75,40 @@ pub fn run(a: BenchNodeArgs) -> Result<ExitCode> {
         model.input_rows,
         model.input_cols
     );
-    let feet = Feet::new(a.feet, load::image_pool(), IdConfig::default()).context("--feet")?;
+    let mut reports = Vec::new();
+    for &n in &a.feet {
+        let (text, json) = bench_one(&a, n, &model)?;
+        if !a.json {
+            if a.feet.len() > 1 {
+                println!();
+            }
+            print!("{text}");
+        }
+        reports.push(json);
+    }
+    if a.json {
+        match reports.as_slice() {
+            [one] => println!("{one}"),
+            _ => println!("{}", serde_json::Value::Array(reports)),
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// One measurement with `feet_n` feet (the node in this process, or as a process on
+/// `--iface`): its report as text and as JSON.
+fn bench_one(
+    a: &BenchNodeArgs,
+    feet_n: u8,
+    model: &node::classifier::Model,
+) -> Result<(String, serde_json::Value)> {
+    let feet = Feet::new(feet_n, load::image_pool(), IdConfig::default()).context("--feet")?;
     let total_us = WARMUP_US + (a.seconds * 1e6) as u64;
     let (bus, run) = match &a.iface {
         None => (
             "inproc",
             load::bench_inproc(
-                model,
+                model.clone(),
                 feet,
                 total_us,
                 a.mcap.as_deref(),
@@ -95,7 +123,7 @@ pub fn run(a: BenchNodeArgs) -> Result<ExitCode> {
             load::bench_process(
                 &std::env::current_exe()?,
                 iface,
-                &model,
+                model,
                 feet,
                 total_us,
                 a.mcap.as_deref(),
@@ -106,17 +134,12 @@ pub fn run(a: BenchNodeArgs) -> Result<ExitCode> {
     let r = load::BenchReport {
         bus,
         label: a.label.as_deref(),
-        feet: a.feet,
+        feet: feet_n,
         seconds: a.seconds,
         memory_scope: run.memory_scope,
         tally: &run.tally,
         memory_mb: run.memory_mb,
         extra: run.extra,
     };
-    if a.json {
-        println!("{}", r.to_json());
-    } else {
-        print!("{r}");
-    }
-    Ok(ExitCode::SUCCESS)
+    Ok((r.to_string(), r.to_json()))
 }

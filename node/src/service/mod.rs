@@ -10,16 +10,16 @@
 //! at `status_hz`.
 //!
 //! The node is a [`Component`], the shape of every part on the bus. Started
-//! ([`NodeService::start`]), it runs on the runner's three threads ([`component::spawn`]),
-//! joined by bounded channels:
-//! - `receive` reads the bus and never blocks on the others: a full queue drops the frame and
-//!   counts it (`rx_dropped`);
-//! - `pipeline` owns the service: reassembly, stance tracking, classification, ticks and model
-//!   reloads ([`RunningNode::reload_model`] hands it a model already loaded and checked);
-//! - `send` writes TerrainClass and NodeStatus frames.
+//! ([`NodeService::start`]), it runs on one thread ([`component::spawn_one`]): the thread a
+//! frame wakes reads it, decides and sends the answer, with no hand-off between threads
+//! (measured against the three threads of [`component::spawn`], [`NodeThreads::Three`]:
+//! docs/decisions/node-threads.md). Model reloads ([`RunningNode::reload_model`]) hand it a
+//! model already loaded and checked, installed between two bursts of frames. Its kernel
+//! filters keep the rest of the bus from waking it.
 //!
-//! Receive and send each open their own handle with retry and backoff: a missing interface, or
-//! one that goes down, shows as `Degraded` in NodeStatus and in the log, never as an exit.
+//! The bus handle is opened with retry and backoff: a missing interface, or one that goes
+//! down, shows as `Degraded` in NodeStatus and in the log, never as an exit.
+
 mod running;
 mod stats;
 
@@ -375,6 +375,9 @@ impl NodeService {
             clock: Some(clock),
             tap: tap.clone(),
             link: Some(shared.link.clone()),
+            // Ticks after the frames, which come every 10 ms per foot; waking every 1 ms
+            // besides cost the node three quarters of its CPU (docs/decisions/node-threads.md).
+            idle_wait: Some(IDLE_WAIT),
             ..RunOptions::default()
         };
         let threads = match threads {
@@ -397,6 +400,10 @@ impl NodeService {
     }
 }
 
+/// How long a started node waits without frames before it ticks anyway (the 20 ms the node's
+/// pipeline thread waited before it ran on one thread).
+const IDLE_WAIT: Duration = Duration::from_millis(20);
+
 /// The threads a started node runs on. One thread reads a frame, decides and answers it;
 /// three hand each frame from a receive thread to the pipeline and its answer to a send
 /// thread, so that a slow decision never keeps the socket unread. Measured:
@@ -410,10 +417,8 @@ pub enum NodeThreads {
     Three,
 }
 
-/// The node as a part on the bus. [`NodeService::start`] runs it on three threads
-/// ([`component::spawn`]: receive, pipeline, send), which is what `presrs node` does: the
-/// receive thread keeps a burst of six feet's images from waiting behind a classification
-/// (`presrs bench-node --feet 6`). [`component::run`] runs it on one thread, with
+/// The node as a part on the bus. [`NodeService::start`] runs it on its own thread, which is
+/// what `presrs node` does. [`component::run`] runs it on the caller's thread, with
 /// [`RunOptions::clock`] set to the bus's clock (its deadlines compare with the frames'
 /// receive times) and [`RunOptions::link`] to [`NodeService::link_stats`] (NodeStatus reports
 /// the link).

@@ -93,6 +93,11 @@ impl Outbox {
         self.frames.push(frame);
     }
 
+    /// True when nothing is queued.
+    pub fn is_empty(&self) -> bool {
+        self.frames.is_empty()
+    }
+
     /// Takes the frames queued, oldest first.
     pub fn drain(&mut self) -> std::vec::Drain<'_, CanFrame> {
         self.frames.drain(..)

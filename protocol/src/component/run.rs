@@ -37,6 +37,10 @@ pub struct RunOptions {
     /// (measured on vcan under emulation: 799 of the 800 images `presrs sim --mcap` sent).
     /// `None` (the default): the run ends at the stop.
     pub drain_on_stop: Option<Duration>,
+    /// Without frames, wake to tick only after this long, not every `tick`: a component whose
+    /// frames come often (the node: a tactile stream per foot) ticks after them, at `tick`
+    /// grain, and an idle wait does not wake it a thousand times a second. `None`: every `tick`.
+    pub idle_wait: Option<Duration>,
 }
 
 /// How long a socket must stay quiet for a drain ([`RunOptions::drain_on_stop`]) to end.
@@ -52,6 +56,7 @@ impl Default for RunOptions {
             clock: None,
             link: None,
             drain_on_stop: None,
+            idle_wait: None,
         }
     }
 }
@@ -165,12 +170,23 @@ pub(crate) fn run_with<C: Component + ?Sized>(
             between(component);
             // Everything queued (up to a burst), then the tick: a burst never waits one tick
             // per frame, and a stream never holds the tick back.
-            let mut wait = next_tick.saturating_duration_since(Instant::now());
+            let mut wait = match opts.idle_wait {
+                // Ticks come after frames; with none, after `idle_wait`.
+                Some(idle) => (next_tick + idle).saturating_duration_since(Instant::now()),
+                None => next_tick.saturating_duration_since(Instant::now()),
+            };
             for _ in 0..opts.max_burst.max(1) {
                 match b.recv(wait) {
                     Ok(Some(st)) => {
                         deliver(component, &st, opts, &link, now_us(), &mut out);
                         wait = Duration::ZERO;
+                        // An answer goes out at once, not after the rest of the burst.
+                        if !out.is_empty()
+                            && let Err(e) = flush(&mut out, b.as_mut(), opts, &link, now_us(), name)
+                        {
+                            failed(&e, &mut backoff, &mut stats);
+                            continue 'open;
+                        }
                     }
                     Ok(None) => break,
                     Err(e) => {
