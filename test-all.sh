@@ -26,8 +26,8 @@ tests/vcan/run.sh --prepare
 # Where this kernel has no CAN the vcan run is User-mode Linux, one CPU, which run.sh pins to
 # core 0 (or a VM); the whole arm64 part (builds, tests under qemu-aarch64, packages) takes the
 # other cores, at idle priority (the run's tests judge robot time, which waits on its
-# processes). Run after the VM suite instead, its tests and packages added 240 s to a 2145 s
-# run (2026-11-27); beside it they fill the other core's idle time.
+# processes). Beside it, not after it: its tests and packages fill the other core's idle time
+# (CHANGELOG.md has the runs).
 arm_log=$(mktemp)
 others=(); [ "$(nproc)" -ge 2 ] && others=(taskset -c "1-$(($(nproc) - 1))")
 part "vcan suite (beside it, at idle priority: scripts/test-arm64.sh, its output after)"

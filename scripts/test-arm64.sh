@@ -1,7 +1,6 @@
 #!/usr/bin/env bash
 # The arm64 checks, run by ./test-all.sh beside the vcan suite, at idle priority on the cores it
-# leaves (the builds 777 s on one core of a 2-core machine, clean-clone run of 2026-11-26; the
-# rest 116-240 s):
+# leaves (their times: CHANGELOG.md):
 # 1. clippy for aarch64 on the libraries (the NEON code only compiles there);
 # 2. the node crate's unit and integration tests (classifier, stance pipeline), cross-built
 #    for aarch64 and run under qemu-aarch64: correctness only, never timings (qemu emulates

@@ -50,16 +50,7 @@ pub struct BenchNodeArgs {
     /// The in-process node's threads: 1 (the default, as `presrs node` runs) or 3 (receive,
     /// pipeline and send), to measure one against the other (docs/decisions/node-threads.md).
     #[arg(long, default_value = "1")]
-    pub node_threads: NodeThreadsArg,
-}
-
-/// `--node-threads`.
-#[derive(Clone, Copy, clap::ValueEnum)]
-pub enum NodeThreadsArg {
-    #[value(name = "1")]
-    One,
-    #[value(name = "3")]
-    Three,
+    pub node_threads: node::NodeThreads,
 }
 
 pub fn run(a: BenchNodeArgs) -> Result<ExitCode> {
@@ -112,10 +103,7 @@ fn bench_one(
                 feet,
                 total_us,
                 a.mcap.as_deref(),
-                match a.node_threads {
-                    NodeThreadsArg::One => node::NodeThreads::One,
-                    NodeThreadsArg::Three => node::NodeThreads::Three,
-                },
+                a.node_threads,
             )?,
         ),
         Some(iface) => (

@@ -189,10 +189,11 @@ impl ControllerConfig {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    fn fresh() -> ControllerConfig {
+    /// A controller on a fresh robot: commanding at once, no takeover.
+    pub(crate) fn fresh() -> ControllerConfig {
         ControllerConfig {
             takeover_ms: 0,
             ..ControllerConfig::default()

@@ -544,15 +544,8 @@ impl Controller {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::config::tests::fresh;
     use protocol::messages::{FootContact, NodeStatus, TerrainClass};
-
-    /// A controller on a fresh robot: commanding at once, no takeover.
-    fn fresh() -> ControllerConfig {
-        ControllerConfig {
-            takeover_ms: 0,
-            ..ControllerConfig::default()
-        }
-    }
 
     fn tc(terrain: u8, conf: f64) -> Message {
         Message::TerrainClass(TerrainClass {

@@ -76,10 +76,7 @@ pub fn bench_inproc(
         memory_mb,
         memory_scope: "whole process: node threads and load generator",
         extra: serde_json::json!({
-            "node_threads": match threads {
-                node::NodeThreads::One => 1,
-                node::NodeThreads::Three => 3,
-            },
+            "node_threads": threads.count(),
             "node_rx_frames": stats.rx_frames,
             "node_stages": stage_means(&stats.stages),
             "node_rx_dropped": stats.rx_dropped,

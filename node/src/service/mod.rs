@@ -409,12 +409,25 @@ const IDLE_WAIT: Duration = Duration::from_millis(20);
 /// thread, so that a slow decision never keeps the socket unread. Measured:
 /// docs/decisions/node-threads.md.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum NodeThreads {
     /// Receive, decide and send on one thread ([`component::spawn_one`]).
     #[default]
+    #[cfg_attr(feature = "clap", value(name = "1"))]
     One,
     /// Receive, pipeline and send threads ([`component::spawn`]).
+    #[cfg_attr(feature = "clap", value(name = "3"))]
     Three,
+}
+
+impl NodeThreads {
+    /// How many threads.
+    pub fn count(self) -> u8 {
+        match self {
+            NodeThreads::One => 1,
+            NodeThreads::Three => 3,
+        }
+    }
 }
 
 /// The node as a part on the bus. [`NodeService::start`] runs it on its own thread, which is

@@ -187,8 +187,7 @@ impl CanBus for InProcEndpoint {
         loop {
             // A poll (no timeout) only looks: crossbeam's timed receive spins and yields the
             // CPU several times before it gives up, even for a deadline already past, and a
-            // runner polls after every frame of a burst (measured with `presrs bench-node`:
-            // that cost the node more than its frames' work).
+            // runner polls after every frame of a burst (docs/decisions/node-threads.md).
             let got = if timeout.is_zero() {
                 self.rx.try_recv().ok()
             } else {

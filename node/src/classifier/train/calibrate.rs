@@ -76,13 +76,7 @@ pub enum CalibrateError {
 /// file keeps them), the first ones given. Returns the calibration's check (the share of the
 /// images classified right that are called unknown).
 ///
-/// Measured and not taken: the cap's images spread evenly through the run instead of its
-/// first ones (a run is recorded in time, and a lab may walk its gaits in blocks). On
-/// `scripts/unseen_gait.sh`'s runs (seeds 1-3, nine models of two gaits each) with the
-/// calibration run's stances in two gait blocks, so that the first 40 per terrain are all of
-/// the first gait: the next run's known stances called unknown 0.6-2.9% (mean 2.0%) with the
-/// first ones, 0.2-5.0% (2.3%) spread; the unseen gait's 0.4-3.3% (2.0%) against 0.4-4.2%
-/// (2.3%). Load-normalised, one gait's stances calibrate the others'.
+/// The first images, not ones spread through the run: docs/decisions/unknown-calibration.md.
 pub fn calibrate_on_runs(
     model: &mut Model,
     images: &[(&PressureImage, &str)],
@@ -231,9 +225,8 @@ pub(super) fn set_novelty(
     let mut cls = crate::classifier::Classifier::new(m);
     // (best class, kNN distance, residual) per calibration image in contact and classified
     // right. A known image taken for another terrain is an error of the classifier, not a
-    // known image that looks unusual: kept, it set its wrong class's threshold (measured: a
-    // fresh sandpaper_220 run decided as sandpaper_150 raised 150's threshold from 1.0 to 2.9,
-    // and a left-out grit passed as 150 unseen).
+    // known image that looks unusual: kept, it set its wrong class's threshold
+    // (docs/decisions/unknown-calibration.md).
     let mut parts: Vec<(usize, f64, f64)> = Vec::new();
     let mut wrong = 0usize;
     let (mut reference, mut reference_classes) = (Vec::new(), Vec::new());
@@ -293,10 +286,8 @@ pub(super) fn set_novelty(
         nv.residual_scale[kk] = positive(m, pooled_res);
     }
     // Each part's unit is then stretched to its own tail, so that the `1 - rate` quantile of
-    // either part alone is 1: neither decides by its tail alone. Measured (presrs experiment
-    // open-set, seeds 2-4): without it, the residual's long tail on a new sensor serial set the
-    // pooled threshold and a left-out static terrain went unnoticed (75% called unknown, 100%
-    // with it).
+    // either part alone is 1: neither decides by its tail alone
+    // (docs/decisions/unknown-calibration.md).
     {
         let q = 1.0 - cal_rate;
         let mut zk: Vec<f64> = parts
@@ -330,8 +321,7 @@ pub(super) fn set_novelty(
             .collect();
         // The class's own quantile, shrunk toward the pooled one by its count: with 30
         // images, the 98% quantile is the largest one, and a class's threshold was then as
-        // noisy as its one most unusual image (measured: per-class quantiles alone called
-        // 8.9% of a fresh static run unknown, the blend 2.5%).
+        // noisy as its one most unusual image (docs/decisions/unknown-calibration.md).
         let t = if v.is_empty() {
             pooled
         } else {
@@ -456,11 +446,8 @@ pub(super) fn class_spreads(m: &Model, k: usize) -> Vec<f64> {
 /// a new image of its terrain would be). A class's threshold is the `unknown_rate` quantile of
 /// its samples' densities, so about that share of its images falls below it.
 ///
-/// Per class, because the classes' spreads differ: measured leave-one-terrain-out on the
-/// simulator (`presrs experiment openset`), one threshold for all classes ranked a left-out
-/// terrain below the known test images no better than chance (mean AUROC 0.65 static, 0.80
-/// sandpaper, 0.52 dynamic), per-class ones 0.93, 0.84 and 0.76: a tight class's unusual image
-/// is as dense as a loose class's typical one.
+/// Per class, because the classes' spreads differ: a tight class's unusual image is as dense
+/// as a loose class's typical one (docs/decisions/unknown-calibration.md).
 ///
 /// Without a rate (0, or an older model): for every class the lowest density of any sample
 /// less 10 nats (22,000 times less dense than the least typical training image), which rejects
