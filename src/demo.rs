@@ -64,6 +64,10 @@ pub struct DemoArgs {
     /// serves them live, with the loop paced to real time so there is something to watch.
     #[command(flatten)]
     pub live: record::LiveOptions,
+    /// `--ros2`: the demo's bus as ROS 2 topics on Zenoh (it waits up to 5 s for the router,
+    /// and delivers every message before it exits); `--ros2-bag DIR`: as a rosbag2.
+    #[command(flatten)]
+    pub ros2: ros2::Ros2Options,
     /// Every frame of the demo's bus (motor frames included) as a candump log (`candump -L`
     /// format, interface can0, as `presrs sim --log` writes): `canplayer vcan0=can0 -I FILE`
     /// replays it, `presrs mcap` and python-can read it.
@@ -130,11 +134,11 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
         payload_kg,
     };
     let show = !a.json;
-    let live_recording = a.live.mcap.is_some() || a.live.foxglove.is_some();
+    let live_recording = a.live.mcap.is_some() || a.live.foxglove.is_some() || a.ros2.any();
     let recording = live_recording || a.candump.is_some();
     anyhow::ensure!(
         !(recording && a.realtime),
-        "--mcap and --foxglove record the lock-step demo (paced to real time with --foxglove); drop --realtime"
+        "--mcap, --foxglove, --ros2 and --ros2-bag record the lock-step demo (paced to real time with --foxglove); drop --realtime"
     );
     let mut leg_report = None;
     let (falls, rows) = if a.realtime {
@@ -155,7 +159,13 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
         (run.falls(), run.rows)
     } else {
         let live = if live_recording {
-            a.live.start(&lp.node.ids, &catalog)
+            Some(crate::ros2_cmd::LiveOutputs::start(
+                &a.live,
+                &a.ros2,
+                &lp.node.ids,
+                &catalog,
+                true,
+            )?)
         } else {
             None
         };
@@ -173,10 +183,11 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
         };
         // Ctrl-C ends a recorded run properly (the file's summary written); without a
         // recording it ends the process as always.
-        let run = if live.is_some() || log.is_some() {
+        let recorder = live.as_ref().and_then(|l| l.recorder.as_ref());
+        let run = if recorder.is_some() || log.is_some() {
             let signals = protocol::component::Signals::install()?;
             let out = lab::closed_loop::DemoOutputs {
-                live: live.as_ref(),
+                live: recorder,
                 log: log.as_mut().map(|w| w as &mut dyn std::io::Write),
                 paced: a.live.foxglove.is_some(),
                 stop: &signals.stop,
@@ -185,8 +196,8 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
         } else {
             lab::closed_loop::run(&track, model, &lp, on_step)
         };
-        if let Some(r) = live {
-            r.finish_logged();
+        if let Some(l) = live {
+            l.finish();
         }
         let run = match (run, &a.candump) {
             (Err(e @ lab::LabError::Log(_)), Some(p)) => {

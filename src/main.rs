@@ -16,6 +16,7 @@ mod experiment;
 mod leg_cmd;
 mod mcap_cmd;
 mod node_cmd;
+mod ros2_cmd;
 mod sim_cmd;
 
 #[derive(Parser)]
@@ -59,9 +60,13 @@ enum Cmd {
     /// The simulated hopper and foot on a CAN interface, in real time.
     Sim(sim_cmd::SimArgs),
     /// A candump log to an MCAP file (Foxglove, PlotJuggler, any MCAP reader): each message on
-    /// its own JSON channel per foot, each pressure image a foxglove.RawImage. (`ros2 bag`
-    /// cannot play its JSON channels.)
+    /// its own JSON channel per foot, each pressure image a foxglove.RawImage; with --ros2, a
+    /// rosbag2 directory that `ros2 bag play` reads (CDR, the bridge's topics).
     Mcap(mcap_cmd::McapArgs),
+    /// The robot's bus as ROS 2 topics, beside the node: terrain per step, contact, pressure
+    /// images, joint states, gait and /diagnostics, on Zenoh in rmw_zenoh's format (no ROS
+    /// install on the robot).
+    Bridge(ros2_cmd::BridgeArgs),
     /// A recording at a glance: a foot's pressure image beside terrain, gait and speed (PNG).
     View(mcap_cmd::ViewArgs),
     /// Simulator, node and controller in one process on the in-process bus: the closed loop.
@@ -144,6 +149,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Cmd::Capture(a) => capture_cmd::run(a),
         Cmd::Energy(a) => energy_cmd::run(a),
         Cmd::Mcap(a) => mcap_cmd::run(a),
+        Cmd::Bridge(a) => ros2_cmd::bridge(a),
         Cmd::View(a) => mcap_cmd::view(a),
         Cmd::Demo(args) => demo::run(args),
         Cmd::BenchNode(args) => bench_node::run(args),

@@ -14,12 +14,19 @@ use record::{McapFile, Recorder, Sink};
 pub struct McapArgs {
     /// candump log (`candump -L` format, as `candump -L any > run.log` writes it).
     pub log: PathBuf,
-    /// The MCAP file to write.
+    /// The MCAP file to write (with --ros2: the rosbag2 directory, which must not exist).
     #[arg(long)]
     pub out: PathBuf,
+    /// Write a ROS 2 bag instead: `--out DIR` becomes a rosbag2 directory (MCAP with CDR
+    /// messages and `metadata.yaml`), the same messages `presrs bridge` publishes.
+    #[arg(long)]
+    pub ros2: bool,
+    /// With --ros2: the robot's ROS 2 namespace in the bag's topic names.
+    #[arg(long, value_name = "NS", default_value = "", requires = "ros2")]
+    pub namespace: String,
     /// Also run the node with this model on the way: its TerrainClass per step goes on
     /// `/footN/terrain/model`, beside any TerrainClass already in the log.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "ros2")]
     pub model: Option<PathBuf>,
     /// Node config (TOML): identifiers, feet, stance timing (see `examples/node.toml`).
     #[arg(long)]
@@ -48,6 +55,33 @@ pub fn run(a: McapArgs) -> Result<ExitCode> {
     // Checked to its end before the recording is created, then streamed.
     let file = protocol::candump::LogFile::check(&a.log)?;
     let mut records = file.records()?;
+    if a.ros2 {
+        let names = ros2::Names::new(0, &a.namespace)?;
+        let mut bag = ros2::RosBag::create(&a.out, names.clone()).context("--out")?;
+        let mut enc = ros2::Encoder::new(ids, catalog, &names);
+        for st in records.by_ref() {
+            enc.frame(&st.stamped, &mut bag).context("--out")?;
+        }
+        records.finish()?;
+        bag.finish().context("--out")?;
+        let s = enc.stats();
+        if a.json {
+            println!(
+                "{}",
+                serde_json::json!({ "frames": file.records, "out": a.out,
+                    "messages": s.messages, "undecodable": s.undecodable, "foreign": s.foreign })
+            );
+        }
+        eprintln!(
+            "{} frames -> {} (rosbag2): {} messages; {} undecodable and {} foreign frames left out",
+            file.records,
+            a.out.display(),
+            s.messages,
+            s.undecodable,
+            s.foreign
+        );
+        return Ok(ExitCode::SUCCESS);
+    }
     let mut out = McapFile::create(&a.out).context("--out")?;
     let mut rec = Recorder::new(ids, catalog);
     lab::replay::log_to_recording(&mut records, node.as_mut(), &mut rec, &mut out)

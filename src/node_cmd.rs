@@ -36,6 +36,9 @@ pub struct NodeArgs {
     pub terrains: protocol::TerrainsArg,
     #[command(flatten)]
     pub live: record::LiveOptions,
+    /// `--ros2`: the node's bus as ROS 2 topics on Zenoh; `--ros2-bag DIR`: as a rosbag2.
+    #[command(flatten)]
+    pub ros2: ros2::Ros2Options,
 }
 
 pub fn run(a: NodeArgs) -> Result<ExitCode> {
@@ -46,10 +49,11 @@ pub fn run(a: NodeArgs) -> Result<ExitCode> {
     match (&a.replay, &a.iface) {
         (Some(log), _) => {
             anyhow::ensure!(
-                a.live.mcap.is_none() && a.live.foxglove.is_none(),
-                "--mcap and --foxglove record a live node; for a log, run `presrs mcap {} --out FILE.mcap --model {}`",
+                a.live.mcap.is_none() && a.live.foxglove.is_none() && !a.ros2.any(),
+                "--mcap, --foxglove, --ros2 and --ros2-bag record a live node; for a log, run `presrs mcap {} --out FILE.mcap --model {}` (or `presrs mcap --ros2 {} --out DIR`)",
                 log.display(),
-                a.model.display()
+                a.model.display(),
+                log.display()
             );
             // The same decisions on every replay: a refit lands at the step that asked for it.
             cfg.refit = cfg.refit.reproducible();
@@ -71,10 +75,16 @@ pub fn run(a: NodeArgs) -> Result<ExitCode> {
             let node = NodeService::new(cfg, model)
                 .with_context(|| format!("--model {}", a.model.display()))?;
             // After the checks above: a bad model or config is an error before any file exists.
-            let recording = a.live.start(node.ids(), node.catalog());
+            let outputs = crate::ros2_cmd::LiveOutputs::start(
+                &a.live,
+                &a.ros2,
+                node.ids(),
+                node.catalog(),
+                false,
+            )?;
             let running = node.start_with_tap(
                 BusSource::Iface(iface.clone()),
-                recording.as_ref().map(|r| r.bus_tap()),
+                outputs.recorder.as_ref().map(|r| r.bus_tap()),
             )?;
             while !signals.stopping() && running.is_running() {
                 if signals.take_reload() {
@@ -88,9 +98,7 @@ pub fn run(a: NodeArgs) -> Result<ExitCode> {
                 std::thread::sleep(Duration::from_millis(50));
             }
             running.stop();
-            if let Some(r) = recording {
-                r.finish_logged();
-            }
+            outputs.finish();
             Ok(ExitCode::SUCCESS)
         }
         (None, None) => anyhow::bail!("give --iface IFACE or --replay FILE.log"),

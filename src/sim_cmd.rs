@@ -78,6 +78,9 @@ pub struct SimArgs {
     /// `--foxglove`: the same live.
     #[command(flatten)]
     pub live: record::LiveOptions,
+    /// `--ros2`: the bus as ROS 2 topics on Zenoh; `--ros2-bag DIR`: as a rosbag2.
+    #[command(flatten)]
+    pub ros2: ros2::Ros2Options,
 }
 
 pub fn run(a: SimArgs) -> Result<ExitCode> {
@@ -111,8 +114,8 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         ..Default::default()
     };
     let ids = cfg.ids.clone();
-    let recording = a.live.start(&ids, &catalog);
-    let tap = recording.as_ref().map(|r| r.tap());
+    let outputs = crate::ros2_cmd::LiveOutputs::start(&a.live, &a.ros2, &ids, &catalog, false)?;
+    let tap = outputs.recorder.as_ref().map(|r| r.tap());
     let track = cfg.track.clone();
     let mut observe = |t_us: u64, robot: &SimRobot| {
         if let Some(tap) = &tap {
@@ -125,9 +128,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     };
     if let Some(log) = &a.log {
         let r = write_log(cfg, &a, log, tap.as_deref(), &mut observe);
-        if let Some(r) = recording {
-            r.finish_logged();
-        }
+        outputs.finish();
         return r;
     }
     let opts = RunOptions {
@@ -161,9 +162,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         signals.stop.store(true, Ordering::Relaxed);
         let _ = l.join();
     }
-    if let Some(r) = recording {
-        r.finish_logged();
-    }
+    outputs.finish();
     eprintln!("presrs sim: {r}");
     if let Some(p) = &a.report {
         std::fs::write(p, serde_json::to_string_pretty(&r)?)

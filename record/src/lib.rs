@@ -41,7 +41,9 @@ pub mod schema;
 
 #[cfg(feature = "foxglove")]
 pub use foxglove_server::{DEFAULT_ADDR, FoxgloveServer};
-pub use live::{LIVE_QUEUE, LiveOptions, LiveRecorder, LiveSummary, LiveTap, listen};
+pub use live::{
+    FrameConsumer, LIVE_QUEUE, LiveOptions, LiveRecorder, LiveSummary, LiveTap, listen,
+};
 pub use mcap_file::McapFile;
 pub use recorder::{Channel, RecordStats, Recorder, SimTruth, Sink, Topic};
 
@@ -81,6 +83,9 @@ pub enum RecordError {
     /// The recorder's thread could not start.
     #[error("starting the recorder thread: {0}")]
     Spawn(std::io::Error),
+    /// An output of another encoding (the ROS 2 bridge) failed.
+    #[error("{0}")]
+    Output(String),
     /// A bug in the recorder; please report it.
     #[error("recorder: {0}")]
     Internal(&'static str),

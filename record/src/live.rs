@@ -2,7 +2,8 @@
 //! a [`LiveTap`]: a copy into a bounded queue, which never waits and never allocates; a full
 //! queue drops the frame and counts it. One writer thread decodes, reassembles and writes to
 //! every sink. A sink that fails (disk full, path gone) is logged by name and dropped; the
-//! process and the other sinks go on.
+//! process and the other sinks go on. Outputs with an encoding of their own (ROS 2's CDR) are
+//! [`FrameConsumer`]s on the same thread: they see every frame the tap kept.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -47,6 +48,9 @@ impl Tap for LiveTap {
     fn dropped(&self) -> u64 {
         self.dropped.load(Ordering::Relaxed)
     }
+    fn backlog(&self) -> f64 {
+        self.tx.len() as f64 / self.tx.capacity().unwrap_or(usize::MAX).max(1) as f64
+    }
 }
 
 impl LiveTap {
@@ -63,6 +67,19 @@ impl LiveTap {
     pub fn offer_truth(&self, t_us: u64, foot: u8, truth: SimTruth) {
         self.push(Entry::Truth { t_us, foot, truth });
     }
+}
+
+/// An output that decodes frames itself (the ROS 2 bridge: CDR on Zenoh, rosbag2), fed by
+/// the writer thread beside the JSON sinks. An error drops it (logged by name); the rest go on.
+pub trait FrameConsumer: Send {
+    /// A frame the tap kept; `dropped`: frames the tap has dropped so far (the queue was full).
+    fn frame(&mut self, frame: &Stamped, dropped: u64) -> Result<(), RecordError>;
+    /// About once a second: make what was written readable, check the network.
+    fn flush(&mut self) -> Result<(), RecordError> {
+        Ok(())
+    }
+    /// The recording ends: deliver or write what is left. Called once.
+    fn finish(&mut self) -> Result<(), RecordError>;
 }
 
 /// How a live recording ended.
@@ -91,6 +108,16 @@ impl LiveRecorder {
         sinks: Vec<(String, Box<dyn Sink>)>,
         capacity: usize,
     ) -> Result<Self, RecordError> {
+        Self::start_with(recorder, sinks, Vec::new(), capacity)
+    }
+
+    /// [`LiveRecorder::start`] with [`FrameConsumer`]s beside the sinks.
+    pub fn start_with(
+        recorder: Recorder,
+        sinks: Vec<(String, Box<dyn Sink>)>,
+        consumers: Vec<(String, Box<dyn FrameConsumer>)>,
+        capacity: usize,
+    ) -> Result<Self, RecordError> {
         let (tx, rx) = bounded(capacity.max(1));
         let tap = Arc::new(LiveTap {
             tx,
@@ -100,7 +127,7 @@ impl LiveRecorder {
         let (t, s) = (tap.clone(), stop.clone());
         let thread = std::thread::Builder::new()
             .name("record".into())
-            .spawn(move || writer_loop(recorder, sinks, rx, &t, &s))
+            .spawn(move || writer_loop(recorder, sinks, consumers, rx, &t, &s))
             .map_err(RecordError::Spawn)?;
         Ok(Self {
             tap,
@@ -205,6 +232,25 @@ impl Fanout {
     }
 }
 
+/// Calls `f` on each consumer; one that fails is logged, dropped and its error kept.
+fn each_consumer(
+    consumers: &mut Vec<(String, Box<dyn FrameConsumer>)>,
+    failed: &mut Vec<String>,
+    f: &mut dyn FnMut(&mut dyn FrameConsumer) -> Result<(), RecordError>,
+) {
+    let mut i = 0;
+    while i < consumers.len() {
+        match f(consumers[i].1.as_mut()) {
+            Ok(()) => i += 1,
+            Err(e) => {
+                let (name, _) = consumers.remove(i);
+                tracing::error!("{name} stopped: {e}; the process goes on without it");
+                failed.push(e.to_string());
+            }
+        }
+    }
+}
+
 impl Sink for Fanout {
     fn add_channel(&mut self, index: usize, channel: &Channel) -> Result<(), RecordError> {
         self.each(&mut |s| s.add_channel(index, channel));
@@ -227,6 +273,7 @@ impl Sink for Fanout {
 fn writer_loop(
     mut rec: Recorder,
     sinks: Vec<(String, Box<dyn Sink>)>,
+    mut consumers: Vec<(String, Box<dyn FrameConsumer>)>,
     rx: Receiver<Entry>,
     tap: &LiveTap,
     stop: &AtomicBool,
@@ -250,10 +297,22 @@ fn writer_loop(
                     rec.set_recording_dropped(tap.dropped());
                     // The fan-out never fails as a whole: its sinks fail one by one.
                     let _ = match e {
-                        Entry::Frame(st) => rec.frame(&st, &mut out),
-                        Entry::Truth { t_us, foot, truth } => {
+                        Entry::Frame(st) => {
+                            let dropped = tap.dropped();
+                            each_consumer(&mut consumers, &mut out.failed, &mut |c| {
+                                c.frame(&st, dropped)
+                            });
+                            // JSON only where a sink takes it (a ROS 2-only run skips it).
+                            if out.sinks.is_empty() {
+                                Ok(())
+                            } else {
+                                rec.frame(&st, &mut out)
+                            }
+                        }
+                        Entry::Truth { t_us, foot, truth } if !out.sinks.is_empty() => {
                             rec.sim_truth(t_us, foot, &truth, &mut out)
                         }
+                        Entry::Truth { .. } => Ok(()),
                     };
                 }
                 Err(TryRecvError::Empty) => break,
@@ -263,8 +322,9 @@ fn writer_loop(
                 }
             }
         }
-        if disconnected || stopping || out.sinks.is_empty() {
-            if out.sinks.is_empty() {
+        let none_left = out.sinks.is_empty() && consumers.is_empty();
+        if disconnected || stopping || none_left {
+            if none_left {
                 tracing::error!("every recording sink has failed: recording stopped");
             }
             break;
@@ -272,6 +332,7 @@ fn writer_loop(
         if last_flush.elapsed() >= FLUSH_PERIOD {
             last_flush = Instant::now();
             let _ = out.flush();
+            each_consumer(&mut consumers, &mut out.failed, &mut |c| c.flush());
             let dropped = tap.dropped();
             if dropped > dropped_logged {
                 tracing::warn!(
@@ -285,6 +346,7 @@ fn writer_loop(
         std::thread::sleep(POLL);
     }
     let _ = out.finish();
+    each_consumer(&mut consumers, &mut out.failed, &mut |c| c.finish());
     LiveSummary {
         stats: rec.stats(),
         dropped: tap.dropped(),
@@ -406,6 +468,17 @@ impl LiveOptions {
         ids: &protocol::IdConfig,
         catalog: &protocol::TerrainCatalog,
     ) -> Option<LiveRecorder> {
+        self.start_with(ids, catalog, Vec::new())
+    }
+
+    /// [`LiveOptions::start`] with outputs of other encodings beside (the ROS 2 bridge); a
+    /// recorder starts when any sink or consumer is asked for.
+    pub fn start_with(
+        &self,
+        ids: &protocol::IdConfig,
+        catalog: &protocol::TerrainCatalog,
+        consumers: Vec<(String, Box<dyn FrameConsumer>)>,
+    ) -> Option<LiveRecorder> {
         let mut sinks: Vec<(String, Box<dyn Sink>)> = Vec::new();
         if let Some(p) = &self.mcap {
             match crate::McapFile::create(p) {
@@ -419,12 +492,13 @@ impl LiveOptions {
         if let Some(addr) = &self.foxglove {
             foxglove_sink(addr, &mut sinks);
         }
-        if sinks.is_empty() {
+        if sinks.is_empty() && consumers.is_empty() {
             return None;
         }
-        match LiveRecorder::start(
+        match LiveRecorder::start_with(
             Recorder::new(ids.clone(), catalog.clone()),
             sinks,
+            consumers,
             LIVE_QUEUE,
         ) {
             Ok(r) => Some(r),

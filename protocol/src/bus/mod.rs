@@ -74,6 +74,11 @@ pub trait Tap: Send + Sync {
     fn offer(&self, frame: &Stamped);
     /// Frames dropped so far because the recorder was behind.
     fn dropped(&self) -> u64;
+    /// How full its queue is, 0..=1. A run with no real time to keep (the lock-step demo)
+    /// waits while it is over half full, so that its recording is whole; a robot never does.
+    fn backlog(&self) -> f64 {
+        0.0
+    }
 }
 
 /// True when a frame passes a filter list (empty list: everything passes).
