@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Installs what the tests need on a fresh Debian machine: Python cantools/python-can (the
-# independent CAN clients), jiku-data (real plantar-pressure images for the open-set test),
+# independent CAN clients), eclipse-zenoh and rosbags (the ROS 2 clients), jiku-data (real plantar-pressure images for the open-set test),
 # can-utils, and for kernels without CAN a kernel that has it. Idempotent; quick when all is
 # there.
 #   --uml          also User-mode Linux (Debian's user-mode-linux: a kernel with vcan that runs
@@ -52,7 +52,7 @@ if [ ${#need_apt[@]} -gt 0 ]; then
   DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq "${need_apt[@]}" >/dev/null
 fi
 
-py_ok() { python3 -c "import cantools, can, numpy, sklearn, mcap, websockets, jikudata" 2>/dev/null; }
+py_ok() { python3 -c "import cantools, can, numpy, sklearn, mcap, websockets, jikudata, zenoh, rosbags" 2>/dev/null; }
 if ! py_ok; then
   echo "install-deps: pip install -r tests/requirements.txt"
   python3 -m pip install -q -r "$here/tests/requirements.txt"

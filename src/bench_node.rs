@@ -51,6 +51,11 @@ pub struct BenchNodeArgs {
     /// pipeline and send), to measure one against the other (docs/decisions/node-threads.md).
     #[arg(long, default_value = "1")]
     pub node_threads: node::NodeThreads,
+    /// `--ros2`: measure each feet count twice in one run, without and then with the ROS 2
+    /// bridge beside the node on the same bus (publishing on Zenoh, as `presrs bridge` does);
+    /// the report adds the bridge's CPU and drops.
+    #[command(flatten)]
+    pub ros2: ros2::Ros2Options,
 }
 
 pub fn run(a: BenchNodeArgs) -> Result<ExitCode> {
@@ -66,12 +71,31 @@ pub fn run(a: BenchNodeArgs) -> Result<ExitCode> {
         model.input_rows,
         model.input_cols
     );
+    anyhow::ensure!(
+        !(a.ros2.any() && (a.mcap.is_some() || a.iface.is_some())),
+        "--ros2 measures the in-process node with and without the bridge; drop --mcap and --iface"
+    );
+    let runs: &[bool] = if a.ros2.any() {
+        &[false, true]
+    } else {
+        &[false]
+    };
     let mut reports = Vec::new();
-    for &n in &a.feet {
-        let (text, json) = bench_one(&a, n, &model)?;
+    for (&n, &bridge) in a.feet.iter().flat_map(|n| runs.iter().map(move |b| (n, b))) {
+        let (text, json) = bench_one(&a, n, &model, bridge)?;
         if !a.json {
-            if a.feet.len() > 1 {
+            if a.feet.len() > 1 || bridge {
                 println!();
+            }
+            if a.ros2.any() {
+                println!(
+                    "{}",
+                    if bridge {
+                        "with the ROS 2 bridge:"
+                    } else {
+                        "without the ROS 2 bridge:"
+                    }
+                );
             }
             print!("{text}");
         }
@@ -92,6 +116,7 @@ fn bench_one(
     a: &BenchNodeArgs,
     feet_n: u8,
     model: &node::classifier::Model,
+    bridge: bool,
 ) -> Result<(String, serde_json::Value)> {
     let feet = Feet::new(feet_n, load::image_pool(), IdConfig::default()).context("--feet")?;
     let total_us = WARMUP_US + (a.seconds * 1e6) as u64;
@@ -104,6 +129,19 @@ fn bench_one(
                 total_us,
                 a.mcap.as_deref(),
                 a.node_threads,
+                if bridge {
+                    let out = a
+                        .ros2
+                        .start(
+                            &IdConfig::default(),
+                            &protocol::TerrainCatalog::paper(),
+                            false,
+                        )
+                        .context("--ros2")?;
+                    out.map(|o| Box::new(o) as Box<dyn record::FrameConsumer>)
+                } else {
+                    None
+                },
             )?,
         ),
         Some(iface) => (
@@ -129,5 +167,13 @@ fn bench_one(
         memory_mb: run.memory_mb,
         extra: run.extra,
     };
-    Ok((r.to_string(), r.to_json()))
+    let mut text = r.to_string();
+    if let Some(b) = r.extra.get("beside").filter(|b| !b.is_null()) {
+        text.push_str(&format!(
+            "ROS 2 bridge beside it: CPU {:.1}% of one core, {} frames dropped\n",
+            b["cpu_pct_of_one_core"].as_f64().unwrap_or(f64::NAN),
+            b["dropped"]
+        ));
+    }
+    Ok((text, r.to_json()))
 }

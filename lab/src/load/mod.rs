@@ -85,6 +85,9 @@ pub enum LoadError {
     /// A recording was asked for and could not start.
     #[error("--mcap {0}: the recording could not start (the log says why)")]
     Recording(String),
+    /// The part beside the node could not start.
+    #[error("the part beside the node: {0}")]
+    Beside(#[from] record::RecordError),
 }
 
 #[cfg(test)]

@@ -16,14 +16,17 @@ pub struct BenchRun {
 
 /// The node's own receive/pipeline/send threads ([`node::NodeService::start`]) on an
 /// in-process bus in this process, under `feet` for `total_us` (warm-up included); its frames
-/// recorded to the MCAP file `mcap` when given. CPU counts the node's three threads; memory
-/// is the whole process (node and load generator), an upper bound for the node.
+/// recorded to the MCAP file `mcap` when given. `beside`: a part reading the same bus on its
+/// own endpoint and threads, as `presrs bridge` runs beside the node (the ROS 2 bridge).
+/// CPU counts the node's threads; memory is the whole process (node and load generator), an
+/// upper bound for the node.
 pub fn bench_inproc(
     model: node::classifier::Model,
     feet: Feet,
     total_us: u64,
     mcap: Option<&std::path::Path>,
     threads: node::NodeThreads,
+    beside: Option<Box<dyn record::FrameConsumer>>,
 ) -> Result<BenchRun, LoadError> {
     use protocol::bus::{BusSource, InProcBus};
     let ids = feet.ids.clone();
@@ -45,7 +48,28 @@ pub fn bench_inproc(
         recording.as_ref().map(|r| r.bus_tap()),
         threads,
     )?;
+    let stop_beside = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let beside = match beside {
+        Some(c) => {
+            let rec = record::LiveRecorder::start_with(
+                record::Recorder::new(ids.clone(), protocol::TerrainCatalog::paper()),
+                Vec::new(),
+                vec![("beside".into(), c)],
+                record::LIVE_QUEUE,
+            )?;
+            let listener = record::listen(
+                BusSource::InProc(bus.clone()),
+                rec.tap(),
+                stop_beside.clone(),
+            )?;
+            Some((rec, listener))
+        }
+        None => None,
+    };
     let rec_cpu_start = task_cpu_ns("self", Some(&["record"]));
+    // Its reader and its writer (the caller records no MCAP beside it: one "record" thread).
+    let beside_cpu = || task_cpu_ns("self", Some(&["record-listen", "record"]));
+    let beside_cpu_start = beside_cpu();
     let cpu = || task_cpu_ns("self", Some(&["receive", "pipeline", "send"]));
     let result = measure(
         &mut bus.endpoint(),
@@ -56,7 +80,19 @@ pub fn bench_inproc(
         &cpu,
     );
     let rec_cpu_end = task_cpu_ns("self", Some(&["record"]));
+    let beside_cpu_end = beside_cpu();
     let stats = node.stop();
+    let beside = beside.map(|(rec, listener)| {
+        stop_beside.store(true, std::sync::atomic::Ordering::Relaxed);
+        let _ = listener.join();
+        let s = rec.finish();
+        serde_json::json!({
+            "dropped": s.dropped,
+            "failed": s.failed,
+            "cpu_pct_of_one_core": beside_cpu_start.zip(beside_cpu_end)
+                .map(|(a0, a1)| a1.saturating_sub(a0) as f64 * 1e-9 / (total_us as f64 * 1e-6) * 100.0),
+        })
+    });
     let memory_mb = memory_mb("self");
     let tally = result?;
     let recorded = recording.map(|r| {
@@ -82,6 +118,7 @@ pub fn bench_inproc(
             "node_rx_dropped": stats.rx_dropped,
             "bus_overruns": bus.overruns(),
             "mcap": recorded,
+            "beside": beside,
         }),
     })
 }
