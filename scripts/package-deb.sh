@@ -7,8 +7,9 @@
 # (installed by scripts/install-deps.sh --cross arm64, with the rustup target). On an arm64
 # machine, --arch arm64 builds natively. The package holds:
 #   /usr/bin/presrs
-#   /lib/systemd/system/presrs-node.service, presrs-controller.service, presrs-leg.service
-#   (not enabled on install)
+#   /lib/systemd/system/presrs-node.service, presrs-controller.service, presrs-leg.service,
+#   presrs-bridge.service (not enabled on install)
+#   /usr/share/presrs/ros2/presrs_msgs/ (the ROS 2 interface package, for the ROS side)
 #   /etc/presrs/node.toml, controller.toml (conffiles: an edited one survives upgrade and remove)
 #   /usr/share/doc/presrs/ (the DBC, README, protocol, deploy and real-robot docs)
 # Depends are read off the binary (its NEEDED libraries and the newest glibc symbol version it
@@ -68,6 +69,10 @@ install -D -m 755 "$bin" "$stage/usr/bin/presrs"
 install -D -m 644 packaging/systemd/presrs-node.service "$stage/lib/systemd/system/presrs-node.service"
 install -D -m 644 packaging/systemd/presrs-controller.service "$stage/lib/systemd/system/presrs-controller.service"
 install -D -m 644 packaging/systemd/presrs-leg.service "$stage/lib/systemd/system/presrs-leg.service"
+install -D -m 644 packaging/systemd/presrs-bridge.service "$stage/lib/systemd/system/presrs-bridge.service"
+for f in package.xml CMakeLists.txt msg/TerrainClass.msg msg/FootContact.msg msg/GaitState.msg; do
+  install -D -m 644 "ros2/presrs_msgs/$f" "$stage/usr/share/presrs/ros2/presrs_msgs/$f"
+done
 install -D -m 644 examples/node.toml "$stage/etc/presrs/node.toml"
 install -D -m 644 examples/controller.toml "$stage/etc/presrs/controller.toml"
 doc="$stage/usr/share/doc/presrs"

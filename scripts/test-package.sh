@@ -45,11 +45,12 @@ in_root "$r" dpkg -i /tmp/presrs.deb >/dev/null || fail "dpkg -i $(basename "$am
 in_root "$r" presrs --help >/dev/null || fail "the installed presrs does not run in the fresh root"
 for f in /usr/bin/presrs /etc/presrs/node.toml /etc/presrs/controller.toml \
          /lib/systemd/system/presrs-node.service /lib/systemd/system/presrs-leg.service \
+         /lib/systemd/system/presrs-bridge.service /usr/share/presrs/ros2/presrs_msgs/msg/TerrainClass.msg \
          /usr/share/doc/presrs/presrs.dbc; do
   [ -e "$r$f" ] || fail "$f not installed"
 done
 # verify resolves ExecStart= and the units' dependencies inside the root.
-systemd-analyze verify --root="$r" presrs-node.service presrs-controller.service presrs-leg.service ||
+systemd-analyze verify --root="$r" presrs-node.service presrs-controller.service presrs-leg.service presrs-bridge.service ||
   fail "systemd-analyze verify rejects the units"
 echo "# edited on the robot" >> "$r/etc/presrs/node.toml"
 echo '{"user": "model"}' > "$r/etc/presrs/model.json"
@@ -104,4 +105,15 @@ for d in differ[:10]:
 sys.exit(1 if differ else 0)
 EOF
 done
-echo "test-package: arm64: installs with Debian's arm64 libc, and its binary classifies as the x86-64 one"
+# The bridge is in it: the same rosbag2, byte for byte, from a demo's candump log.
+"$x86" demo --steps 10 --candump "$data/demo.log" --csv "$data/demo.csv" >/dev/null 2>&1 ||
+  fail "the x86-64 demo did not write its candump log"
+mkdir -p "$data/x86_64" "$data/aarch64"
+"$x86" mcap --ros2 "$data/demo.log" --out "$data/x86_64/bag" 2>/dev/null || fail "x86-64 mcap --ros2"
+"${arm_presrs[@]}" mcap --ros2 "$data/demo.log" --out "$data/aarch64/bag" 2>/dev/null ||
+  fail "the arm64 presrs does not write a rosbag2 (mcap --ros2)"
+cmp "$data/x86_64/bag/metadata.yaml" "$data/aarch64/bag/metadata.yaml" &&
+  cmp "$data/x86_64/bag/bag_0.mcap" "$data/aarch64/bag/bag_0.mcap" ||
+  fail "arm64 and x86-64 write different rosbag2s from the same log"
+"${arm_presrs[@]}" bridge --help >/dev/null || fail "the arm64 presrs has no bridge"
+echo "test-package: arm64: installs with Debian's arm64 libc, its binary classifies as the x86-64 one and writes the same rosbag2"

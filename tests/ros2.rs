@@ -266,35 +266,22 @@ fn now_s() -> f64 {
         .as_secs_f64()
 }
 
-#[test]
-fn a_fleet_on_one_router_survives_the_router_restarting() {
-    let dir = tempdir("fleet");
-    let port = free_port();
-    let router = Py::start(&["router", &port.to_string()]);
-    let out = dir.join("sub.json");
-    let sub = Py::start(&["subscribe", &port.to_string(), out.to_str().unwrap(), "300"]);
-    let robots = ["robot1", "robot2"];
-    let bags: Vec<PathBuf> = robots.iter().map(|r| dir.join(r)).collect();
-    let t0 = Instant::now();
-    let demos: Vec<Child> = robots
+/// Demos of `robots` on the router at `port`, each with its bag under `dir`, started at once.
+fn start_demos(port: u16, robots: &[&str], steps: usize, dir: &Path) -> Vec<Child> {
+    robots
         .iter()
-        .zip(&bags)
-        .map(|(r, b)| {
-            demo_ros2(port, r, 1200, b)
+        .map(|r| {
+            demo_ros2(port, r, steps, &dir.join(r))
                 .stdout(Stdio::piped())
                 .stderr(Stdio::piped())
                 .spawn()
                 .unwrap()
         })
-        .collect();
-    // Mid-run: the router goes away for a second and comes back on the same port.
-    std::thread::sleep(Duration::from_secs(3));
-    drop(router);
-    let killed = now_s();
-    std::thread::sleep(Duration::from_secs(1));
-    let _router = Py::start(&["router", &port.to_string()]);
-    let restarted = now_s();
-    let mut ran_past_restart = true;
+        .collect()
+}
+
+/// Waits for the demos; each ran without a fall.
+fn wait_demos(demos: Vec<Child>, robots: &[&str]) {
     for (d, r) in demos.into_iter().zip(robots) {
         let o = d.wait_with_output().unwrap();
         assert!(
@@ -305,15 +292,45 @@ fn a_fleet_on_one_router_survives_the_router_restarting() {
         let s: Value = serde_json::from_slice(&o.stdout).unwrap();
         // The robots keep hopping whatever the network does.
         assert_eq!(s["falls"], 0, "{r}");
-        ran_past_restart &= t0.elapsed() > Duration::from_secs(6);
     }
+}
+
+#[test]
+fn a_fleet_on_one_router_every_message_once_in_order_and_a_router_restart() {
+    let dir = tempdir("fleet");
+    let port = free_port();
+    let router = Py::start(&["router", &port.to_string()]);
+    let out = dir.join("sub.json");
+    let sub = Py::start(&["subscribe", &port.to_string(), out.to_str().unwrap(), "300"]);
+    // Two robots, one router, one subscriber: everything each published.
+    let fleet = ["robot1", "robot2"];
+    wait_demos(start_demos(port, &fleet, 150, &dir), &fleet);
+    // Two more, and mid-run the router goes away for a second and comes back on its port.
+    let restarted_fleet = ["robot3", "robot4"];
+    let t0 = Instant::now();
+    let demos = start_demos(port, &restarted_fleet, 1200, &dir);
+    std::thread::sleep(Duration::from_secs(3));
+    drop(router);
+    let killed = now_s();
+    std::thread::sleep(Duration::from_secs(1));
+    let _router = Py::start(&["router", &port.to_string()]);
+    let restarted = now_s();
+    wait_demos(demos, &restarted_fleet);
     assert!(
-        ran_past_restart,
+        t0.elapsed() > Duration::from_secs(6),
         "the demos ended before the router was back: make them longer"
     );
     stop_subscriber(&out, sub);
+    let bags: Vec<PathBuf> = fleet.iter().map(|r| dir.join(r)).collect();
+    let mut args: Vec<&std::ffi::OsStr> = vec!["live".as_ref(), out.as_os_str()];
+    args.extend(bags.iter().map(|b| b.as_os_str()));
+    let live = check(&args, &[]);
+    for r in fleet {
+        let n = bag_count(&dir.join(r), &format!("/{r}/foot0/terrain"));
+        assert_eq!(live["topics"][format!("/{r}/foot0/terrain")], n, "{live}");
+    }
     let sub = read_json(&out);
-    for r in robots {
+    for r in restarted_fleet {
         let topic = format!("/{r}/foot0/terrain");
         let t = &sub["topics"][&topic];
         let seqs: Vec<u64> = t["seqs"]
@@ -338,8 +355,30 @@ fn a_fleet_on_one_router_survives_the_router_restarting() {
             resumed.is_some_and(|d| d <= 2.0),
             "{topic}: publishing resumed {resumed:?} s after the router came back (at most 2 s)"
         );
-        // Everything but the outage: the gaps in the sequence lie around it, and the last
-        // message the robot published arrived.
+        // Everything but the outage: each gap in the sequence lies around it (the messages
+        // on either side were sent before it ended and after it began), and the last message
+        // the robot published arrived.
+        let src: Vec<f64> = t["src"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        for (i, w) in seqs.windows(2).enumerate() {
+            if w[1] > w[0] + 1 {
+                assert!(
+                    src[i] <= restarted + 2.0 && src[i + 1] >= killed - 0.5,
+                    "{topic}: messages {}..{} lost at {:.2}..{:.2} s, not around the outage \
+                     ({:.2}..{:.2} s)",
+                    w[0] + 1,
+                    w[1] - 1,
+                    src[i],
+                    src[i + 1],
+                    killed,
+                    restarted
+                );
+            }
+        }
         let n = bag_count(&dir.join(r), &topic);
         assert_eq!(
             *seqs.last().unwrap(),
