@@ -1,61 +1,38 @@
-//! RIHS01 type hashes, as ROS 2 computes them (REP 2011, `rosidl_generator_type_description`):
-//! SHA-256 of the type description as JSON (the type's fields, then every type it references,
-//! sorted by name; default values left out), with Python's `json.dumps` separators. rmw_zenoh
-//! puts the hash in every key expression, so a subscriber with another definition of the type
-//! never matches. Written here because no maintained Rust crate computes it; the test suite
-//! checks it against `rosbags`' own computation for every type.
+//! RIHS01 type hashes (REP 2011): rmw_zenoh puts one in every key expression, so a subscriber
+//! with another definition of a type never matches. The hash itself is the `ros2-types`
+//! crate's (SHA-256 of the type description as rosidl writes it); this module hands it our
+//! [`crate::types`] tables. The test suite checks every hash against `rosbags`' own.
 
-use sha2::{Digest, Sha256};
-use std::fmt::Write;
+use ros2_types::types::{Field, FieldType, IndividualTypeDescription, TypeDescriptionMsg};
 
 use crate::types::{Base, MsgType, referenced};
 
 /// `RIHS01_` and 64 hex digits.
 pub fn rihs01(t: &MsgType) -> String {
-    let json = description_json(t);
-    let digest = Sha256::digest(json.as_bytes());
-    let mut s = String::with_capacity(7 + 64);
-    s.push_str("RIHS01_");
-    for b in digest {
-        let _ = write!(s, "{b:02x}");
-    }
-    s
+    let msg = TypeDescriptionMsg::new(
+        individual(t),
+        referenced(t).into_iter().map(individual).collect(),
+    );
+    // It only fails on JSON it cannot write; ours is plain names and numbers.
+    ros2_types::calculate_type_hash(&msg).unwrap_or_else(|_| "RIHS01_".into())
 }
 
-/// The JSON that is hashed.
-pub fn description_json(t: &MsgType) -> String {
-    let mut s = String::from("{\"type_description\": ");
-    one(&mut s, t);
-    s.push_str(", \"referenced_type_descriptions\": [");
-    for (i, r) in referenced(t).into_iter().enumerate() {
-        if i > 0 {
-            s.push_str(", ");
-        }
-        one(&mut s, r);
-    }
-    s.push_str("]}");
-    s
-}
-
-fn one(s: &mut String, t: &MsgType) {
-    let _ = write!(s, "{{\"type_name\": \"{}\", \"fields\": [", t.name);
-    for (i, f) in t.fields.iter().enumerate() {
-        if i > 0 {
-            s.push_str(", ");
-        }
-        let id = f.base.type_id() + if f.sequence { 144 } else { 0 };
-        let nested = match f.base {
-            Base::Nested(n) => n,
-            _ => "",
-        };
-        let _ = write!(
-            s,
-            "{{\"name\": \"{}\", \"type\": {{\"type_id\": {id}, \"capacity\": 0, \
-             \"string_capacity\": 0, \"nested_type_name\": \"{nested}\"}}}}",
-            f.name
-        );
-    }
-    s.push_str("]}");
+fn individual(t: &MsgType) -> IndividualTypeDescription {
+    let fields = t
+        .fields
+        .iter()
+        .map(|f| {
+            let ty = match (f.base, f.sequence) {
+                (Base::Nested(n), false) => FieldType::nested(n),
+                (Base::Nested(n), true) => FieldType::nested_sequence(n),
+                (b, false) => FieldType::primitive(b.type_id()),
+                // An unbounded sequence: 144 above the element's id (FieldType.msg).
+                (b, true) => FieldType::primitive(b.type_id() + 144),
+            };
+            Field::new(f.name, ty)
+        })
+        .collect();
+    IndividualTypeDescription::new(t.name, fields)
 }
 
 #[cfg(test)]
@@ -65,9 +42,8 @@ mod tests {
 
     #[test]
     fn standard_types_hash_as_ros_2_publishes_them() {
-        // Values from ROS 2 Jazzy's generated type descriptions (`ros2 interface` / the
-        // packages' `*.json`), also what `rosbags` computes; the interop test recomputes
-        // every type with rosbags.
+        // ROS 2 Jazzy's hashes, as `rosbags` computes them (the interop test recomputes every
+        // type with it).
         assert_eq!(
             rihs01(&types::TIME),
             "RIHS01_b106235e25a4c5ed35098aa0a61a3ee9c9b18d197f398b0e4206cea9acf9c197"
@@ -76,15 +52,17 @@ mod tests {
             rihs01(&types::HEADER_MSG),
             "RIHS01_f49fb3ae2cf070f793645ff749683ac6b06203e41c891e17701b1cb597ce6a01"
         );
-    }
-
-    #[test]
-    fn the_json_has_python_separators_and_sorted_references() {
-        let j = description_json(&types::HEADER_MSG);
-        assert!(j.starts_with(
-            "{\"type_description\": {\"type_name\": \"std_msgs/msg/Header\", \"fields\": \
-             [{\"name\": \"stamp\", \"type\": {\"type_id\": 1, \"capacity\": 0, "
-        ));
-        assert!(j.ends_with("\"nested_type_name\": \"\"}}]}]}"));
+        assert_eq!(
+            rihs01(&types::IMAGE),
+            "RIHS01_d31d41a9a4c4bc8eae9be757b0beed306564f7526c88ea6a4588fb9582527d47"
+        );
+        assert_eq!(
+            rihs01(&types::DIAGNOSTIC_ARRAY),
+            "RIHS01_5a8a36efb05fb25070fa0fb3810290c0e6cd4862b54a8fb975a1ee8dc55a333e"
+        );
+        assert_eq!(
+            rihs01(&types::JOINT_STATE),
+            "RIHS01_a13ee3a330e346c9d87b5aa18d24e11690752bd33a0350f11c5882bc9179260e"
+        );
     }
 }
