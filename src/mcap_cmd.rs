@@ -57,14 +57,15 @@ pub fn run(a: McapArgs) -> Result<ExitCode> {
     let mut records = file.records()?;
     if a.ros2 {
         let names = ros2::Names::new(0, &a.namespace)?;
-        let mut bag = ros2::RosBag::create(&a.out, names.clone()).context("--out")?;
-        let mut enc = ros2::Encoder::new(ids, catalog, &names);
-        for st in records.by_ref() {
-            enc.frame(&st.stamped, &mut bag).context("--out")?;
-        }
+        let s = ros2::write_bag(
+            records.by_ref().map(|r| r.stamped),
+            ids,
+            catalog,
+            names,
+            &a.out,
+        )
+        .context("--out")?;
         records.finish()?;
-        bag.finish().context("--out")?;
-        let s = enc.stats();
         if a.json {
             println!(
                 "{}",

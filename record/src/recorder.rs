@@ -318,17 +318,8 @@ impl Recorder {
     fn image(&mut self, foot: u8, t_ns: u64, sink: &mut dyn Sink) -> Result<(), RecordError> {
         let img: &TactileImage = self.reassembler.last_image();
         let bytes = &mut self.bytes;
-        bytes.clear();
-        let (encoding, bpp) = if img.bits == 8 {
-            bytes.extend(img.pixels().iter().map(|&p| p as u8));
-            ("mono8", 1)
-        } else {
-            // Foxglove reads mono16 little-endian.
-            for &p in img.pixels() {
-                bytes.extend_from_slice(&p.to_le_bytes());
-            }
-            ("mono16", 2)
-        };
+        // Foxglove reads mono16 little-endian.
+        let (encoding, bpp) = img.mono_bytes(bytes);
         let b = &mut self.buf;
         b.clear();
         let _ = write!(
@@ -338,7 +329,7 @@ impl Recorder {
             t_ns % 1_000_000_000,
             img.cols,
             img.rows,
-            img.cols as usize * bpp
+            img.cols as usize * bpp as usize
         );
         crate::base64::encode(b, bytes);
         b.push_str("\"}");

@@ -167,6 +167,24 @@ impl RosBag {
     }
 }
 
+/// `stamped` frames (a candump log's) into a new rosbag2 at `dir`: the messages the bridge
+/// would have published for `names`, decoded with `ids` and named from `catalog`.
+pub fn write_bag(
+    stamped: impl IntoIterator<Item = protocol::Stamped>,
+    ids: protocol::IdConfig,
+    catalog: protocol::TerrainCatalog,
+    names: Names,
+    dir: &Path,
+) -> Result<crate::EncodeStats, Ros2Error> {
+    let mut bag = RosBag::create(dir, names.clone())?;
+    let mut enc = crate::Encoder::new(ids, catalog, &names);
+    for st in stamped {
+        enc.frame(&st, &mut bag)?;
+    }
+    bag.finish()?;
+    Ok(enc.stats())
+}
+
 impl RosSink for RosBag {
     fn write(&mut self, topic: RosTopic, t_ns: u64, cdr: &[u8]) -> Result<(), Ros2Error> {
         let channel = match self.topics.get(&topic) {

@@ -166,15 +166,8 @@ impl Encoder {
                     return Ok(());
                 }
                 let img = self.reassembler.last_image();
-                let (encoding, bpp, data) = if img.bits == 8 {
-                    ("mono8", 1, img.pixels().iter().map(|&p| p as u8).collect())
-                } else {
-                    let mut d = Vec::with_capacity(img.pixels().len() * 2);
-                    for &p in img.pixels() {
-                        d.extend_from_slice(&p.to_le_bytes());
-                    }
-                    ("mono16", 2, d)
-                };
+                let mut data = Vec::new();
+                let (encoding, bpp) = img.mono_bytes(&mut data);
                 let m = ros::Image {
                     header: header(format!("foot{foot}")),
                     height: img.rows as u32,

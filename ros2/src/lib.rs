@@ -32,7 +32,7 @@ mod publisher;
 pub mod typehash;
 pub mod types;
 
-pub use bag::RosBag;
+pub use bag::{RosBag, write_bag};
 pub use encoder::{BridgeHealth, EncodeStats, Encoder, RosSink, RosTopic};
 pub use names::{BadNamespace, Names};
 pub use options::Ros2Options;

@@ -32,6 +32,9 @@ pub struct Ros2Summary {
 pub struct Ros2Output {
     encoder: Encoder,
     sinks: Sinks,
+    /// The tap's drops as of the last frame, and the router's losses as of the last flush.
+    dropped: u64,
+    router_losses: u64,
     summary: Arc<Mutex<Ros2Summary>>,
 }
 
@@ -40,6 +43,7 @@ struct Sinks {
     bag: Option<RosBag>,
     names: crate::Names,
     published: BTreeMap<RosTopic, u64>,
+    total: u64,
     failed: Vec<String>,
 }
 
@@ -61,6 +65,7 @@ impl RosSink for Sinks {
             self.bag = None;
         }
         *self.published.entry(topic).or_default() += 1;
+        self.total += 1;
         Ok(())
     }
 }
@@ -76,8 +81,11 @@ impl Ros2Output {
                 bag,
                 names,
                 published: BTreeMap::new(),
+                total: 0,
                 failed: Vec::new(),
             },
+            dropped: 0,
+            router_losses: 0,
             summary: Arc::default(),
         }
     }
@@ -94,29 +102,28 @@ impl Ros2Output {
 
 impl FrameConsumer for Ros2Output {
     fn frame(&mut self, frame: &Stamped, dropped: u64) -> Result<(), RecordError> {
-        let published = self.sinks.published.values().sum();
-        #[allow(unused_mut)]
-        let mut router_losses = 0;
-        #[cfg(feature = "zenoh")]
-        if let Some(z) = self.sinks.zenoh.as_mut() {
-            router_losses = z.router_losses();
-        }
+        self.dropped = dropped;
         self.encoder.set_health(BridgeHealth {
             dropped,
-            published,
-            router_losses,
+            published: self.sinks.total,
+            router_losses: self.router_losses,
         });
         self.encoder
             .frame(frame, &mut self.sinks)
             .map_err(|e| RecordError::Output(format!("ROS 2: {e}")))?;
-        if let Ok(mut s) = self.summary.lock() {
-            s.dropped = dropped;
-        }
         if self.alive() {
             Ok(())
         } else {
             Err(RecordError::Output("ROS 2: every output failed".into()))
         }
+    }
+
+    fn flush(&mut self) -> Result<(), RecordError> {
+        #[cfg(feature = "zenoh")]
+        if let Some(z) = self.sinks.zenoh.as_mut() {
+            self.router_losses = z.router_losses();
+        }
+        Ok(())
     }
 
     fn finish(&mut self) -> Result<(), RecordError> {
@@ -142,6 +149,7 @@ impl FrameConsumer for Ros2Output {
         );
         if let Ok(mut s) = self.summary.lock() {
             s.published = published;
+            s.dropped = self.dropped;
             s.failed = self.sinks.failed.clone();
         }
         result

@@ -57,7 +57,6 @@ pub struct ZenohPublisher {
     congestion: CongestionControl,
     had_router: bool,
     router_losses: u64,
-    last_check: Instant,
 }
 
 fn zerr(what: &str, e: impl std::fmt::Display) -> Ros2Error {
@@ -92,7 +91,6 @@ impl ZenohPublisher {
             },
             had_router: false,
             router_losses: 0,
-            last_check: Instant::now(),
         })
     }
 
@@ -117,19 +115,17 @@ impl ZenohPublisher {
         false
     }
 
-    /// Times the router went away, so far (checked once a second).
+    /// Checks the router now; returns the times it went away so far. Called about once a
+    /// second (the recorder's flush), so an outage shorter than that may go uncounted.
     pub fn router_losses(&mut self) -> u64 {
-        if self.last_check.elapsed() >= Duration::from_secs(1) {
-            self.last_check = Instant::now();
-            let now = self.has_router();
-            if self.had_router && !now {
-                self.router_losses += 1;
-                tracing::warn!("Zenoh router lost: publishing resumes when it is back");
-            } else if !self.had_router && now {
-                tracing::info!("Zenoh router connected");
-            }
-            self.had_router = now;
+        let now = self.has_router();
+        if self.had_router && !now {
+            self.router_losses += 1;
+            tracing::warn!("Zenoh router lost: publishing resumes when it is back");
+        } else if !self.had_router && now {
+            tracing::info!("Zenoh router connected");
         }
+        self.had_router = now;
         self.router_losses
     }
 

@@ -175,6 +175,23 @@ impl TactileImage {
     pub fn pixels(&self) -> &[u16] {
         &self.pixels[..self.len()]
     }
+
+    /// The pixels as a viewer's image bytes, into `out` (cleared): `mono8` for 8-bit images,
+    /// `mono16` little-endian otherwise. Returns the encoding and the bytes per pixel. The
+    /// MCAP recording and the ROS 2 image both show them so.
+    #[cfg(feature = "std")]
+    pub fn mono_bytes(&self, out: &mut std::vec::Vec<u8>) -> (&'static str, u32) {
+        out.clear();
+        if self.bits == 8 {
+            out.extend(self.pixels().iter().map(|&p| p as u8));
+            ("mono8", 1)
+        } else {
+            for &p in self.pixels() {
+                out.extend_from_slice(&p.to_le_bytes());
+            }
+            ("mono16", 2)
+        }
+    }
 }
 
 /// Writes pixel `i`'s bytes into the transfer's byte stream.
