@@ -13,6 +13,20 @@ export CARGO_INCREMENTAL=0
 # by side below, and two apt-gets at once would fight over dpkg's lock.
 part "install dependencies"; scripts/install-deps.sh --cross arm64 --package --uml
 part "cargo fmt --check"; cargo fmt --all --check
+# The arm64 part's builds (aarch64 lints, test binaries, the package's binary), in their own
+# target directory (scripts/test-arm64.sh), from now on at idle priority: they take only the
+# CPU time the parts below leave (their tests wait on real time, the vcan suite's User-mode
+# Linux holds one core), and never make those wait. Its output comes after the vcan suite.
+arm_log=$(mktemp); arm_build_rc=$(mktemp)
+(
+  rc=0; chrt --idle 0 nice -n 19 scripts/test-arm64.sh --build >"$arm_log" 2>&1 || rc=$?
+  echo "$rc" >"$arm_build_rc"
+) &
+arm_build_pid=$!
+# A process and all it started: to move the arm64 part between cores, and to stop it when a
+# part fails.
+tree() { echo "$1"; for c in $(ps -o pid= --ppid "$1" 2>/dev/null); do tree "$c"; done; }
+trap 'for p in $(tree "$arm_build_pid") ${arm_pid:+$(tree "$arm_pid")}; do kill "$p" 2>/dev/null; done' EXIT
 part "cargo clippy"; cargo clippy --workspace --all-targets --features vcan,interop -- -D warnings
 part "protocol without std, for the foot's microcontroller (thumbv7em-none-eabihf)"
 cargo build -p presrs-protocol --no-default-features --target thumbv7em-none-eabihf
@@ -24,20 +38,27 @@ cargo test --workspace --features interop,vcan
 part "vcan suite, the host's part: the test binary, the release build, the system tests' model"
 tests/vcan/run.sh --prepare
 # Where this kernel has no CAN the vcan run is User-mode Linux, one CPU, which run.sh pins to
-# core 0 (or a VM); the whole arm64 part (builds, tests under qemu-aarch64, packages) takes the
-# other cores, at idle priority (the run's tests judge robot time, which waits on its
-# processes). Beside it, not after it: its tests and packages fill the other core's idle time
-# (CHANGELOG.md has the runs).
-arm_log=$(mktemp)
+# core 0 (or a VM); the arm64 part takes the other cores: its builds, still running, move
+# there, and its tests and packages follow them there, at idle priority (the run's tests
+# judge robot time, which waits on its processes).
 others=(); [ "$(nproc)" -ge 2 ] && others=(taskset -c "1-$(($(nproc) - 1))")
-part "vcan suite (beside it, at idle priority: scripts/test-arm64.sh, its output after)"
-"${others[@]}" chrt --idle 0 nice -n 19 scripts/test-arm64.sh >"$arm_log" 2>&1 &
+if [ ${#others[@]} -gt 0 ]; then
+  for p in $(tree "$arm_build_pid"); do taskset -a -p -c "1-$(($(nproc) - 1))" "$p" >/dev/null 2>&1 || true; done
+fi
+part "vcan suite (beside it, at idle priority: the rest of scripts/test-arm64.sh, its output after)"
+(
+  # Once its builds are done (a subshell cannot `wait` for its parent's child: their exit
+  # status is in a file), the rest: tests under qemu-aarch64, the packages.
+  while [ ! -s "$arm_build_rc" ]; do sleep 2; done
+  rc=$(cat "$arm_build_rc"); rm -f "$arm_build_rc"
+  [ "$rc" = 0 ] || exit "$rc"
+  "${others[@]}" chrt --idle 0 nice -n 19 scripts/test-arm64.sh >>"$arm_log" 2>&1
+) &
 arm_pid=$!
 vcan_rc=0; tests/vcan/run.sh --prepared || vcan_rc=$?
 part "vcan suite done (exit $vcan_rc); the arm64 part beside it:"
-# The VM's core is free: the rest of the arm64 part (with the ROS 2 bridge's zenoh its builds
-# outlast the VM suite) gets every core. Its processes, and what they start from now on.
-tree() { echo "$1"; for c in $(ps -o pid= --ppid "$1" 2>/dev/null); do tree "$c"; done; }
+# The run's core is free: the rest of the arm64 part gets every core. Its processes, and what
+# they start from now on.
 for p in $(tree "$arm_pid"); do taskset -a -p -c "0-$(($(nproc) - 1))" "$p" >/dev/null 2>&1 || true; done
 arm_rc=0; wait "$arm_pid" || arm_rc=$?
 cat "$arm_log"; rm -f "$arm_log"
@@ -45,4 +66,5 @@ if [ "$vcan_rc" != 0 ] || [ "$arm_rc" != 0 ]; then
   echo "FAILED: vcan suite exit $vcan_rc, arm64 part exit $arm_rc" >&2
   exit 1
 fi
+trap - EXIT
 part "all tests passed"

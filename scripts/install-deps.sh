@@ -40,6 +40,8 @@ if [ "$uml" = 1 ]; then
   command -v linux.uml >/dev/null || need_apt+=(user-mode-linux)
   # Its init loads vcan with insmod, which a fresh Debian without a kernel image lacks.
   command -v insmod >/dev/null || need_apt+=(kmod)
+  # tests/vcan/uml-xstate.c, preloaded into it on hosts with AMX, is compiled by the run.
+  command -v cc >/dev/null || need_apt+=(gcc libc6-dev)
 fi
 if [ "$vm" = 1 ]; then
   command -v qemu-system-x86_64 >/dev/null || need_apt+=(qemu-system-x86)

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# The arm64 checks, run by ./test-all.sh beside the vcan suite, at idle priority on the cores it
-# leaves (their times: CHANGELOG.md):
+# The arm64 checks, run by ./test-all.sh at idle priority: the builds from its start, beside
+# the host's builds and tests, the rest beside the vcan suite (their times: CHANGELOG.md):
 # 1. clippy for aarch64 on the libraries (the NEON code only compiles there);
 # 2. the node crate's unit and integration tests (classifier, stance pipeline), cross-built
 #    for aarch64 and run under qemu-aarch64: correctness only, never timings (qemu emulates
@@ -12,8 +12,7 @@
 #
 #   scripts/test-arm64.sh           all of it (each build is a no-op when already done)
 #   scripts/test-arm64.sh --build   only the builds: the lints, the aarch64 test binaries, the
-#                                   arm64 package's binary; ./test-all.sh runs them at idle
-#                                   priority beside the vcan suite, and the rest after it
+#                                   arm64 package's binary (what needs no host build)
 set -euo pipefail
 build_only=0
 case "${1:-}" in
@@ -26,6 +25,16 @@ t0=$SECONDS
 step() { echo "== arm64: $1 (at $((SECONDS - t0)) s)"; }
 root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root"
+# The host's target directory (CARGO_TARGET_DIR, a config's, or ./target), and beside it the
+# aarch64 builds' own: cargo locks a target directory's profile directory while it builds (a
+# cross build locks the host's release/ too, for its build scripts and proc macros), so in the
+# same one ./test-all.sh's aarch64 builds, started at once, would wait on clippy, `cargo test`
+# and the vcan suite's release build, or make them wait.
+meta=$(cargo metadata --no-deps --format-version 1)
+target_dir=$(python3 -c 'import json, sys; print(json.load(sys.stdin)["target_directory"])' <<<"$meta")
+version=$(python3 -c 'import json, sys; print(next(p["version"] for p in json.load(sys.stdin)["packages"] if p["name"] == "presrs"))' <<<"$meta")
+cross_dir="$target_dir/cross"
+cross() { CARGO_TARGET_DIR="$cross_dir" "$@"; }
 
 scripts/install-deps.sh --cross arm64 --package
 triple=aarch64-unknown-linux-gnu
@@ -38,7 +47,7 @@ export CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_RUNNER="qemu-aarch64 -L /usr/aarch
 # --all-targets the dev-dependencies (criterion, proptest) were checked for aarch64 too: 77 s
 # against 46 s on a fresh target directory (2-core machine, 2026-11-25).
 step "cargo clippy --target $triple --lib (node, protocol)"
-cargo clippy --quiet --target "$triple" -p presrs-node -p presrs-protocol --lib -- -D warnings
+cross cargo clippy --quiet --target "$triple" -p presrs-node -p presrs-protocol --lib -- -D warnings
 
 # --release: the emulated tests run in seconds instead of minutes. The node crate only: the
 # CLI's tests cross-built with it compiled the whole workspace and the CLI's dev-dependencies
@@ -50,23 +59,23 @@ cargo clippy --quiet --target "$triple" -p presrs-node -p presrs-protocol --lib 
 node_tests=(--quiet --release --target "$triple" -p presrs-node --lib --test service --test train_classify)
 if [ "$build_only" = 1 ]; then
   step "node crate tests: the aarch64 build"
-  cargo test --no-run "${node_tests[@]}"
+  cross cargo test --no-run "${node_tests[@]}"
   step "the arm64 package's binary: cargo build --release --target $triple --bin presrs"
-  cargo build --release --quiet --target "$triple" --bin presrs
+  cross cargo build --release --quiet --target "$triple" --bin presrs
   step "builds done"
   exit 0
 fi
 step "node crate tests under qemu-aarch64"
-cargo test "${node_tests[@]}"
+cross cargo test "${node_tests[@]}"
 
-step "arm64 Debian package"; scripts/package-deb.sh --arch arm64
+step "arm64 Debian package"; cross scripts/package-deb.sh --arch arm64
+# Beside the amd64 one, where scripts/test-package.sh looks.
+mkdir -p "$target_dir/debian" && cp "$cross_dir/debian/presrs_${version}_arm64.deb" "$target_dir/debian/"
 # The CLI's classification tests against the binary the arm64 package ships, driven by the
 # host's test binary, the one ./test-all.sh's `cargo test` built (scripts/test-exe.sh).
 step "CLI classification tests on the arm64 binary under qemu-aarch64"
-target_dir=$(cargo metadata --no-deps --format-version 1 |
-  python3 -c 'import json, sys; print(json.load(sys.stdin)["target_directory"])')
 cli_tests=$(scripts/test-exe.sh cli_classifier)
-PRESRS_TEST_BIN="$target_dir/$triple/release/presrs" \
+PRESRS_TEST_BIN="$cross_dir/$triple/release/presrs" \
   PRESRS_TEST_RUNNER="qemu-aarch64 -L /usr/aarch64-linux-gnu" "$cli_tests" --quiet
 step "amd64 Debian package"; scripts/package-deb.sh --arch amd64
 step "both packages in throwaway Debian roots"; scripts/test-package.sh

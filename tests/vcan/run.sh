@@ -96,21 +96,30 @@ can_here() {
 # `vng` (a virtme-ng VM under qemu TCG, the runner before 2026-11-26; still here for a host where
 # User-mode Linux cannot run, e.g. one that forbids ptrace).
 runner=${PRESRS_VCAN_RUNNER:-uml}
-# User-mode Linux cannot run on every host: Debian's 6.1 build fails to ptrace the FP registers
-# where the CPU's XSAVE area is large (AMX: "ptrace set fp regs failed, errno = 14", and its
-# init dies at once; seen on a 2026-11-27 CI machine). A 5 s boot that must print a marker
-# tells; where it does not, the suite runs in the virtme-ng VM instead (slower, but it runs).
+# Debian's User-mode Linux 6.1 restores its processes' FP registers in a buffer sized for
+# AVX-512, which a host with AMX refuses ("ptrace set fp regs failed, errno = 14": its init
+# dies at once; seen on 2026-11-27 CI machines). tests/vcan/uml-xstate.c, preloaded into it,
+# hands the host the whole XSAVE area (a no-op where the sizes agree). A 5 s boot that must
+# print a marker tells whether it runs; where it does not (e.g. a host that forbids ptrace),
+# the suite runs in the virtme-ng VM instead (slower, but it runs).
+uml_preload=()
+uml_shim() {
+  [ "${#uml_preload[@]}" -gt 0 ] && return 0
+  mkdir -p "$work"
+  cc -shared -fPIC -O2 -Wall -o "$work/uml-xstate.so" "$root/tests/vcan/uml-xstate.c" -ldl || return 1
+  uml_preload=(env LD_PRELOAD="$work/uml-xstate.so")
+}
 uml_boots() {
   "$root/scripts/install-deps.sh" --uml >/dev/null
+  uml_shim || return 1
   local probe="$work/uml-probe.sh"
-  mkdir -p "$work"
   printf '#!/bin/sh\necho PRESRS-UML-BOOTED\nhalt -f\n' > "$probe"
   chmod +x "$probe"
-  timeout --kill-after 5 30 linux.uml mem=256M quiet root=/dev/root rootfstype=hostfs rootflags=/ \
+  timeout --kill-after 5 30 "${uml_preload[@]}" linux.uml mem=256M quiet root=/dev/root rootfstype=hostfs rootflags=/ \
     rw init="$probe" con=null con0=fd:0,fd:1 < /dev/null 2>&1 | grep -q PRESRS-UML-BOOTED
 }
 if [ "$runner" = uml ] && [ -z "${PRESRS_VCAN_RUNNER:-}" ] && ! can_here && ! uml_boots; then
-  echo "vcan suite: User-mode Linux does not boot on this host (its FP registers cannot be traced: a CPU with a large XSAVE area such as AMX); running the suite in a virtme-ng VM instead (about twice as long)"
+  echo "vcan suite: User-mode Linux does not boot on this host (with tests/vcan/uml-xstate.c preloaded); running the suite in a virtme-ng VM instead (about twice as long)"
   runner=vng
 fi
 # What the tests need from the host, for a guest kernel's shell (User-mode Linux or the VM).
@@ -129,6 +138,7 @@ elif [ "$runner" = uml ]; then
   # whole suite: 662 s here (clean clone, with the arm64 builds on the other core) against
   # 1247 s in the VM.
   "$root/scripts/install-deps.sh" --uml
+  uml_shim
   init="$work/uml-init.sh"
   # A tmpfs on /tmp keeps the tests' scratch files off hostfs, but it hides the host's /tmp:
   # a checkout (or its target directory) under /tmp then cannot be reached ("can't cd").
@@ -178,7 +188,7 @@ INIT
   pin=(); [ "$(nproc)" -ge 2 ] && pin=(taskset -c 0)
   echo "vcan suite: booting User-mode Linux ${pin[*]:+(${pin[*]}) }(at $SECONDS s)"
   set +e
-  timeout --kill-after 30 2700 "${pin[@]}" linux.uml mem=2G quiet root=/dev/root rootfstype=hostfs rootflags=/ \
+  timeout --kill-after 30 2700 "${pin[@]}" "${uml_preload[@]}" linux.uml mem=2G quiet root=/dev/root rootfstype=hostfs rootflags=/ \
     rw init="$init" con=null con0=fd:0,fd:1 < /dev/null 2>&1 | sed -u 's/\r$//' | tee "$log"
   set -e
 elif [ "$runner" = vng ]; then
