@@ -111,14 +111,15 @@ fn replay(mut node: NodeService, log: &Path, json: bool) -> Result<ExitCode> {
     let file = protocol::candump::LogFile::check(log)?;
     let mut records = file.records()?;
     let catalog = node.catalog().clone();
-    let summary = node::replay::replay_log(&mut node, &mut records, &mut |t_us, foot, tc, gait| {
+    let summary = node::replay::replay_log(&mut node, &mut records, &mut |(t_us, o)| {
+        let node::service::Output::Class { foot, class, gait } = o else {
+            return;
+        };
         if json {
-            println!(
-                "{}",
-                node::replay::class_json(t_us, foot, tc, gait, &catalog)
-            );
+            let line = node::replay::class_json(t_us, foot, &class, gait, &catalog);
+            println!("{line}");
         } else {
-            println!("{}", node::replay::class_line(t_us, foot, tc, &catalog));
+            println!("{}", node::replay::class_line(t_us, foot, &class, &catalog));
         }
     });
     records.finish()?;

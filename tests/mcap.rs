@@ -72,12 +72,12 @@ fn robot_with_node(model: &Path, seconds: u64) -> Vec<Stamped> {
     let mut said = Vec::new();
     for ms in 1..=seconds * 1000 {
         let t = ms * 1000;
-        robot.advance_to(t, &mut |f| frames.push(f));
+        robot.advance_to(t, &mut frames);
         let t_us = LOG_EPOCH_US + t;
         for frame in frames.drain(..) {
             let st = Stamped { t_us, frame };
-            node.tick(t_us, &mut |o| said.push(o));
-            node.process(&st, &mut |o| said.push(o));
+            node.tick(t_us, &mut said);
+            node.process(&st, &mut said);
             log.push(st);
             for o in said.drain(..) {
                 log.push(Stamped {

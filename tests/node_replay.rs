@@ -53,7 +53,10 @@ fn replay_prints_the_pipelines_decisions_with_the_logs_timestamps() {
     let mut p = StancePipeline::new(NodeConfig::default(), Some(model));
     let mut want = Vec::new();
     for r in &records {
-        p.on_frame(r, &mut |foot, tc| want.push((r.t_us, foot, tc)));
+        p.on_frame(r, &mut |(foot, tc): (
+            u8,
+            protocol::messages::TerrainClass,
+        )| { want.push((r.t_us, foot, tc)) });
     }
     assert!(want.len() > 5, "only {} decisions in 6 s", want.len());
 

@@ -2,7 +2,7 @@
 
 use node::{NodeConfig, RefitMode, StancePipeline};
 use protocol::Stamped;
-use protocol::messages::flags;
+use protocol::messages::{TerrainClass, flags};
 use sim::runner::{SimConfig, SimRobot};
 
 #[test]
@@ -14,11 +14,9 @@ fn exactly_one_terrain_class_per_step_despite_switch_bounce() {
     while t < 5_000_000 {
         t += 1000;
         let mut frames = Vec::new();
-        robot.advance_to(t, &mut |f| frames.push(f));
+        robot.advance_to(t, &mut frames);
         for frame in frames {
-            p.on_frame(&Stamped { t_us: t, frame }, &mut |foot, tc| {
-                decided.push((foot, tc))
-            });
+            p.on_frame(&Stamped { t_us: t, frame }, &mut decided);
         }
     }
     let steps = robot.steps.len();
@@ -72,9 +70,12 @@ fn the_decision_comes_with_the_sampled_frame_not_a_frame_later() {
     while t < 3_000_000 {
         t += 1000;
         let mut frames = Vec::new();
-        robot.advance_to(t, &mut |f| frames.push(f));
+        robot.advance_to(t, &mut frames);
         for frame in frames {
-            p.on_frame(&Stamped { t_us: t, frame }, &mut |_, tc| {
+            p.on_frame(&Stamped { t_us: t, frame }, &mut |(_, tc): (
+                u8,
+                TerrainClass,
+            )| {
                 if tc.flags & flags::NO_SAMPLE == 0 {
                     latencies.push(tc.latency_us)
                 }
@@ -131,9 +132,14 @@ fn damaged_run(
     while t < seconds * 1_000_000 {
         t += 1000;
         let mut frames = Vec::new();
-        robot.advance_to(t, &mut |f| frames.push(f));
+        robot.advance_to(t, &mut frames);
         for frame in frames {
-            p.on_frame(&Stamped { t_us: t, frame }, &mut |_, tc| decided.push(tc));
+            p.on_frame(&Stamped { t_us: t, frame }, &mut |(_, tc): (
+                u8,
+                TerrainClass,
+            )| {
+                decided.push(tc)
+            });
         }
     }
     let correct = decided

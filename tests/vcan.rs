@@ -149,7 +149,7 @@ fn images_stream_at_100_hz_for_10_s_none_lost() {
                     timestamp_us: (k * 10_000) as u32,
                     pixels: &px,
                 },
-                |f| {
+                &mut |f: protocol::CanFrame| {
                     // A full queue on vcan is transient: retry briefly, as a driver would.
                     let mut tries = 0;
                     while let Err(e) = tx.send(&f) {

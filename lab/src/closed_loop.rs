@@ -283,10 +283,10 @@ pub fn run_recorded(
         }
     };
     let mut sim = SimService::new(sim_cfg, p.seed, None, &catalog, &mut observe);
-    let mut sent = |t_us: u64, frame: &protocol::CanFrame| {
+    let mut sent = |st: protocol::Stamped| {
         let st = protocol::Stamped {
-            t_us: epoch_us + t_us,
-            frame: *frame,
+            t_us: epoch_us + st.t_us,
+            frame: st.frame,
         };
         if let Some(tap) = tap {
             tap.offer(&st);

@@ -22,7 +22,7 @@ pub fn log_to_recording<R: Borrow<LogRecord>>(
         let st = &r.borrow().stamped;
         rec.frame(st, out)?;
         if let Some(node) = node.as_deref_mut() {
-            node.replay(std::iter::once(st), &mut |t, o| {
+            node.replay(std::iter::once(st), &mut |(t, o): (u64, Output)| {
                 if let Output::Class { foot, class, .. } = o {
                     decided.push((t, foot, class));
                 }

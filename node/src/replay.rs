@@ -5,6 +5,7 @@
 //! would have: a step whose sample deadline passed between two records is decided at the later
 //! record's time, as it would have been live at the next frame.
 
+use protocol::emit::Emit;
 use std::fmt;
 
 use protocol::TerrainCatalog;
@@ -90,13 +91,13 @@ impl fmt::Display for ReplaySummary {
     }
 }
 
-/// Replays `records` through `node`, handing each TerrainClass (log time, foot, decision, the
-/// gait in force: the log's last GaitStatus) to `on_class`. The records stream: a
+/// Replays `records` through `node`, handing each decision ([`Output::Class`]: foot, decision,
+/// the gait in force, the log's last GaitStatus) to `out` with its log time. The records stream: a
 /// [`protocol::candump::LogFile`]'s or a slice's.
 pub fn replay_log<R: Borrow<LogRecord>>(
     node: &mut NodeService,
     records: impl IntoIterator<Item = R>,
-    on_class: &mut impl FnMut(u64, u8, &TerrainClass, Option<u8>),
+    out: &mut (impl Emit<(u64, Output)> + ?Sized),
 ) -> ReplaySummary {
     let (mut frames, mut span) = (0, None::<(u64, u64)>);
     // The gaits counted from this replay's decisions alone, as the node counts since it began.
@@ -105,9 +106,9 @@ pub fn replay_log<R: Borrow<LogRecord>>(
         let st = &r.borrow().stamped;
         frames += 1;
         span = Some(span.map_or((st.t_us, st.t_us), |(a, _)| (a, st.t_us)));
-        node.replay(std::iter::once(st), &mut |t_us, o| {
-            if let Output::Class { foot, class, gait } = o {
-                on_class(t_us, foot, &class, gait);
+        node.replay(std::iter::once(st), &mut |(t_us, o): (u64, Output)| {
+            if matches!(o, Output::Class { .. }) {
+                out.emit((t_us, o));
             }
         });
     }

@@ -110,7 +110,7 @@ impl FakeFoot {
                     pixels: &px,
                 };
                 self.seg
-                    .frames(0, self.seq, &img, |f: CanFrame| {
+                    .frames(0, self.seq, &img, &mut |f: CanFrame| {
                         out.push(Stamped {
                             t_us: t + 1000,
                             frame: f,
@@ -352,7 +352,7 @@ fn the_heartbeat_comes_at_status_hz_with_the_model_id() {
     }
     // The heartbeat survives a clock that jumps back (another bus clock).
     let mut again = Vec::new();
-    node.tick(10_000, &mut |o| again.push(o));
+    node.tick(10_000, &mut again);
     assert!(matches!(again[..], [Output::Status(_)]), "{again:?}");
 }
 
@@ -542,7 +542,7 @@ fn a_replay_decides_each_step_as_the_log_clock_says() {
     }
     let mut node = NodeService::new(NodeConfig::default(), model()).unwrap();
     let mut said = Vec::new();
-    node.replay(&frames, &mut |t, o| said.push((t, o)));
+    node.replay(&frames, &mut said);
     let got = classes(&said);
     assert_eq!(got.len(), terrains.len(), "{got:?}");
     let catalog = TerrainCatalog::paper();
@@ -560,8 +560,10 @@ fn a_replay_decides_each_step_as_the_log_clock_says() {
     let records = as_log(&frames);
     let mut node = NodeService::new(NodeConfig::default(), model()).unwrap();
     let mut lines = Vec::new();
-    let sum = presrs_node::replay::replay_log(&mut node, &records, &mut |t, foot, tc, _| {
-        lines.push(presrs_node::replay::class_line(t, foot, tc, &catalog))
+    let sum = presrs_node::replay::replay_log(&mut node, &records, &mut |(t, o)| {
+        if let Output::Class { foot, class, .. } = o {
+            lines.push(presrs_node::replay::class_line(t, foot, &class, &catalog))
+        }
     });
     assert_eq!(lines.len(), terrains.len(), "{lines:?}");
     for (line, &terrain) in lines.iter().zip(&terrains) {
@@ -611,7 +613,7 @@ fn classic_worst_case_steps(cfg: NodeConfig) -> Vec<(u64, TerrainClass)> {
             pixels: &px,
         };
         let mut n = 0u64;
-        seg.frames(0, k as u8, &img, |f: CanFrame| {
+        seg.frames(0, k as u8, &img, &mut |f: CanFrame| {
             n += 1;
             frames.push(Stamped {
                 t_us: capture + n * 135,
@@ -624,7 +626,7 @@ fn classic_worst_case_steps(cfg: NodeConfig) -> Vec<(u64, TerrainClass)> {
     frames.sort_by_key(|s| s.t_us);
     let mut node = NodeService::new(cfg, model()).unwrap();
     let mut said = Vec::new();
-    node.replay(&frames, &mut |t, o| said.push((t, o)));
+    node.replay(&frames, &mut said);
     classes(&said)
 }
 
@@ -727,7 +729,7 @@ fn stance_tracking_properties_hold_for_random_feet_and_malformed_traffic() {
                 pixels: &px,
             };
             let mut n = 0;
-            seg.frames(0, k as u8, &img, |f: CanFrame| {
+            seg.frames(0, k as u8, &img, &mut |f: CanFrame| {
                 n += 1;
                 frames.push(Stamped {
                     t_us: ts + 500 + n * 150,
@@ -762,7 +764,7 @@ fn stance_tracking_properties_hold_for_random_feet_and_malformed_traffic() {
         frames.sort_by_key(|s| s.t_us);
         let mut node = NodeService::new(NodeConfig::default(), model.clone()).unwrap();
         let mut said = Vec::new();
-        node.replay(&frames, &mut |t, o| said.push((t, o)));
+        node.replay(&frames, &mut said);
         node.tick(end + 1_000_000, &mut |o| said.push((end + 1_000_000, o)));
         let got = classes(&said);
         let steps: std::collections::BTreeSet<u16> = got.iter().map(|(_, tc)| tc.step).collect();
@@ -905,7 +907,7 @@ fn status_counters_wrap_mod_256_instead_of_pinning_at_255() {
             pixels: &px,
         };
         let mut frames = Vec::new();
-        seg.frames(0, k as u8, &img, |f| frames.push(f)).unwrap();
+        seg.frames(0, k as u8, &img, &mut frames).unwrap();
         // A flipped pixel byte in the last data segment: the transfer fails its CRC.
         let last = frames.last_mut().unwrap();
         let mut data = last.data().to_vec();
@@ -944,7 +946,7 @@ fn latency_shows_how_late_the_node_decided() {
         for f in &frames {
             // The node takes each frame `delay` after the kernel stamped it.
             clock.set_us(f.t_us + delay_us.unwrap_or(0));
-            node.process(f, &mut |o| said.push(o));
+            node.process(f, &mut said);
         }
         let got: Vec<TerrainClass> = said
             .iter()
@@ -1155,7 +1157,7 @@ fn unknowns_are_counted_in_the_gait_each_step_was_decided_in() {
     let records = as_log(&frames);
     let model = node.model().unwrap().clone();
     let mut replayed = NodeService::new(NodeConfig::default(), model).unwrap();
-    let sum = presrs_node::replay::replay_log(&mut replayed, &records, &mut |_, _, _, _| {});
+    let sum = presrs_node::replay::replay_log(&mut replayed, &records, &mut Vec::new());
     assert_eq!(sum.gaits, node.gait_tally().counts());
     assert!(
         sum.to_string().ends_with(

@@ -124,7 +124,7 @@ where
         self.image_seq = self.image_seq.wrapping_add(1);
         let mut failed = None;
         let (can, foot) = (&mut self.can, self.foot);
-        self.segmenter.frames(foot, seq, img, |f| {
+        self.segmenter.frames(foot, seq, img, &mut |f: CanFrame| {
             if failed.is_none()
                 && let Err(e) = send(can, &f)
             {

@@ -20,6 +20,7 @@
 //! - [`bus`]: SocketCAN and an in-process bus behind one trait; [`clock`]: time sources;
 //! - [`component`]: the one shape of every part on the bus (node, controller, simulated
 //!   robot, capture, recorder) and the one loop that runs it on a bus;
+//! - [`emit`]: the one way a part hands on what it makes ([`emit::Emit`]);
 //! - [`config`]: the one config-file loader and its errors; [`error`]: the error types.
 //!
 //! ## On the foot's microcontroller
@@ -53,6 +54,7 @@ pub mod component;
 pub mod config;
 #[cfg(feature = "std")]
 pub mod dbc;
+pub mod emit;
 pub mod error;
 pub mod foot;
 pub mod frame;

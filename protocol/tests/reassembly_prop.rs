@@ -4,6 +4,7 @@
 
 use std::collections::HashMap;
 
+use presrs_protocol::CanFrame;
 use presrs_protocol::ids::IdConfig;
 use presrs_protocol::tactile::{ImageRef, Reassembler, Segmenter, Variant};
 use proptest::prelude::*;
@@ -69,7 +70,7 @@ fn segments(v: Variant, img: &Sent) -> Vec<Vec<u8>> {
                 timestamp_us: 77,
                 pixels: &img.pixels,
             },
-            |f| out.push(f.data().to_vec()),
+            &mut |f: CanFrame| out.push(f.data().to_vec()),
         )
         .unwrap();
     out

@@ -468,7 +468,7 @@ mod tests {
         };
         let seg = Segmenter::new(Variant::Fd, ids);
         let mut frames = Vec::new();
-        seg.frames(1, 0, &img, |f| frames.push(f)).unwrap();
+        seg.frames(1, 0, &img, &mut frames).unwrap();
         for (i, f) in frames.iter().enumerate() {
             r.frame(
                 &Stamped {
@@ -520,7 +520,7 @@ mod tests {
         };
         let mut frames = Vec::new();
         Segmenter::new(Variant::Fd, ids)
-            .frames(0, 3, &img, |f| frames.push(f))
+            .frames(0, 3, &img, &mut frames)
             .unwrap();
         for f in frames {
             r.frame(&Stamped { t_us: 9, frame: f }, &mut m).unwrap();

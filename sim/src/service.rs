@@ -345,7 +345,7 @@ impl Component for SimService<'_> {
         }
         let before = self.t_us;
         self.t_us = target.min(self.t_us + MAX_LAG_US);
-        self.robot.advance_to(self.t_us, &mut |f| out.push(f));
+        self.robot.advance_to(self.t_us, out);
         if let Some((foot, _)) = self.motor_leg
             && let Some((a, l)) = self.robot.leg_truth(foot)
         {

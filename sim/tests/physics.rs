@@ -208,7 +208,7 @@ fn surfaces_other_than_sandpaper_render_as_before_to_the_bit() {
         1,
         3_000_000,
         &mut |_, _| {},
-        &mut |st| {
+        &mut |st: protocol::Stamped| {
             frames += 1;
             fnv(&mut log, &st.t_us.to_le_bytes());
             fnv(&mut log, &st.frame.raw_id().to_le_bytes());

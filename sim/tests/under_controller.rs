@@ -37,16 +37,16 @@ fn run(track: Track, script: &Script, until_us: u64) -> Run {
     let mut t_us = 0;
     while t_us < until_us {
         t_us += 1000;
-        robot.advance_to(t_us, &mut |f| sent.push(f));
+        robot.advance_to(t_us, &mut sent);
         for f in sent.drain(..) {
             if let Ok(Some((foot, m))) = messages::decode(&f, &ids) {
-                ctrl.on_message(foot, &m, t_us, &mut |o| out.push(o));
+                ctrl.on_message(foot, &m, t_us, &mut out);
             }
         }
         let node_up = !script.outages.iter().any(|&(a, b)| (a..b).contains(&t_us));
         if node_up && t_us % 100_000 == 0 {
             let hb = Message::NodeStatus(NodeStatus::default());
-            ctrl.on_message(0, &hb, t_us, &mut |o| out.push(o));
+            ctrl.on_message(0, &hb, t_us, &mut out);
         }
         if robot.steps.len() > steps {
             steps = robot.steps.len();
@@ -57,10 +57,10 @@ fn run(track: Track, script: &Script, until_us: u64) -> Run {
                     confidence_pct: 95.0,
                     ..Default::default()
                 });
-                ctrl.on_message(0, &tc, t_us, &mut |o| out.push(o));
+                ctrl.on_message(0, &tc, t_us, &mut out);
             }
         }
-        ctrl.tick(t_us, &mut |o| out.push(o));
+        ctrl.tick(t_us, &mut out);
         for m in out.drain(..) {
             let m = match (m, script.bad_angle) {
                 (Message::LegCommand(lc), Some((a, b, angle))) if (a..b).contains(&t_us) => {

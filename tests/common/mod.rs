@@ -162,7 +162,7 @@ pub fn frames_44x44(
     };
     let mut out = Vec::new();
     protocol::tactile::Segmenter::new(v, ids.clone())
-        .frames(foot, seq, &img, |f| out.push(f))
+        .frames(foot, seq, &img, &mut out)
         .unwrap_or_else(|e| panic!("{e}"));
     out
 }

@@ -13,6 +13,7 @@
 //! own stream only. Mixed into the foot's clock they put the stance law a second off when the
 //! two clocks started a second apart (every hop fell, measured with the bridge on vcan).
 
+use protocol::emit::Emit;
 use std::collections::BTreeMap;
 
 use protocol::messages::{
@@ -311,7 +312,7 @@ impl Controller {
         foot: u8,
         msg: &Message,
         now_us: u64,
-        out: &mut impl FnMut(Message),
+        out: &mut (impl Emit<Message> + ?Sized),
     ) {
         if let Some(l) = self.listen.as_mut() {
             l.since_us.get_or_insert(now_us);
@@ -455,7 +456,7 @@ impl Controller {
         }
     }
 
-    fn apply_pending(&mut self, out: &mut impl FnMut(Message)) {
+    fn apply_pending(&mut self, out: &mut (impl Emit<Message> + ?Sized)) {
         if self.listen.is_some() {
             return;
         }
@@ -469,7 +470,7 @@ impl Controller {
             // throws it backwards). Its target moves by BETA_DES_STEP per step too: aiming at
             // the new beta_des at once still let a G1 -> G3 switch at G1's speed (or the safe
             // gait at G3's) topple the simulated hopper after 2 of 40 node outages.
-            out(Message::GaitStatus(self.status()));
+            out.emit(Message::GaitStatus(self.status()));
         }
     }
 
@@ -487,7 +488,7 @@ impl Controller {
 
     /// Time-driven outputs: LegCommand at the command rate, GaitStatus at the status rate, and
     /// the heartbeat watchdog.
-    pub fn tick(&mut self, now_us: u64, out: &mut impl FnMut(Message)) {
+    pub fn tick(&mut self, now_us: u64, out: &mut (impl Emit<Message> + ?Sized)) {
         if let Some(l) = self.listen.as_mut() {
             let since = *l.since_us.get_or_insert(now_us);
             if now_us.saturating_sub(since) < self.cfg.takeover_ms * 1000 {
@@ -526,7 +527,7 @@ impl Controller {
                 )
             };
             self.seq = self.seq.wrapping_add(1);
-            out(Message::LegCommand(LegCommand {
+            out.emit(Message::LegCommand(LegCommand {
                 leg_length_m: len,
                 touchdown_angle_rad: self.next_beta_td,
                 gait: g.id,
@@ -536,7 +537,7 @@ impl Controller {
         }
         if now_us >= self.next_status_us {
             self.next_status_us = now_us + (1e6 / self.cfg.status_hz) as u64;
-            out(Message::GaitStatus(self.status()));
+            out.emit(Message::GaitStatus(self.status()));
         }
     }
 }
@@ -574,9 +575,9 @@ mod tests {
         for step in 0..3 {
             t += 100_000;
             let before = c.gait().id;
-            c.on_message(0, &hb, t, &mut |m| out.push(m));
-            c.on_message(0, &contact(true, t), t, &mut |m| out.push(m));
-            c.on_message(0, &tc(wood, 90.0), t + 70_000, &mut |m| out.push(m));
+            c.on_message(0, &hb, t, &mut out);
+            c.on_message(0, &contact(true, t), t, &mut out);
+            c.on_message(0, &tc(wood, 90.0), t + 70_000, &mut out);
             // in stance: no switch yet, whatever the count
             assert_eq!(c.gait().id, before, "step {step}: switched in stance");
             c.on_message(0, &contact(false, t + 140_000), t + 140_000, &mut |m| {
@@ -607,9 +608,9 @@ mod tests {
         let mut t = 0;
         let mut step = |c: &mut Controller, terrain: u8| {
             t += 240_000;
-            c.on_message(0, &hb, t, &mut |m| out.push(m));
-            c.on_message(0, &contact(true, t), t, &mut |m| out.push(m));
-            c.on_message(0, &tc(terrain, 90.0), t + 70_000, &mut |m| out.push(m));
+            c.on_message(0, &hb, t, &mut out);
+            c.on_message(0, &contact(true, t), t, &mut out);
+            c.on_message(0, &tc(terrain, 90.0), t + 70_000, &mut out);
             c.on_message(0, &contact(false, t + 140_000), t + 140_000, &mut |m| {
                 out.push(m)
             });
@@ -644,9 +645,9 @@ mod tests {
         let mut t = 0;
         for _ in 0..6 {
             t += 200_000;
-            c.on_message(0, &hb, t, &mut |m| out.push(m));
-            c.on_message(0, &contact(true, t), t, &mut |m| out.push(m));
-            c.on_message(0, &tc(wood, 90.0), t + 70_000, &mut |m| out.push(m));
+            c.on_message(0, &hb, t, &mut out);
+            c.on_message(0, &contact(true, t), t, &mut out);
+            c.on_message(0, &tc(wood, 90.0), t + 70_000, &mut out);
             // A symmetric stance about the angle aimed at.
             c.on_message(0, &ls(-c.beta_des, t + 150_000), t + 150_000, &mut |m| {
                 out.push(m)
@@ -686,11 +687,11 @@ mod tests {
         let mut t = 0;
         for _ in 0..2 {
             t += 100_000;
-            c.on_message(0, &hb, t, &mut |m| out.push(m));
-            c.on_message(0, &contact(true, t), t, &mut |m| out.push(m));
-            c.on_message(0, &tc(20, 90.0), t + 70_000, &mut |m| out.push(m));
+            c.on_message(0, &hb, t, &mut out);
+            c.on_message(0, &contact(true, t), t, &mut out);
+            c.on_message(0, &tc(20, 90.0), t + 70_000, &mut out);
             t += 140_000;
-            c.on_message(0, &contact(false, t), t, &mut |m| out.push(m));
+            c.on_message(0, &contact(false, t), t, &mut out);
         }
         assert_eq!(c.gait().id, 3);
         assert_eq!(c.reason(), GaitReason::Terrain);
@@ -735,15 +736,15 @@ mod tests {
             ];
             for (m, t) in events {
                 match m {
-                    Some(m) => c.on_message(0, &m, t, &mut |m| out.push(m)),
-                    None => c.tick(t, &mut |m| out.push(m)),
+                    Some(m) => c.on_message(0, &m, t, out),
+                    None => c.tick(t, out),
                 }
             }
         };
         let cat = TerrainCatalog::paper();
         let mut c = Controller::new(ControllerConfig::default(), &cat);
         let mut out = Vec::new();
-        c.tick(0, &mut |m| out.push(m));
+        c.tick(0, &mut out);
         hop(&mut c, &mut out);
         let t = c.takeover.expect("took over at the second touchdown");
         assert_eq!((t.gait, t.gait_from), (3, "touchdown law"), "{t:?}");
@@ -778,7 +779,7 @@ mod tests {
             reason: GaitReason::Terrain,
             foot: 0,
         };
-        c.on_message(0, &Message::GaitStatus(other), 0, &mut |m| out.push(m));
+        c.on_message(0, &Message::GaitStatus(other), 0, &mut out);
         hop(&mut c, &mut out);
         let t = c.takeover.expect("took over");
         assert_eq!((t.gait, t.gait_from), (1, "gait status"));
@@ -787,10 +788,10 @@ mod tests {
         // No leg heard: a fresh start after takeover_ms, in the initial gait.
         let mut c = Controller::new(ControllerConfig::default(), &cat);
         let mut out = Vec::new();
-        c.tick(0, &mut |m| out.push(m));
-        c.tick(1_999_000, &mut |m| out.push(m));
+        c.tick(0, &mut out);
+        c.tick(1_999_000, &mut out);
         assert!(out.is_empty() && c.takeover.is_none());
-        c.tick(2_000_000, &mut |m| out.push(m));
+        c.tick(2_000_000, &mut out);
         let t = c.takeover.expect("fresh start");
         assert_eq!(
             (t.gait, t.gait_from, t.touchdown_angle_rad),
@@ -806,8 +807,8 @@ mod tests {
     fn a_gap_in_the_legs_reports_makes_the_controller_listen_again() {
         let mut c = Controller::new(ControllerConfig::default(), &TerrainCatalog::paper());
         let mut out = Vec::new();
-        c.tick(0, &mut |m| out.push(m));
-        c.tick(2_000_000, &mut |m| out.push(m));
+        c.tick(0, &mut out);
+        c.tick(2_000_000, &mut out);
         assert!(c.takeover.is_some(), "fresh start after takeover_ms");
         let ls = |t: u64| {
             Message::LegState(protocol::messages::LegState {
@@ -817,16 +818,16 @@ mod tests {
             })
         };
         for t in (2_000_000..2_100_000).step_by(10_000) {
-            c.on_message(0, &ls(t), t, &mut |m| out.push(m));
+            c.on_message(0, &ls(t), t, &mut out);
         }
-        c.tick(2_100_000, &mut |m| out.push(m));
+        c.tick(2_100_000, &mut out);
         assert_eq!(c.leg_gaps, 0);
         // 300 ms of reports lost.
-        c.on_message(0, &ls(2_400_000), 2_400_000, &mut |m| out.push(m));
+        c.on_message(0, &ls(2_400_000), 2_400_000, &mut out);
         assert_eq!(c.leg_gaps, 1);
         out.clear();
-        c.tick(2_401_000, &mut |m| out.push(m));
-        c.tick(2_500_000, &mut |m| out.push(m));
+        c.tick(2_401_000, &mut out);
+        c.tick(2_500_000, &mut out);
         assert!(out.is_empty(), "commanded a leg it lost track of: {out:?}");
     }
 
@@ -837,15 +838,15 @@ mod tests {
     fn a_gap_in_a_motor_legs_reports_keeps_the_commands_coming() {
         let mut c = Controller::new(ControllerConfig::default(), &TerrainCatalog::paper());
         let mut out = Vec::new();
-        c.tick(0, &mut |m| out.push(m));
-        c.tick(2_000_000, &mut |m| out.push(m));
+        c.tick(0, &mut out);
+        c.tick(2_000_000, &mut out);
         let status = Message::LegStatus(protocol::messages::LegStatus {
             mode: protocol::messages::LegMode::Running,
             joint: 0,
             command_age_ms: 2,
             fault_code: 0,
         });
-        c.on_message(0, &status, 2_000_000, &mut |m| out.push(m));
+        c.on_message(0, &status, 2_000_000, &mut out);
         let ls = |t: u64| {
             Message::LegState(protocol::messages::LegState {
                 leg_angle_rad: 0.3,
@@ -863,20 +864,20 @@ mod tests {
             })
         };
         for t in (2_000_000..2_100_000).step_by(10_000) {
-            c.on_message(0, &ls(t), t, &mut |m| out.push(m));
-            c.on_message(0, &fc(false, t), t, &mut |m| out.push(m));
+            c.on_message(0, &ls(t), t, &mut out);
+            c.on_message(0, &fc(false, t), t, &mut out);
         }
-        c.on_message(0, &fc(true, 2_100_000), 2_100_000, &mut |m| out.push(m));
+        c.on_message(0, &fc(true, 2_100_000), 2_100_000, &mut out);
         // The bridge silent for 300 ms; the foot's reports keep coming.
         for t in (2_110_000..2_400_000).step_by(10_000) {
-            c.on_message(0, &fc(true, t), t, &mut |m| out.push(m));
+            c.on_message(0, &fc(true, t), t, &mut out);
         }
-        c.on_message(0, &ls(2_400_000), 2_400_000, &mut |m| out.push(m));
+        c.on_message(0, &ls(2_400_000), 2_400_000, &mut out);
         assert_eq!(c.leg_gaps, 1);
         // The phase of the first LegCommand at `t`.
         let mut phase_at = |c: &mut Controller, t: u64| {
             out.clear();
-            c.tick(t, &mut |m| out.push(m));
+            c.tick(t, &mut out);
             match out.as_slice() {
                 [Message::LegCommand(l), ..] => Some(l.phase),
                 _ => None,
@@ -926,9 +927,9 @@ mod tests {
         ] {
             let mut c = Controller::new(ControllerConfig::default(), &TerrainCatalog::paper());
             let mut out = Vec::new();
-            c.tick(0, &mut |m| out.push(m));
-            c.on_message(0, &status(mode), 100_000, &mut |m| out.push(m));
-            c.tick(101_000, &mut |m| out.push(m));
+            c.tick(0, &mut out);
+            c.on_message(0, &status(mode), 100_000, &mut out);
+            c.tick(101_000, &mut out);
             assert_eq!(commands(&out) > 0, at_once, "{mode:?}: {out:?}");
             let t = c.takeover;
             assert_eq!(
@@ -938,8 +939,8 @@ mod tests {
             // Another foot's bridge says nothing of ours.
             let mut c = Controller::new(ControllerConfig::default(), &TerrainCatalog::paper());
             out.clear();
-            c.on_message(1, &status(mode), 100_000, &mut |m| out.push(m));
-            c.tick(101_000, &mut |m| out.push(m));
+            c.on_message(1, &status(mode), 100_000, &mut out);
+            c.tick(101_000, &mut out);
             assert_eq!(commands(&out), 0, "{mode:?} of foot 1: {out:?}");
         }
     }
@@ -949,17 +950,17 @@ mod tests {
         let mut c = Controller::new(fresh(), &TerrainCatalog::paper());
         let mut out = Vec::new();
         let hb = Message::NodeStatus(NodeStatus::default());
-        c.on_message(0, &hb, 100_000, &mut |m| out.push(m));
-        c.tick(200_000, &mut |m| out.push(m));
+        c.on_message(0, &hb, 100_000, &mut out);
+        c.tick(200_000, &mut out);
         // Our interface was down from 0.2 s to 2.2 s; reopened, the node has a timeout again.
         c.on_bus_open(2_200_000);
-        c.tick(2_250_000, &mut |m| out.push(m));
+        c.tick(2_250_000, &mut out);
         assert_eq!(c.reason(), GaitReason::Initial);
-        c.on_message(0, &hb, 2_270_000, &mut |m| out.push(m));
-        c.tick(2_600_000, &mut |m| out.push(m));
+        c.on_message(0, &hb, 2_270_000, &mut out);
+        c.tick(2_600_000, &mut out);
         assert_eq!(c.reason(), GaitReason::Initial);
         // Silent for the timeout after the reopen: lost.
-        c.tick(2_771_000, &mut |m| out.push(m));
+        c.tick(2_771_000, &mut out);
         assert_eq!(c.reason(), GaitReason::NodeLost);
     }
 
@@ -967,15 +968,10 @@ mod tests {
     fn lost_heartbeat_goes_to_the_safe_gait() {
         let mut c = Controller::new(fresh(), &TerrainCatalog::paper());
         let mut out = Vec::new();
-        c.on_message(
-            0,
-            &Message::NodeStatus(NodeStatus::default()),
-            0,
-            &mut |m| out.push(m),
-        );
-        c.tick(400_000, &mut |m| out.push(m));
+        c.on_message(0, &Message::NodeStatus(NodeStatus::default()), 0, &mut out);
+        c.tick(400_000, &mut out);
         assert_eq!(c.gait().id, 2);
-        c.tick(501_000, &mut |m| out.push(m));
+        c.tick(501_000, &mut out);
         assert_eq!((c.gait().id, c.reason()), (1, GaitReason::NodeLost));
         assert!(
             out.iter()
@@ -998,7 +994,7 @@ mod tests {
             out.push(m)
         });
         out.clear();
-        c.tick(1_070_000, &mut |m| out.push(m));
+        c.tick(1_070_000, &mut out);
         let g = c.gait().clone();
         let want = laws::aer_leg_length(0.07, g.zeta0, g.zeta_dev, g.omega, g.phi);
         let cmd = out.iter().find_map(|m| match m {
@@ -1044,11 +1040,11 @@ mod tests {
             leg_length_m: 0.14,
             timestamp_us: 1_000_000,
         });
-        c.on_message(0, &ls, 9_062_000, &mut |m| out.push(m));
+        c.on_message(0, &ls, 9_062_000, &mut out);
         let stance_len = |c: &mut Controller, now: u64| {
             let mut out = Vec::new();
             c.next_cmd_us = 0;
-            c.tick(now, &mut |m| out.push(m));
+            c.tick(now, &mut out);
             out.iter()
                 .find_map(|m| match m {
                     Message::LegCommand(lc) if lc.phase == Phase::Stance => Some(lc.leg_length_m),
@@ -1065,7 +1061,7 @@ mod tests {
         // The foot's 32-bit clock wraps: an edge just after the wrap is still 100 ms later.
         let mut c = Controller::new(fresh(), &TerrainCatalog::paper());
         let before = u32::MAX as u64 - 50_000;
-        c.on_message(0, &contact(true, before), 0, &mut |m| out.push(m));
+        c.on_message(0, &contact(true, before), 0, &mut out);
         c.on_message(0, &contact(false, before + 100_000), 100_000, &mut |m| {
             out.push(m)
         });
@@ -1085,7 +1081,7 @@ mod tests {
         };
         let b = c.gait().beta_des;
         // A normal step: liftoff 0.05 rad past beta_des, eq. (5) applies.
-        c.on_message(0, &ls(b, 1_000_000), 1_000_000, &mut |m| out.push(m));
+        c.on_message(0, &ls(b, 1_000_000), 1_000_000, &mut out);
         c.on_message(0, &contact(true, 1_000_000), 1_000_000, &mut |m| {
             out.push(m)
         });
@@ -1100,11 +1096,11 @@ mod tests {
         assert!((c.next_beta_td - law).abs() < 1e-12);
         assert_eq!(c.gait_resets, 0);
         // A fall: the leg swept to 1.3 rad before the foot left the ground.
-        c.on_message(0, &ls(b, 1_400_000), 1_400_000, &mut |m| out.push(m));
+        c.on_message(0, &ls(b, 1_400_000), 1_400_000, &mut out);
         c.on_message(0, &contact(true, 1_400_000), 1_400_000, &mut |m| {
             out.push(m)
         });
-        c.on_message(0, &ls(-1.3, 1_520_000), 1_520_000, &mut |m| out.push(m));
+        c.on_message(0, &ls(-1.3, 1_520_000), 1_520_000, &mut out);
         c.on_message(0, &contact(false, 1_520_000), 1_520_000, &mut |m| {
             out.push(m)
         });
@@ -1113,7 +1109,7 @@ mod tests {
         c.on_message(0, &contact(true, 1_800_000), 1_800_000, &mut |m| {
             out.push(m)
         });
-        c.on_message(0, &ls(-b, 1_810_000), 1_810_000, &mut |m| out.push(m));
+        c.on_message(0, &ls(-b, 1_810_000), 1_810_000, &mut out);
         c.on_message(0, &contact(false, 1_830_000), 1_830_000, &mut |m| {
             out.push(m)
         });

@@ -1,6 +1,7 @@
 //! A bumpless start: what a starting controller listens to, and how it takes over the gait the
 //! leg runs (see [`Controller`]).
 
+use protocol::emit::Emit;
 use protocol::messages::{GaitReason, Message};
 
 use super::*;
@@ -48,7 +49,7 @@ impl Controller {
         &mut self,
         touchdown: bool,
         now_us: u64,
-        out: &mut impl FnMut(Message),
+        out: &mut (impl Emit<Message> + ?Sized),
     ) {
         let Some(l) = self.listen.take() else {
             return;
@@ -112,6 +113,6 @@ impl Controller {
             touchdown_angle_rad: touchdown.then_some(b1),
             beta_des_rad: beta_des,
         });
-        out(Message::GaitStatus(self.status()));
+        out.emit(Message::GaitStatus(self.status()));
     }
 }

@@ -2,6 +2,7 @@
 //! decision must come from.
 
 use super::*;
+use protocol::emit::Emit;
 
 /// Eight G2 stance images per dynamic terrain from the simulator's skin, with their terrain ids.
 pub fn image_pool() -> Vec<(u8, Vec<u16>)> {
@@ -106,7 +107,7 @@ impl Feet {
 
     /// Emits the next event's frames (a FootContact, or an image's segments) and says whether
     /// that image was its stance's sampled frame.
-    pub fn emit(&mut self, out: &mut dyn FnMut(CanFrame)) -> Result<Option<Sampled>, LoadError> {
+    pub fn emit(&mut self, out: &mut dyn Emit<CanFrame>) -> Result<Option<Sampled>, LoadError> {
         let t = self.next_us();
         let Some(f) = self
             .feet
@@ -137,7 +138,7 @@ impl Feet {
                 timestamp_us: t as u32,
             });
             if let Some(frame) = m.to_frame(&self.ids, f.id) {
-                out(frame);
+                out.emit(frame);
             }
             return Ok(None);
         }

@@ -157,7 +157,7 @@ mod tests {
             let t = feet.next_us();
             assert!(t >= last, "events in time order");
             last = t;
-            if let Some(s) = feet.emit(&mut |f| frames.push(f)).unwrap() {
+            if let Some(s) = feet.emit(&mut frames).unwrap() {
                 sampled.push(s);
             }
         }

@@ -7,6 +7,7 @@
 //! writes them in the layout `presrs train` reads, `DIR/<terrain>/<name>.pgm`, with a
 //! `DIR/manifest.csv` that also keeps a second capture of the same log from adding anything.
 
+use protocol::emit::Emit;
 use std::collections::HashSet;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -190,37 +191,41 @@ impl Capture {
 
     /// One frame with its time: the clock moves on to it first ([`Self::tick`]), then the
     /// frame is processed, as the node does live and on a replay.
-    pub fn feed(&mut self, st: &Stamped, out: &mut impl FnMut(CapturedStep)) {
+    pub fn feed(&mut self, st: &Stamped, out: &mut (impl Emit<CapturedStep> + ?Sized)) {
         self.tick(st.t_us, out);
         self.process(st, out);
     }
 
     /// One received (or logged) frame; a step it ends goes to `out`.
-    pub fn process(&mut self, st: &Stamped, out: &mut impl FnMut(CapturedStep)) {
+    pub fn process(&mut self, st: &Stamped, out: &mut (impl Emit<CapturedStep> + ?Sized)) {
         self.gaits.on_frame(st, &self.ids);
         let decided = &mut self.decided;
-        self.pipeline
-            .on_frame(st, &mut |foot, _| decided.push(foot));
+        self.pipeline.on_frame(st, &mut |(foot, _): (
+            u8,
+            protocol::messages::TerrainClass,
+        )| decided.push(foot));
         self.take(out);
     }
 
     /// The receiver's clock moved on to `now_us` without a frame: decides steps whose nearer
     /// images can no longer come (as the node does).
-    pub fn tick(&mut self, now_us: u64, out: &mut impl FnMut(CapturedStep)) {
+    pub fn tick(&mut self, now_us: u64, out: &mut (impl Emit<CapturedStep> + ?Sized)) {
         let decided = &mut self.decided;
-        self.pipeline
-            .tick(now_us, &mut |foot, _| decided.push(foot));
+        self.pipeline.tick(now_us, &mut |(foot, _): (
+            u8,
+            protocol::messages::TerrainClass,
+        )| decided.push(foot));
         self.take(out);
     }
 
-    fn take(&mut self, out: &mut impl FnMut(CapturedStep)) {
+    fn take(&mut self, out: &mut (impl Emit<CapturedStep> + ?Sized)) {
         for i in 0..self.decided.len() {
             let foot = self.decided[i];
             self.counts.steps += 1;
             match self.step(foot) {
                 Ok(c) => {
                     self.counts.captured += 1;
-                    out(c);
+                    out.emit(c);
                 }
                 Err(Skip::NoImage) => self.counts.no_image += 1,
                 Err(Skip::Blank) => self.counts.blank += 1,

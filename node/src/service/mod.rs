@@ -23,6 +23,7 @@
 mod running;
 mod stats;
 
+use protocol::emit::Emit;
 pub use running::RunningNode;
 use stats::Shared;
 pub use stats::{NodeStats, StageTimes};
@@ -163,13 +164,14 @@ impl NodeService {
     }
 
     /// One received frame; the decisions it completes go to `out`.
-    pub fn process(&mut self, frame: &Stamped, out: &mut impl FnMut(Output)) {
+    pub fn process(&mut self, frame: &Stamped, out: &mut (impl Emit<Output> + ?Sized)) {
         self.gait.on_frame(frame, self.pipeline.ids());
         let (gait, tally) = (self.gait.current(), &mut self.tally);
-        self.pipeline.on_frame(frame, &mut |foot, class| {
-            tally.add(gait, class.terrain == TERRAIN_UNKNOWN);
-            out(Output::Class { foot, class, gait })
-        });
+        self.pipeline
+            .on_frame(frame, &mut |(foot, class): (u8, TerrainClass)| {
+                tally.add(gait, class.terrain == TERRAIN_UNKNOWN);
+                out.emit(Output::Class { foot, class, gait })
+            });
     }
 
     /// A recorded run on its own clock: each frame's time ticks the node before the frame is
@@ -178,30 +180,31 @@ impl NodeService {
     pub fn replay<'a>(
         &mut self,
         frames: impl IntoIterator<Item = &'a Stamped>,
-        out: &mut impl FnMut(u64, Output),
+        out: &mut (impl Emit<(u64, Output)> + ?Sized),
     ) {
         for f in frames {
             let t = f.t_us;
-            self.tick(t, &mut |o| out(t, o));
-            self.process(f, &mut |o| out(t, o));
+            self.tick(t, &mut |o| out.emit((t, o)));
+            self.process(f, &mut |o| out.emit((t, o)));
         }
     }
 
     /// Everything due by `now_us` (the clock of [`Stamped::t_us`]): steps whose sample deadline
     /// has passed with no nearer frame possible, and NodeStatus when a status period is up.
-    pub fn tick(&mut self, now_us: u64, out: &mut impl FnMut(Output)) {
+    pub fn tick(&mut self, now_us: u64, out: &mut (impl Emit<Output> + ?Sized)) {
         let (gait, tally) = (self.gait.current(), &mut self.tally);
-        self.pipeline.tick(now_us, &mut |foot, class| {
-            tally.add(gait, class.terrain == TERRAIN_UNKNOWN);
-            out(Output::Class { foot, class, gait })
-        });
+        self.pipeline
+            .tick(now_us, &mut |(foot, class): (u8, TerrainClass)| {
+                tally.add(gait, class.terrain == TERRAIN_UNKNOWN);
+                out.emit(Output::Class { foot, class, gait })
+            });
         // A clock that jumped back (a new bus clock) must not silence the heartbeat.
         let due = self
             .next_status_us
             .is_none_or(|t| now_us >= t || t > now_us + self.status_period_us);
         if due {
             self.next_status_us = Some(now_us + self.status_period_us);
-            out(Output::Status(self.status(false)));
+            out.emit(Output::Status(self.status(false)));
         }
     }
 
@@ -458,7 +461,7 @@ impl Component for NodeService {
     fn on_frame(&mut self, st: &Stamped, now_us: u64, out: &mut Outbox) {
         let t0 = Instant::now();
         let mut said = std::mem::take(&mut self.said);
-        self.process(st, &mut |o| said.push(o));
+        self.process(st, &mut said);
         let decided = said.iter().any(|o| matches!(o, Output::Class { .. }));
         self.send_said(&mut said, out);
         let ns = t0.elapsed().as_nanos() as u64;
@@ -474,7 +477,7 @@ impl Component for NodeService {
 
     fn tick(&mut self, now_us: u64, out: &mut Outbox) {
         let mut said = std::mem::take(&mut self.said);
-        NodeService::tick(self, now_us, &mut |o| said.push(o));
+        NodeService::tick(self, now_us, &mut said);
         self.send_said(&mut said, out);
         // A log line every 10 s: never per frame.
         if self.last_log.elapsed() >= Duration::from_secs(10) {

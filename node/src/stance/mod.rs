@@ -16,6 +16,7 @@ mod decision;
 mod sample;
 
 use protocol::clock::Clock;
+use protocol::emit::Emit;
 use protocol::messages::{self, FootContact, Message, TerrainClass, flags};
 use protocol::tactile::{Reassembler, ReassemblyStats};
 use protocol::{IdConfig, Stamped};
@@ -344,7 +345,7 @@ impl StancePipeline {
     }
 
     /// Processes one received frame; every TerrainClass it decides goes to `out`.
-    pub fn on_frame(&mut self, st: &Stamped, out: &mut impl FnMut(u8, TerrainClass)) {
+    pub fn on_frame(&mut self, st: &Stamped, out: &mut (impl Emit<(u8, TerrainClass)> + ?Sized)) {
         self.counters.frames += 1;
         self.now_rx_us = st.t_us;
         let decoded = match messages::decode(&st.frame, &self.cfg.ids) {
@@ -372,7 +373,12 @@ impl StancePipeline {
         }
     }
 
-    fn on_contact(&mut self, foot: u8, fc: FootContact, out: &mut impl FnMut(u8, TerrainClass)) {
+    fn on_contact(
+        &mut self,
+        foot: u8,
+        fc: FootContact,
+        out: &mut (impl Emit<(u8, TerrainClass)> + ?Sized),
+    ) {
         // The state this report ends held until now: settle it first. A foot that reports only
         // its edges (and sends no image in flight) would otherwise never confirm a liftoff,
         // and every later stance would run on as the first one (1 of 3 steps decided).
@@ -384,7 +390,7 @@ impl StancePipeline {
     }
 
     /// Accepts a switch state that has held for the debounce time by `now` (foot clock).
-    fn settle(&mut self, foot: u8, now: u32, out: &mut impl FnMut(u8, TerrainClass)) {
+    fn settle(&mut self, foot: u8, now: u32, out: &mut (impl Emit<(u8, TerrainClass)> + ?Sized)) {
         let debounce = self.cfg.debounce_us;
         let f = &mut self.feet[foot as usize];
         let Some(edge) = f.switch.settle(now, debounce) else {
@@ -424,7 +430,12 @@ impl StancePipeline {
         }
     }
 
-    fn on_image(&mut self, foot: u8, rx_us: u64, out: &mut impl FnMut(u8, TerrainClass)) {
+    fn on_image(
+        &mut self,
+        foot: u8,
+        rx_us: u64,
+        out: &mut (impl Emit<(u8, TerrainClass)> + ?Sized),
+    ) {
         let ts = self.reassembler.last_image().timestamp_us;
         // The image's own timestamp also settles a pending switch edge.
         self.settle(foot, ts, out);
@@ -521,7 +532,7 @@ impl StancePipeline {
         foot: u8,
         dt: u32,
         rx_us: u64,
-        out: &mut impl FnMut(u8, TerrainClass),
+        out: &mut (impl Emit<(u8, TerrainClass)> + ?Sized),
     ) {
         let sample_us = self.cfg.sample_ms * 1000;
         let img = self.reassembler.last_image();
@@ -548,7 +559,7 @@ impl StancePipeline {
     /// at 0.35), and an extrapolated foot clock could pass the deadline before a nearer frame
     /// arrived. So the deadline only moves with frames; a foot that falls silent is decided at
     /// liftoff.
-    pub fn tick(&mut self, now_rx_us: u64, out: &mut impl FnMut(u8, TerrainClass)) {
+    pub fn tick(&mut self, now_rx_us: u64, out: &mut (impl Emit<(u8, TerrainClass)> + ?Sized)) {
         let sample_us = self.cfg.sample_ms * 1000;
         let w1 = self.cfg.window_ms[1] * 1000;
         for foot in 0..self.feet.len() {
@@ -577,7 +588,7 @@ impl StancePipeline {
         }
     }
 
-    fn decide(&mut self, foot: u8, out: &mut impl FnMut(u8, TerrainClass)) {
+    fn decide(&mut self, foot: u8, out: &mut (impl Emit<(u8, TerrainClass)> + ?Sized)) {
         let cfg = &self.cfg;
         let f = &mut self.feet[foot as usize];
         f.decided = true;
@@ -665,6 +676,6 @@ impl StancePipeline {
             .as_ref()
             .map_or(self.now_rx_us, |c| c.now_us().max(self.now_rx_us));
         tc.latency_us = decision::latency_us(&tc, now, f.best_rx_us);
-        out(foot, tc);
+        out.emit((foot, tc));
     }
 }

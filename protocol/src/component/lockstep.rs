@@ -1,5 +1,6 @@
 //! Every component on one simulated clock: [`LockStep`].
 
+use crate::emit::Emit;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -7,7 +8,7 @@ use super::{Component, Outbox};
 use crate::bus::{CanBus, InProcBus, InProcEndpoint};
 use crate::clock::ManualClock;
 use crate::error::BusError;
-use crate::frame::CanFrame;
+use crate::frame::Stamped;
 
 /// Every component on one simulated clock, on one in-process bus: the demo's, the tests' and
 /// the experiments' loop. Each [`LockStep::step`] sets the clock and gives each part, in a
@@ -46,7 +47,7 @@ impl LockStep {
         &mut self,
         i: usize,
         part: &mut dyn Component,
-        sent: &mut dyn FnMut(u64, &CanFrame),
+        sent: &mut dyn Emit<Stamped>,
     ) -> Result<(), BusError> {
         let Some(ep) = self.endpoints.get_mut(i) else {
             return Ok(());
@@ -64,7 +65,7 @@ impl LockStep {
         &mut self,
         i: usize,
         part: &mut dyn Component,
-        sent: &mut dyn FnMut(u64, &CanFrame),
+        sent: &mut dyn Emit<Stamped>,
     ) -> Result<(), BusError> {
         if i >= self.endpoints.len() {
             return Ok(());
@@ -86,7 +87,7 @@ impl LockStep {
         &mut self,
         t_us: u64,
         parts: &mut [Option<&mut dyn Component>],
-        sent: &mut dyn FnMut(u64, &CanFrame),
+        sent: &mut dyn Emit<Stamped>,
     ) -> Result<(), BusError> {
         self.t_us = t_us;
         self.clock.set_us(t_us);
@@ -108,11 +109,11 @@ impl LockStep {
         Ok(())
     }
 
-    fn send(&mut self, i: usize, sent: &mut dyn FnMut(u64, &CanFrame)) -> Result<(), BusError> {
+    fn send(&mut self, i: usize, sent: &mut dyn Emit<Stamped>) -> Result<(), BusError> {
         let (t, up) = (self.t_us, self.link_up);
         let ep = &mut self.endpoints[i];
         for f in self.out.drain() {
-            sent(t, &f);
+            sent.emit(Stamped { t_us: t, frame: f });
             if up {
                 ep.send(&f)?;
             }

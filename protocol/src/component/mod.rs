@@ -104,6 +104,14 @@ impl Outbox {
     }
 }
 
+/// A component's frames go where every part's output goes: a segmenter writes an image's
+/// frames straight into it.
+impl crate::emit::Emit<CanFrame> for Outbox {
+    fn emit(&mut self, frame: CanFrame) {
+        self.push(frame)
+    }
+}
+
 /// A part that lives on the bus. See the [module docs](self).
 ///
 /// Times are robot time in microseconds, from the runner's clock ([`run`]: wall time since

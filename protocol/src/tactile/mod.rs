@@ -289,7 +289,7 @@ mod tests {
                     timestamp_us: 1234,
                     pixels: px,
                 },
-                |f| out.push(f),
+                &mut out,
             )
             .unwrap();
         out
@@ -466,7 +466,7 @@ mod tests {
                     timestamp_us: 0,
                     pixels: &vec![0; 65 * 65],
                 },
-                |_| {},
+                &mut |_: CanFrame| {},
             )
             .unwrap_err();
         assert!(e.to_string().contains("at most 4096 pixels"));
@@ -481,7 +481,7 @@ mod tests {
                     timestamp_us: 0,
                     pixels: &[0; 4]
                 },
-                |_| {}
+                &mut |_: CanFrame| {}
             )
             .is_err()
         );
@@ -496,7 +496,7 @@ mod tests {
                     timestamp_us: 0,
                     pixels: &[0; 3]
                 },
-                |_| {}
+                &mut |_: CanFrame| {}
             )
             .is_err()
         );

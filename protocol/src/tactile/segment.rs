@@ -1,6 +1,7 @@
 //! The foot's side: cutting an image into segment frames, on the stack (no_std, no allocation).
 
 use super::*;
+use crate::emit::Emit;
 
 /// Errors of [`Segmenter`].
 #[derive(Debug, thiserror::Error, PartialEq, Eq)]
@@ -59,7 +60,7 @@ impl Segmenter {
         foot: u8,
         seq: u8,
         img: &ImageRef<'_>,
-        mut emit: impl FnMut(CanFrame),
+        out: &mut (impl Emit<CanFrame> + ?Sized),
     ) -> Result<(), SegmentError> {
         let ImageRef {
             rows,
@@ -109,7 +110,7 @@ impl Segmenter {
             buf[..len].fill(0);
             write_prefix(v, &mut buf, seq, part);
             encode_header(v, part, &header, &mut buf[..len]);
-            emit(mk(&buf[..len]).ok_or(SegmentError::BadId)?);
+            out.emit(mk(&buf[..len]).ok_or(SegmentError::BadId)?);
         }
         let dps = v.data_per_segment();
         for s in 0..header.segments as usize {
@@ -120,7 +121,7 @@ impl Segmenter {
             for (j, k) in (start..end).enumerate() {
                 buf[v.prefix() + j] = pixel_byte(pixels, bits, k);
             }
-            emit(mk(&buf[..len]).ok_or(SegmentError::BadId)?);
+            out.emit(mk(&buf[..len]).ok_or(SegmentError::BadId)?);
         }
         Ok(())
     }

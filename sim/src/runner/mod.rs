@@ -110,7 +110,7 @@ mod tests {
             5,
             6_000_000,
             &mut |_, r| falls = r.falls.len(),
-            &mut |st| {
+            &mut |st: protocol::Stamped| {
                 if let Ok(Some((_, protocol::messages::Message::FootContact(c)))) =
                     protocol::messages::decode(&st.frame, &ids)
                     && edges.last().is_none_or(|e| e.1 != c.stance)

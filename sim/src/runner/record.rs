@@ -1,6 +1,7 @@
 //! A simulated run written as a candump log, with the terrain each step stood on (its truth).
 
 use super::*;
+use protocol::emit::Emit;
 
 /// The log's clock at simulated time 0 for [`record`]: 2023-11-14, a plausible candump time.
 pub const LOG_EPOCH_US: u64 = 1_700_000_000_000_000;
@@ -15,7 +16,7 @@ pub fn record(
     seed: u64,
     duration_us: u64,
     observe: &mut dyn FnMut(u64, &SimRobot),
-    emit: &mut dyn FnMut(protocol::Stamped),
+    emit: &mut dyn Emit<protocol::Stamped>,
 ) -> Vec<StepTruth> {
     let mut robot = SimRobot::new(cfg, seed);
     let mut t = 0;
@@ -25,7 +26,7 @@ pub fn record(
             observe(LOG_EPOCH_US + t, &robot);
         }
         robot.advance_to(t, &mut |frame| {
-            emit(protocol::Stamped {
+            emit.emit(protocol::Stamped {
                 t_us: LOG_EPOCH_US + t,
                 frame,
             })

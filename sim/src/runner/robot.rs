@@ -1,6 +1,7 @@
 //! The simulated robot: the hopper, its foot switch, leg state and skin, on the bus's frames.
 
 use super::*;
+use protocol::emit::Emit;
 
 /// The simulated robot: track, legs, sensors, identifiers.
 #[derive(Clone, Debug, PartialEq)]
@@ -271,7 +272,7 @@ impl SimRobot {
     }
 
     /// Runs the robot up to `t_us`, emitting every frame it sends, in time order.
-    pub fn advance_to(&mut self, t_us: u64, emit: &mut dyn FnMut(CanFrame)) {
+    pub fn advance_to(&mut self, t_us: u64, emit: &mut dyn Emit<CanFrame>) {
         while self.now_us < t_us {
             let next = (self.now_us + 1000)
                 .min(t_us)
@@ -299,7 +300,7 @@ impl SimRobot {
         }
     }
 
-    fn advance_leg(&mut self, foot: usize, t_us: u64, emit: &mut dyn FnMut(CanFrame)) {
+    fn advance_leg(&mut self, foot: usize, t_us: u64, emit: &mut dyn Emit<CanFrame>) {
         let ids = &self.cfg.ids;
         let t_end = t_us as f64 * 1e-6;
         loop {
@@ -396,12 +397,12 @@ impl SimRobot {
                 timestamp_us: t as u32,
             });
             if let Some(f) = m.to_frame(ids, foot as u8) {
-                emit(f);
+                emit.emit(f);
             }
         }
     }
 
-    fn send_frame(&mut self, foot: usize, emit: &mut dyn FnMut(CanFrame)) {
+    fn send_frame(&mut self, foot: usize, emit: &mut dyn Emit<CanFrame>) {
         let leg = &mut self.legs[foot];
         leg.skin.faults.on_time(FRAME_US as f64 * 1e-6);
         let load = leg.hopper.foot_load();
@@ -423,7 +424,7 @@ impl SimRobot {
             timestamp_us: self.now_us as u32,
         });
         if let Some(f) = m.to_frame(&self.cfg.ids, foot as u8) {
-            emit(f);
+            emit.emit(f);
         }
         leg.image_seq = leg.image_seq.wrapping_add(1);
         let img = ImageRef {
@@ -445,7 +446,7 @@ impl SimRobot {
 
     /// A leg of motors answers its bridge: replies and cyclic messages due by `t_us`, with
     /// the hopper's true joints.
-    fn motor_replies(&mut self, foot: usize, t_us: u64, emit: &mut dyn FnMut(CanFrame)) {
+    fn motor_replies(&mut self, foot: usize, t_us: u64, emit: &mut dyn Emit<CanFrame>) {
         let leg = &mut self.legs[foot];
         let (angle, len) = (
             leg.hopper.leg_angle(&leg.cmd),
@@ -455,7 +456,7 @@ impl SimRobot {
         if let Some(m) = leg.cmd.motors.as_mut() {
             m.emit(t_us, angle, len, dt, &mut self.motor_out);
             for f in self.motor_out.drain() {
-                emit(f);
+                emit.emit(f);
             }
         }
     }
@@ -495,7 +496,7 @@ pub(super) fn send_leg_state(
     angle: f64,
     len: f64,
     t_us: u64,
-    emit: &mut dyn FnMut(CanFrame),
+    emit: &mut dyn Emit<CanFrame>,
 ) {
     let m = Message::LegState(LegState {
         leg_angle_rad: angle,
@@ -503,7 +504,7 @@ pub(super) fn send_leg_state(
         timestamp_us: t_us as u32,
     });
     if let Some(f) = m.to_frame(ids, foot) {
-        emit(f);
+        emit.emit(f);
     }
 }
 
