@@ -286,7 +286,7 @@ pub fn run_recorded(
     let mut sent = |st: protocol::Stamped| {
         let st = protocol::Stamped {
             t_us: epoch_us + st.t_us,
-            frame: st.frame,
+            ..st
         };
         if let Some(tap) = tap {
             tap.offer(&st);

@@ -9,6 +9,7 @@
 
 use protocol::Terrain;
 use protocol::candump::LogRecord;
+use protocol::messages::TerrainClass;
 
 #[cfg(doc)]
 use crate::capture::Labelling;
@@ -123,14 +124,8 @@ pub fn fit_energy(
         let mut p = StancePipeline::new(cfg.clone(), Some(plain.clone()));
         let mut last = vec![None; cfg.feet as usize];
         for r in &mut *run.records {
-            p.tick(r.stamped.t_us, &mut |_: (
-                u8,
-                protocol::messages::TerrainClass,
-            )| {});
-            p.on_frame(&r.stamped, &mut |_: (
-                u8,
-                protocol::messages::TerrainClass,
-            )| {});
+            p.tick(r.stamped.t_us, &mut |_: (u8, TerrainClass)| {});
+            p.on_frame(&r.stamped, &mut |_: (u8, TerrainClass)| {});
             for foot in 0..cfg.feet {
                 let o = p.energy_observation(foot);
                 if o.is_none() || o == last[foot as usize] {

@@ -5,10 +5,10 @@
 //! would have: a step whose sample deadline passed between two records is decided at the later
 //! record's time, as it would have been live at the next frame.
 
-use protocol::emit::Emit;
 use std::fmt;
 
 use protocol::TerrainCatalog;
+use protocol::emit::Emit;
 use std::borrow::Borrow;
 
 use protocol::candump::LogRecord;

@@ -7,7 +7,6 @@
 //! writes them in the layout `presrs train` reads, `DIR/<terrain>/<name>.pgm`, with a
 //! `DIR/manifest.csv` that also keeps a second capture of the same log from adding anything.
 
-use protocol::emit::Emit;
 use std::collections::HashSet;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -15,6 +14,8 @@ use std::path::{Path, PathBuf};
 use protocol::Stamped;
 use protocol::candump::{format_seconds, parse_seconds};
 use protocol::component::{Component, Outbox};
+use protocol::emit::Emit;
+use protocol::messages::TerrainClass;
 use protocol::terrain::{Terrain, TerrainCatalog};
 
 use crate::classifier::PressureImage;
@@ -200,10 +201,8 @@ impl Capture {
     pub fn process(&mut self, st: &Stamped, out: &mut (impl Emit<CapturedStep> + ?Sized)) {
         self.gaits.on_frame(st, &self.ids);
         let decided = &mut self.decided;
-        self.pipeline.on_frame(st, &mut |(foot, _): (
-            u8,
-            protocol::messages::TerrainClass,
-        )| decided.push(foot));
+        self.pipeline
+            .on_frame(st, &mut |(foot, _): (u8, TerrainClass)| decided.push(foot));
         self.take(out);
     }
 
@@ -211,10 +210,10 @@ impl Capture {
     /// images can no longer come (as the node does).
     pub fn tick(&mut self, now_us: u64, out: &mut (impl Emit<CapturedStep> + ?Sized)) {
         let decided = &mut self.decided;
-        self.pipeline.tick(now_us, &mut |(foot, _): (
-            u8,
-            protocol::messages::TerrainClass,
-        )| decided.push(foot));
+        self.pipeline
+            .tick(now_us, &mut |(foot, _): (u8, TerrainClass)| {
+                decided.push(foot)
+            });
         self.take(out);
     }
 

@@ -23,7 +23,6 @@
 mod running;
 mod stats;
 
-use protocol::emit::Emit;
 pub use running::RunningNode;
 use stats::Shared;
 pub use stats::{NodeStats, StageTimes};
@@ -37,6 +36,7 @@ use std::time::{Duration, Instant};
 use protocol::bus::{BusSource, ControllerState, Tap};
 use protocol::clock::Clock;
 use protocol::component::{self, Component, Link, LinkStats, Outbox, RunOptions, Threaded};
+use protocol::emit::Emit;
 use protocol::messages::{Message, NodeState, NodeStatus, TERRAIN_UNKNOWN, TerrainClass};
 use protocol::tactile::ReassemblyStats;
 use protocol::terrain::CatalogError;

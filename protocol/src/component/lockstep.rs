@@ -1,12 +1,12 @@
 //! Every component on one simulated clock: [`LockStep`].
 
-use crate::emit::Emit;
 use std::sync::Arc;
 use std::time::Duration;
 
 use super::{Component, Outbox};
 use crate::bus::{CanBus, InProcBus, InProcEndpoint};
 use crate::clock::ManualClock;
+use crate::emit::Emit;
 use crate::error::BusError;
 use crate::frame::Stamped;
 
