@@ -189,6 +189,57 @@ fn one_decision_per_step_from_the_image_nearest_the_sample_time() {
 }
 
 #[test]
+fn the_deciding_frame_is_announced_and_warming_up_for_it_changes_no_decision() {
+    use protocol::component::Component;
+    for multi_frame in [false, true] {
+        let cfg = NodeConfig {
+            multi_frame,
+            ..NodeConfig::default()
+        };
+        let mut foot = FakeFoot::new();
+        let mut frames = Vec::new();
+        let terrains = [0, 1, 2, 2, 0, 1];
+        for (k, &terrain) in terrains.iter().enumerate() {
+            frames.extend(foot.stance(terrain, 1_000_000 + k as u64 * 400_000, 200, |_| true));
+        }
+        let end = 1_000_000 + 7 * 400_000;
+        let plain = classes(&lock_step(
+            &mut NodeService::new(cfg.clone(), model()).unwrap(),
+            &frames,
+            end,
+        ));
+        // The same stream, warming up whenever a deciding frame is announced, and noting what
+        // was announced when each frame came.
+        let mut node = NodeService::new(cfg, model()).unwrap();
+        let (mut said, mut announced) = (Vec::new(), Vec::new());
+        for st in &frames {
+            if let Some(at) = node.expected_frame_us() {
+                node.warm_up();
+                announced.push((st.t_us, at));
+            }
+            node.process(st, &mut |o| said.push((st.t_us, o)));
+            node.tick(st.t_us, &mut |o| said.push((st.t_us, o)));
+        }
+        let warmed = classes(&said);
+        assert_eq!(warmed.len(), terrains.len(), "{multi_frame}: {warmed:?}");
+        for (a, b) in warmed.iter().zip(&plain) {
+            assert_eq!(a.1, b.1, "multi_frame {multi_frame}");
+        }
+        // Each step's deciding image was announced (its receive time, one frame period after
+        // the image before it) before it came: 66 ms after touchdown single-frame, the image
+        // at the window's end (received 106 ms after it) multi-frame.
+        let dt = if multi_frame { 106_000 } else { 66_000 };
+        for k in 0..terrains.len() as u64 {
+            let at = 1_000_000 + k * 400_000 + dt;
+            assert!(
+                announced.iter().any(|&(t, a)| a == at && t < at),
+                "multi_frame {multi_frame}, step {k}: {at} not announced before it came"
+            );
+        }
+    }
+}
+
+#[test]
 fn a_frame_lost_after_the_best_one_is_decided_at_the_deadline_not_at_liftoff() {
     let mut node = NodeService::new(NodeConfig::default(), model()).unwrap();
     let mut foot = FakeFoot::new();

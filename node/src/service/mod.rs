@@ -475,6 +475,16 @@ impl Component for NodeService {
         }
     }
 
+    fn expected_frame_us(&self) -> Option<u64> {
+        self.pipeline.next_decision().map(|(_, at)| at)
+    }
+
+    fn warm_up(&mut self) {
+        if let Some((foot, _)) = self.pipeline.next_decision() {
+            self.pipeline.warm_up(foot);
+        }
+    }
+
     fn tick(&mut self, now_us: u64, out: &mut Outbox) {
         let mut said = std::mem::take(&mut self.said);
         NodeService::tick(self, now_us, &mut said);

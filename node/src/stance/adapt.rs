@@ -14,7 +14,7 @@ use crate::health::LineHealth;
 
 /// A model refitted to one foot's dead lines, and the lines it was fitted for.
 pub(super) struct Adapted {
-    cls: Classifier,
+    pub(super) cls: Classifier,
     dead_rows: Vec<bool>,
     dead_cols: Vec<bool>,
 }

@@ -65,7 +65,7 @@ mod signals;
 mod threaded;
 
 pub use lockstep::LockStep;
-pub use run::{RunOptions, RunStats, run, run_opened};
+pub use run::{POLL_AFTER_US, POLL_BEFORE_US, PRE_WAKE_US, RunOptions, RunStats, run, run_opened};
 pub use signals::{SignalError, Signals};
 pub use threaded::{Link, LinkStats, Threaded, spawn, spawn_one};
 
@@ -156,6 +156,20 @@ pub trait Component {
         let _ = frame;
         false
     }
+
+    /// When (µs on the runner's clock) a frame is due that this component answers at once,
+    /// or `None`: the node's next image that decides a step. [`run`] wakes [`PRE_WAKE_US`]
+    /// before it, calls [`Component::warm_up`] and polls the bus until a frame comes (for at
+    /// most [`POLL_AFTER_US`] past the time), instead of being woken by the frame: a thread
+    /// woken from sleep started 40-90 µs after the frame, with its data out of cache
+    /// (docs/decisions/node-wake.md).
+    fn expected_frame_us(&self) -> Option<u64> {
+        None
+    }
+
+    /// The expected frame ([`Component::expected_frame_us`]) is near: bring what answering it
+    /// reads into cache. Must not change what the component decides.
+    fn warm_up(&mut self) {}
 
     /// True when it has finished on its own (a simulation of a set duration, a capture whose
     /// disk failed): the runner stops it.

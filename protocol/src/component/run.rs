@@ -46,6 +46,20 @@ pub struct RunOptions {
 /// How long a socket must stay quiet for a drain ([`RunOptions::drain_on_stop`]) to end.
 pub const DRAIN_QUIET: Duration = Duration::from_millis(20);
 
+/// How long before a component's expected frame ([`Component::expected_frame_us`]) [`run`]
+/// wakes to warm it up, µs: more than a wake from sleep (100-130 µs late in a VM) and a cold
+/// warm-up take.
+pub const PRE_WAKE_US: u64 = 500;
+
+/// How long before the expected frame [`run`] stops sleeping and polls the bus, µs. Polling
+/// from the warm-up on cost 0.6-1.1 points of a core more with eight feet
+/// (docs/decisions/node-wake.md).
+pub const POLL_BEFORE_US: u64 = 150;
+
+/// How long past the expected time [`run`] polls before it sleeps again, µs: a frame that comes
+/// later than that (a late sender, a bus busy with other frames) wakes the thread as before.
+pub const POLL_AFTER_US: u64 = 300;
+
 impl Default for RunOptions {
     fn default() -> Self {
         Self {
@@ -166,6 +180,8 @@ pub(crate) fn run_with<C: Component + ?Sized>(
         let mut next_tick = Instant::now();
         // Error frames of this handle already in `bus_errors`.
         let mut counted = 0u64;
+        // The expected frame the component was last warmed up for.
+        let mut warmed_for = None;
         while !stopping() && !component.done() {
             between(component);
             // Everything queued (up to a burst), then the tick: a burst never waits one tick
@@ -175,9 +191,35 @@ pub(crate) fn run_with<C: Component + ?Sized>(
                 Some(idle) => (next_tick + idle).saturating_duration_since(Instant::now()),
                 None => next_tick.saturating_duration_since(Instant::now()),
             };
-            for _ in 0..opts.max_burst.max(1) {
+            // A frame to answer at once is due (`expected_frame_us`): wake PRE_WAKE_US before
+            // it to warm up, sleep again until POLL_BEFORE_US before it, then poll the bus
+            // until a frame comes or POLL_AFTER_US past it.
+            let mut poll_until = None;
+            if let Some(at) = component.expected_frame_us() {
+                let now = now_us();
+                let wall = |us: u64| Duration::from_secs_f64(us as f64 / scale.max(1e-9) * 1e-6);
+                if now + PRE_WAKE_US < at {
+                    wait = wait.min(wall(at - PRE_WAKE_US - now));
+                } else if now <= at + POLL_AFTER_US {
+                    if warmed_for != Some(at) {
+                        component.warm_up();
+                        warmed_for = Some(at);
+                    }
+                    // The warm-up took time: where are we now?
+                    let now = now_us();
+                    if now + POLL_BEFORE_US < at {
+                        wait = wait.min(wall(at - POLL_BEFORE_US - now));
+                    } else if now < at + POLL_AFTER_US {
+                        poll_until = Some(Instant::now() + wall(at + POLL_AFTER_US - now));
+                        wait = Duration::ZERO;
+                    }
+                }
+            }
+            let mut taken = 0;
+            while taken < opts.max_burst.max(1) {
                 match b.recv(wait) {
                     Ok(Some(st)) => {
+                        taken += 1;
                         deliver(component, &st, opts, &link, now_us(), &mut out);
                         wait = Duration::ZERO;
                         // An answer goes out at once, not after the rest of the burst.
@@ -187,6 +229,11 @@ pub(crate) fn run_with<C: Component + ?Sized>(
                             failed(&e, &mut backoff, &mut stats);
                             continue 'open;
                         }
+                    }
+                    // Polling for the expected frame (a tick waits for the poll: at most
+                    // POLL_BEFORE_US + POLL_AFTER_US).
+                    Ok(None) if taken == 0 && poll_until.is_some_and(|u| Instant::now() < u) => {
+                        std::hint::spin_loop();
                     }
                     Ok(None) => break,
                     Err(e) => {
@@ -431,6 +478,106 @@ mod tests {
         assert_eq!(probe.starts.len(), 2, "started again after the reopen");
         assert!(stats.reopens >= 1);
         assert!(probe.starts[1] >= probe.starts[0] + 150_000);
+    }
+
+    /// Expects one frame at `at` µs on the run's clock; records when it warmed up and when
+    /// the frame came, on that clock.
+    struct Expects {
+        clock: Arc<crate::clock::MonotonicClock>,
+        at: u64,
+        warmed: Vec<u64>,
+        got: Vec<u64>,
+        cpu_us: u64,
+    }
+
+    impl Component for Expects {
+        fn name(&self) -> &'static str {
+            "expects"
+        }
+        fn filters(&self) -> Vec<(u32, u32)> {
+            Vec::new()
+        }
+        fn on_frame(&mut self, _: &Stamped, now_us: u64, _: &mut Outbox) {
+            self.got.push(now_us);
+        }
+        fn tick(&mut self, _: u64, _: &mut Outbox) {}
+        fn expected_frame_us(&self) -> Option<u64> {
+            self.got.is_empty().then_some(self.at)
+        }
+        fn warm_up(&mut self) {
+            self.warmed.push(self.clock.now_us());
+        }
+    }
+
+    fn expects(at_ms: u64, send_at_ms: Option<u64>, run_ms: u64) -> Expects {
+        let bus = InProcBus::new();
+        let mut peer = bus.endpoint();
+        let clock = Arc::new(crate::clock::MonotonicClock::new());
+        let mut c = Expects {
+            clock: clock.clone(),
+            at: at_ms * 1000,
+            warmed: Vec::new(),
+            got: Vec::new(),
+            cpu_us: 0,
+        };
+        let stop = Arc::new(AtomicBool::new(false));
+        let stopper = stop.clone();
+        let feeder = std::thread::spawn(move || {
+            if let Some(ms) = send_at_ms {
+                std::thread::sleep(Duration::from_millis(ms));
+                send(&mut peer, 0x200, 1);
+            }
+            std::thread::sleep(Duration::from_millis(run_ms - send_at_ms.unwrap_or(0)));
+            stopper.store(true, Ordering::Relaxed);
+        });
+        let opts = RunOptions {
+            clock: Some(clock),
+            // Without the expectation, the runner would sleep through it.
+            idle_wait: Some(Duration::from_millis(200)),
+            ..RunOptions::default()
+        };
+        let cpu0 = thread_cpu_us();
+        run(&mut c, &BusSource::InProc(bus), &opts, &stop);
+        c.cpu_us = thread_cpu_us() - cpu0;
+        feeder.join().unwrap();
+        c
+    }
+
+    fn thread_cpu_us() -> u64 {
+        let mut ts = libc::timespec {
+            tv_sec: 0,
+            tv_nsec: 0,
+        };
+        // SAFETY: `ts` is a valid timespec for the call to fill.
+        unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) };
+        ts.tv_sec as u64 * 1_000_000 + ts.tv_nsec as u64 / 1000
+    }
+
+    #[test]
+    fn an_expected_frame_is_warmed_up_for_once_before_it_comes() {
+        // The frame comes 15 ms late, so that a thread woken late on a loaded machine still
+        // finds it not yet there.
+        let c = expects(40, Some(55), 80);
+        assert_eq!(c.warmed.len(), 1, "{:?}", c.warmed);
+        assert_eq!(c.got.len(), 1);
+        // Not before PRE_WAKE_US ahead of the expected time; before the frame.
+        assert!(
+            c.warmed[0] + PRE_WAKE_US >= c.at,
+            "{} {}",
+            c.warmed[0],
+            c.at
+        );
+        assert!(c.warmed[0] <= c.got[0], "{:?} {:?}", c.warmed, c.got);
+    }
+
+    #[test]
+    fn a_frame_that_does_not_come_is_polled_for_a_bounded_time_then_slept_through() {
+        let c = expects(20, None, 120);
+        assert_eq!(c.warmed.len(), 1, "{:?}", c.warmed);
+        assert!(c.got.is_empty());
+        // The runner's thread polled for POLL_BEFORE_US + POLL_AFTER_US (450 us) and slept the
+        // rest of the 120 ms: polling on would have taken about 100 ms of CPU.
+        assert!(c.cpu_us < 30_000, "{} us of CPU", c.cpu_us);
     }
 
     /// Stops the run (its flag) on its first frame.
