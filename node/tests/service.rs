@@ -191,7 +191,10 @@ fn one_decision_per_step_from_the_image_nearest_the_sample_time() {
 #[test]
 fn the_deciding_frame_is_announced_and_warming_up_for_it_changes_no_decision() {
     use protocol::component::Component;
-    for multi_frame in [false, true] {
+    // Robot time at the receiver's rate, and at a third of it (emulation): the receipt that
+    // is announced follows the receiver's clock, not the foot's.
+    for (multi_frame, slow) in [(false, 1), (true, 1), (false, 3), (true, 3)] {
+        let rx = |t: u64| 1_000_000 + (t - 1_000_000) * slow;
         let cfg = NodeConfig {
             multi_frame,
             ..NodeConfig::default()
@@ -202,7 +205,10 @@ fn the_deciding_frame_is_announced_and_warming_up_for_it_changes_no_decision() {
         for (k, &terrain) in terrains.iter().enumerate() {
             frames.extend(foot.stance(terrain, 1_000_000 + k as u64 * 400_000, 200, |_| true));
         }
-        let end = 1_000_000 + 7 * 400_000;
+        for st in &mut frames {
+            st.t_us = rx(st.t_us);
+        }
+        let end = rx(1_000_000 + 7 * 400_000);
         let plain = classes(&lock_step(
             &mut NodeService::new(cfg.clone(), model()).unwrap(),
             &frames,
@@ -230,7 +236,7 @@ fn the_deciding_frame_is_announced_and_warming_up_for_it_changes_no_decision() {
         // at the window's end (received 106 ms after it) multi-frame.
         let dt = if multi_frame { 106_000 } else { 66_000 };
         for k in 0..terrains.len() as u64 {
-            let at = 1_000_000 + k * 400_000 + dt;
+            let at = rx(1_000_000 + k * 400_000 + dt);
             assert!(
                 announced.iter().any(|&(t, a)| a == at && t < at),
                 "multi_frame {multi_frame}, step {k}: {at} not announced before it came"

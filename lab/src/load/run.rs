@@ -233,6 +233,7 @@ pub fn stage_means(s: &node::StageTimes) -> serde_json::Value {
         "decided": s.decided,
         "decided_frame_work_us_mean": per(s.decided_ns as f64 * 1e-3, s.decided),
         "decided_frame_wait_us_mean": per(s.decided_wait_us as f64, s.decided),
+        "decided_frame_wait_and_work_us_max": s.decided_max_us,
         "what": "work: the pipeline's on_frame (decode, reassembly, stance, decision); \
                  wait: the bus's receive stamp to the pipeline (wake-ups, hand-offs)",
     })

@@ -471,7 +471,9 @@ impl Component for NodeService {
         if decided {
             s.decided += 1;
             s.decided_ns += ns;
-            s.decided_wait_us += now_us.saturating_sub(st.t_us);
+            let wait = now_us.saturating_sub(st.t_us);
+            s.decided_wait_us += wait;
+            s.decided_max_us = s.decided_max_us.max(wait + ns / 1000);
         }
     }
 

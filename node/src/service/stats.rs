@@ -19,7 +19,7 @@ pub(super) struct Shared {
     pub(super) unknown: AtomicU64,
     pub(super) unknown_by_reason: [AtomicU64; Reason::ALL.len()],
     /// [`StageTimes`], each field an atomic.
-    pub(super) stages: [AtomicU64; 5],
+    pub(super) stages: [AtomicU64; 6],
 }
 
 /// Where the node's time goes, summed since it started: every frame's work, and of the frames
@@ -38,26 +38,30 @@ pub struct StageTimes {
     pub decided_ns: u64,
     /// Their wait from the bus's receive stamp to the pipeline (wake-ups and hand-offs), µs.
     pub decided_wait_us: u64,
+    /// The longest wait and work of one of them, µs: the node's share of a latency tail.
+    pub decided_max_us: u64,
 }
 
 impl StageTimes {
-    fn to_array(self) -> [u64; 5] {
+    fn to_array(self) -> [u64; 6] {
         [
             self.frames,
             self.frame_ns,
             self.decided,
             self.decided_ns,
             self.decided_wait_us,
+            self.decided_max_us,
         ]
     }
 
-    fn from_array(a: [u64; 5]) -> Self {
+    fn from_array(a: [u64; 6]) -> Self {
         Self {
             frames: a[0],
             frame_ns: a[1],
             decided: a[2],
             decided_ns: a[3],
             decided_wait_us: a[4],
+            decided_max_us: a[5],
         }
     }
 }

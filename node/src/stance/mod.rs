@@ -92,9 +92,11 @@ struct Foot {
     /// single-frame rule can decide on the nearest frame without waiting for the next one.
     last_image_us: Option<u32>,
     period_us: Option<u32>,
-    /// The receive time of this foot's last image (the receiver's clock), to tell when the
-    /// next is due.
+    /// The receive time of this foot's last image and the gap between two images' receipts
+    /// (the receiver's clock, smoothed), to tell when the next is due: the foot's own period
+    /// is robot time, which runs slower than the receiver's under emulation.
     last_image_rx_us: u64,
+    rx_period_us: Option<u32>,
     /// The last frame heard from this foot: its receive time and the foot's timestamp in it,
     /// so [`StancePipeline::tick`] can tell the foot's time from the receiver's.
     heard: Option<(u64, u32)>,
@@ -135,6 +137,7 @@ impl Foot {
             asked: None,
             last_image_us: None,
             last_image_rx_us: 0,
+            rx_period_us: None,
             period_us: None,
             heard: None,
             balance: Balance::default(),
@@ -449,7 +452,15 @@ impl StancePipeline {
         let multi = self.cfg.multi_frame;
         let f = &mut self.feet[foot as usize];
         if let Some(last) = f.last_image_us {
-            f.period_us = sample::plausible_period(ts.wrapping_sub(last)).or(f.period_us);
+            let gap = sample::plausible_period(ts.wrapping_sub(last));
+            // Consecutive images (no frame lost between them): their receipts' gap, smoothed.
+            if gap.is_some() && gap == f.period_us {
+                let d = rx_us.saturating_sub(f.last_image_rx_us);
+                if let Some(d) = u32::try_from(d).ok().and_then(sample::plausible_period) {
+                    f.rx_period_us = Some(f.rx_period_us.map_or(d, |p| (7 * p + d) / 8));
+                }
+            }
+            f.period_us = gap.or(f.period_us);
         }
         f.last_image_us = Some(ts);
         f.last_image_rx_us = rx_us;
@@ -594,7 +605,7 @@ impl StancePipeline {
     }
 
     /// The foot whose next image decides its step, and when that image is due on the
-    /// receiver's clock (its last image's receipt plus the foot's frame period), soonest first;
+    /// receiver's clock (its last image's receipt plus the gap between receipts), soonest first;
     /// `None` without a model, or when no foot's next image decides a step. A live runner wakes
     /// before it instead of being woken by it ([`protocol::component::Component::expected_frame_us`]).
     pub fn next_decision(&self) -> Option<(u8, u64)> {
@@ -603,7 +614,8 @@ impl StancePipeline {
         let w1 = self.cfg.window_ms[1] * 1000;
         let mut next: Option<(u8, u64)> = None;
         for (i, f) in self.feet.iter().enumerate() {
-            let (Some(last), Some(p)) = (f.last_image_us, f.period_us) else {
+            let (Some(last), Some(p), Some(rx_p)) = (f.last_image_us, f.period_us, f.rx_period_us)
+            else {
                 continue;
             };
             if !f.switch.stance || f.decided {
@@ -618,7 +630,7 @@ impl StancePipeline {
             if dt > sample::FAR_US || !decides {
                 continue;
             }
-            let at = f.last_image_rx_us + u64::from(p);
+            let at = f.last_image_rx_us + u64::from(rx_p);
             if next.is_none_or(|(_, t)| at < t) {
                 next = Some((i as u8, at));
             }
