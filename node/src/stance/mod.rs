@@ -97,6 +97,8 @@ struct Foot {
     /// is robot time, which runs slower than the receiver's under emulation.
     last_image_rx_us: u64,
     rx_period_us: Option<u32>,
+    /// The last image's receipt on the grid of the earliest receipts (see `on_image`).
+    grid_rx_us: u64,
     /// The last frame heard from this foot: its receive time and the foot's timestamp in it,
     /// so [`StancePipeline::tick`] can tell the foot's time from the receiver's.
     heard: Option<(u64, u32)>,
@@ -138,6 +140,7 @@ impl Foot {
             last_image_us: None,
             last_image_rx_us: 0,
             rx_period_us: None,
+            grid_rx_us: 0,
             period_us: None,
             heard: None,
             balance: Balance::default(),
@@ -459,6 +462,16 @@ impl StancePipeline {
                 if let Some(d) = u32::try_from(d).ok().and_then(sample::plausible_period) {
                     f.rx_period_us = Some(f.rx_period_us.map_or(d, |p| (7 * p + d) / 8));
                 }
+                // The grid's receipt of this image: a receipt is only ever late (a sender or
+                // a bus that held it), so the grid follows the earliest receipts, and a later
+                // one only by a sixteenth (a clock that drifts).
+                let due = f.rx_period_us.map(|p| f.grid_rx_us + u64::from(p));
+                f.grid_rx_us = match due {
+                    Some(due) if rx_us > due => due + (rx_us - due) / 16,
+                    _ => rx_us,
+                };
+            } else {
+                f.grid_rx_us = rx_us;
             }
             f.period_us = gap.or(f.period_us);
         }
@@ -605,7 +618,8 @@ impl StancePipeline {
     }
 
     /// The foot whose next image decides its step, and when that image is due on the
-    /// receiver's clock (its last image's receipt plus the gap between receipts), soonest first;
+    /// receiver's clock (one gap between receipts after the last image's, on the grid of the
+    /// earliest receipts: a late last image does not make the next one look late), soonest first;
     /// `None` without a model, or when no foot's next image decides a step. A live runner wakes
     /// before it instead of being woken by it ([`protocol::component::Component::expected_frame_us`]).
     pub fn next_decision(&self) -> Option<(u8, u64)> {
@@ -630,7 +644,7 @@ impl StancePipeline {
             if dt > sample::FAR_US || !decides {
                 continue;
             }
-            let at = f.last_image_rx_us + u64::from(rx_p);
+            let at = f.grid_rx_us + u64::from(rx_p);
             if next.is_none_or(|(_, t)| at < t) {
                 next = Some((i as u8, at));
             }
