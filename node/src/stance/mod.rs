@@ -14,6 +14,7 @@ mod adapt;
 mod debounce;
 mod decision;
 mod sample;
+mod timing;
 
 use protocol::clock::Clock;
 use protocol::emit::Emit;
@@ -30,6 +31,7 @@ use crate::unknown::energy::{Balance, EnergyObservation};
 use crate::unknown::{self, Reason, ReasonCounts};
 use adapt::{Adaptation, Adapted, Refitter, classify};
 use debounce::{Edge, Switch};
+use timing::ImageClock;
 
 /// Counters per stage, for NodeStatus and the logs.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -88,17 +90,8 @@ struct Foot {
     adapted: Option<Adapted>,
     /// The dead lines a refit was last asked for (pending, done or failed): asked once per set.
     asked: Option<(Vec<bool>, Vec<bool>)>,
-    /// Timestamp of this foot's last image and the frame period it implies (µs), so the
-    /// single-frame rule can decide on the nearest frame without waiting for the next one.
-    last_image_us: Option<u32>,
-    period_us: Option<u32>,
-    /// The receive time of this foot's last image and the gap between two images' receipts
-    /// (the receiver's clock, smoothed), to tell when the next is due: the foot's own period
-    /// is robot time, which runs slower than the receiver's under emulation.
-    last_image_rx_us: u64,
-    rx_period_us: Option<u32>,
-    /// The last image's receipt on the grid of the earliest receipts (see `on_image`).
-    grid_rx_us: u64,
+    /// When this foot's images come, on its clock and on the receiver's.
+    clock: ImageClock,
     /// The last frame heard from this foot: its receive time and the foot's timestamp in it,
     /// so [`StancePipeline::tick`] can tell the foot's time from the receiver's.
     heard: Option<(u64, u32)>,
@@ -137,11 +130,7 @@ impl Foot {
             health,
             adapted: None,
             asked: None,
-            last_image_us: None,
-            last_image_rx_us: 0,
-            rx_period_us: None,
-            grid_rx_us: 0,
-            period_us: None,
+            clock: ImageClock::default(),
             heard: None,
             balance: Balance::default(),
         }
@@ -454,29 +443,7 @@ impl StancePipeline {
         let [w0, w1] = [self.cfg.window_ms[0] * 1000, self.cfg.window_ms[1] * 1000];
         let multi = self.cfg.multi_frame;
         let f = &mut self.feet[foot as usize];
-        if let Some(last) = f.last_image_us {
-            let gap = sample::plausible_period(ts.wrapping_sub(last));
-            // Consecutive images (no frame lost between them): their receipts' gap, smoothed.
-            if gap.is_some() && gap == f.period_us {
-                let d = rx_us.saturating_sub(f.last_image_rx_us);
-                if let Some(d) = u32::try_from(d).ok().and_then(sample::plausible_period) {
-                    f.rx_period_us = Some(f.rx_period_us.map_or(d, |p| (7 * p + d) / 8));
-                }
-                // The grid's receipt of this image: a receipt is only ever late (a sender or
-                // a bus that held it), so the grid follows the earliest receipts, and a later
-                // one only by a sixteenth (a clock that drifts).
-                let due = f.rx_period_us.map(|p| f.grid_rx_us + u64::from(p));
-                f.grid_rx_us = match due {
-                    Some(due) if rx_us > due => due + (rx_us - due) / 16,
-                    _ => rx_us,
-                };
-            } else {
-                f.grid_rx_us = rx_us;
-            }
-            f.period_us = gap.or(f.period_us);
-        }
-        f.last_image_us = Some(ts);
-        f.last_image_rx_us = rx_us;
+        f.clock.on_image(ts, rx_us);
         f.heard = Some((rx_us, ts));
         if !f.switch.stance || f.decided {
             return;
@@ -570,7 +537,7 @@ impl StancePipeline {
             f.best_err = Some(err);
             f.keep(img, rx_us);
         }
-        if sample::nearest_is_final(dt, sample_us, f.period_us) {
+        if sample::nearest_is_final(dt, sample_us, f.clock.period_us()) {
             self.decide(foot, out);
         }
     }
@@ -601,13 +568,13 @@ impl StancePipeline {
             if dt > sample::FAR_US {
                 continue;
             }
-            let margin = f.period_us.unwrap_or(10_000);
+            let margin = f.clock.period_us().unwrap_or(10_000);
             let due = if self.cfg.multi_frame {
                 f.used > 0 && dt >= w1 + margin
             } else {
-                let last_dt = f.last_image_us.map(|l| l.wrapping_sub(f.touchdown_us));
+                let last_dt = f.clock.last_ts().map(|l| l.wrapping_sub(f.touchdown_us));
                 f.best_err.is_some_and(|e| {
-                    sample::deadline_passed(dt, sample_us, e, last_dt, f.period_us, margin)
+                    sample::deadline_passed(dt, sample_us, e, last_dt, f.clock.period_us(), margin)
                 })
             };
             if due {
@@ -628,14 +595,13 @@ impl StancePipeline {
         let w1 = self.cfg.window_ms[1] * 1000;
         let mut next: Option<(u8, u64)> = None;
         for (i, f) in self.feet.iter().enumerate() {
-            let (Some(last), Some(p), Some(rx_p)) = (f.last_image_us, f.period_us, f.rx_period_us)
-            else {
+            let (Some((ts, at)), Some(p)) = (f.clock.next(), f.clock.period_us()) else {
                 continue;
             };
             if !f.switch.stance || f.decided {
                 continue;
             }
-            let dt = last.wrapping_add(p).wrapping_sub(f.touchdown_us);
+            let dt = ts.wrapping_sub(f.touchdown_us);
             let decides = if self.cfg.multi_frame {
                 dt >= w1
             } else {
@@ -644,7 +610,6 @@ impl StancePipeline {
             if dt > sample::FAR_US || !decides {
                 continue;
             }
-            let at = f.grid_rx_us + u64::from(rx_p);
             if next.is_none_or(|(_, t)| at < t) {
                 next = Some((i as u8, at));
             }
