@@ -60,6 +60,7 @@ pub mod foot;
 pub mod frame;
 pub mod ids;
 pub mod messages;
+pub mod quantile;
 pub mod tactile;
 #[cfg(feature = "std")]
 pub mod terrain;

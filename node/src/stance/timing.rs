@@ -8,9 +8,10 @@
 //! images is measured on the receiver's clock.
 
 use super::sample;
+use protocol::quantile::StepQuantile;
 
 /// One foot's image timing.
-#[derive(Debug, Default, Clone)]
+#[derive(Debug, Clone)]
 pub(super) struct ImageClock {
     /// The foot's timestamp of its last image (µs, wrapping).
     last_ts: Option<u32>,
@@ -22,7 +23,29 @@ pub(super) struct ImageClock {
     rx_period_us: Option<u32>,
     /// The last image's receipt on the grid of the earliest receipts.
     grid_rx_us: u64,
+    /// How late images come after the grid's due time (µs): a low quantile, measured on every
+    /// image, so the runner polls where this foot's images come (see `LATE_STEPS`).
+    late_us: StepQuantile,
 }
+
+impl Default for ImageClock {
+    fn default() -> Self {
+        Self {
+            last_ts: None,
+            period_us: None,
+            last_rx_us: 0,
+            rx_period_us: None,
+            grid_rx_us: 0,
+            late_us: StepQuantile::new(0, LATE_STEPS.0, LATE_STEPS.1),
+        }
+    }
+}
+
+/// The lateness quantile's steps, µs (down, up): it settles where one image in eight comes
+/// earlier (the runner polls from a little before the time), and follows a few hundred µs
+/// within about two seconds of images. A grid whose smoothed gap is a few µs short lags the
+/// receipts by sixteen times that (up to 330 µs measured, past the whole poll).
+const LATE_STEPS: (i64, i64) = (14, 2);
 
 impl ImageClock {
     /// A new image, taken at `ts` on the foot's clock and received at `rx_us`.
@@ -31,6 +54,10 @@ impl ImageClock {
             let gap = sample::plausible_period(ts.wrapping_sub(last));
             // Consecutive images (no frame lost between them): their receipts' gap, smoothed.
             if gap.is_some() && gap == self.period_us {
+                if let Some(p) = self.rx_period_us {
+                    let due = self.grid_rx_us + u64::from(p);
+                    self.late_us.observe(rx_us as i64 - due as i64);
+                }
                 let d = rx_us.saturating_sub(self.last_rx_us);
                 if let Some(d) = u32::try_from(d).ok().and_then(sample::plausible_period) {
                     self.rx_period_us = Some(self.rx_period_us.map_or(d, |p| (7 * p + d) / 8));
@@ -62,11 +89,12 @@ impl ImageClock {
         self.period_us
     }
 
-    /// The next image: its timestamp on the foot's clock and when it is due on the receiver's;
-    /// `None` until both periods are known.
+    /// The next image: its timestamp on the foot's clock and when it is due on the receiver's
+    /// (the grid's time plus the measured lateness); `None` until both periods are known.
     pub(super) fn next(&self) -> Option<(u32, u64)> {
         let (last, p, rx_p) = (self.last_ts?, self.period_us?, self.rx_period_us?);
-        Some((last.wrapping_add(p), self.grid_rx_us + u64::from(rx_p)))
+        let due = (self.grid_rx_us + u64::from(rx_p)).saturating_add_signed(self.late_us.get());
+        Some((last.wrapping_add(p), due))
     }
 }
 
@@ -101,6 +129,23 @@ mod tests {
         // was left; from the late receipt itself it would be 1_060_900.
         assert!(at <= 1_060_000 + 100 + 150, "due at {at}");
         assert!(at >= 1_060_000, "due at {at}");
+    }
+
+    #[test]
+    fn images_that_come_steadily_after_the_grid_are_expected_when_they_come() {
+        // Receipts 10_003 us apart with the smoothed gap a few us short: the grid lags them.
+        let mut c = ImageClock::default();
+        for i in 0..400u32 {
+            let rx = 1_000_000 + 10_003 * u64::from(i) + [0, 40, 10, 25][i as usize % 4];
+            c.on_image(10_000 * i, rx);
+        }
+        let (_, at) = c.next().unwrap_or_default();
+        let truth = 1_000_000 + 10_003 * 400;
+        // One image in eight earlier than `at`: within the spread of the last receipts.
+        assert!(
+            at >= truth - 10 && at <= truth + 40,
+            "due at {at}, images at {truth}+0..40"
+        );
     }
 
     #[test]

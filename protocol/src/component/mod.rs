@@ -65,7 +65,7 @@ mod signals;
 mod threaded;
 
 pub use lockstep::LockStep;
-pub use run::{POLL_AFTER_US, POLL_BEFORE_US, PRE_WAKE_US, RunOptions, RunStats, run, run_opened};
+pub use run::{POLL_AFTER_US, POLL_LEAD_US, PRE_WAKE_US, RunOptions, RunStats, run, run_opened};
 pub use signals::{SignalError, Signals};
 pub use threaded::{Link, LinkStats, Threaded, spawn, spawn_one};
 
@@ -159,10 +159,11 @@ pub trait Component {
 
     /// When (µs on the runner's clock) a frame is due that this component answers at once,
     /// or `None`: the node's next image that decides a step. [`run`] wakes [`PRE_WAKE_US`]
-    /// before it, calls [`Component::warm_up`] and polls the bus until a frame comes (for at
-    /// most [`POLL_AFTER_US`] past the time), instead of being woken by the frame: a thread
-    /// woken from sleep started 40-90 µs after the frame, with its data out of cache
-    /// (docs/decisions/node-wake.md).
+    /// before it, calls [`Component::warm_up`] and polls the bus from [`POLL_LEAD_US`] before
+    /// it until a frame comes (for at most [`POLL_AFTER_US`] past the time), instead of being
+    /// woken by the frame: a thread woken from sleep started 40-90 µs after the frame, with its
+    /// data out of cache (docs/decisions/node-wake.md). The time is when the frame is expected,
+    /// not the earliest it can come: measured, where the frames come from elsewhere.
     fn expected_frame_us(&self) -> Option<u64> {
         None
     }
