@@ -246,6 +246,39 @@ fn the_deciding_frame_is_announced_and_warming_up_for_it_changes_no_decision() {
 }
 
 #[test]
+fn between_steps_no_frame_is_due_and_in_stance_the_deciding_image_is_announced_early() {
+    use protocol::component::Component;
+    let mut node = NodeService::new(NodeConfig::default(), model()).unwrap();
+    let mut foot = FakeFoot::new();
+    let (first, second) = (1_000_000, 1_400_000);
+    let mut frames = foot.stance(1, first, 200, |_| true);
+    frames.extend(foot.stance(2, second, 200, |_| true));
+    let (mut between, mut early) = (Vec::new(), Vec::new());
+    for st in &frames {
+        let next = node.expected_frame_us();
+        // After the first step's decision, nothing is due until the next touchdown.
+        if st.t_us > first + 100_000 && st.t_us < second {
+            between.push(next);
+        }
+        // The image that decides the second step (66 ms after its touchdown) is known from
+        // the stance's first image on: the runner batches the frames before it.
+        if st.t_us > second + 6_000 && st.t_us < second + 30_000 {
+            early.push(next);
+        }
+        node.process(st, &mut |_| {});
+        node.tick(st.t_us, &mut |_| {});
+    }
+    assert!(
+        !between.is_empty() && between.iter().all(|n| *n == Some(u64::MAX)),
+        "{between:?}"
+    );
+    assert!(
+        !early.is_empty() && early.iter().all(|n| *n == Some(second + 66_000)),
+        "{early:?}"
+    );
+}
+
+#[test]
 fn a_frame_lost_after_the_best_one_is_decided_at_the_deadline_not_at_liftoff() {
     let mut node = NodeService::new(NodeConfig::default(), model()).unwrap();
     let mut foot = FakeFoot::new();

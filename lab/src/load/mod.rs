@@ -32,7 +32,7 @@ mod run;
 
 pub use feet::{Feet, Sampled, image_pool};
 pub use measure::{Tally, measure};
-pub use proc_stats::{memory_mb, task_cpu_ns};
+pub use proc_stats::{memory_mb, task_cpu_ns, task_slices};
 pub use report::BenchReport;
 pub use run::{BenchRun, NodeProcess, bench_inproc, bench_process};
 

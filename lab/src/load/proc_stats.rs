@@ -30,6 +30,23 @@ pub fn task_cpu_ns(pid: &str, names: Option<&[&str]>) -> Option<u64> {
     Some(total)
 }
 
+/// How often the threads of a process (`pid` or "self") named in `names` were put on a CPU
+/// (schedstat's third field: each wake-up from sleep is one): the wake-ups a node costs.
+pub fn task_slices(pid: &str, names: &[&str]) -> Option<u64> {
+    let dir = std::fs::read_dir(format!("/proc/{pid}/task")).ok()?;
+    let mut total = 0u64;
+    for e in dir.flatten() {
+        let p = e.path();
+        let comm = std::fs::read_to_string(p.join("comm")).unwrap_or_default();
+        if !names.contains(&comm.trim()) {
+            continue;
+        }
+        let s = std::fs::read_to_string(p.join("schedstat")).ok()?;
+        total += s.split_whitespace().nth(2)?.parse::<u64>().ok()?;
+    }
+    Some(total)
+}
+
 /// VmRSS and VmHWM (peak) of a process (`pid` or "self"), MB.
 pub fn memory_mb(pid: &str) -> (Option<f64>, Option<f64>) {
     let Ok(s) = std::fs::read_to_string(format!("/proc/{pid}/status")) else {

@@ -70,7 +70,9 @@ pub fn bench_inproc(
     // Its reader and its writer (the caller records no MCAP beside it: one "record" thread).
     let beside_cpu = || task_cpu_ns("self", Some(&["record-listen", "record"]));
     let beside_cpu_start = beside_cpu();
-    let cpu = || task_cpu_ns("self", Some(&["receive", "pipeline", "send"]));
+    const NODE: [&str; 3] = ["receive", "pipeline", "send"];
+    let cpu = || task_cpu_ns("self", Some(&NODE));
+    let (slices0, t0) = (task_slices("self", &NODE), std::time::Instant::now());
     let result = measure(
         &mut bus.endpoint(),
         &mut bus.endpoint(),
@@ -79,6 +81,9 @@ pub fn bench_inproc(
         total_us,
         &cpu,
     );
+    let wakeups_per_s = task_slices("self", &NODE)
+        .zip(slices0)
+        .map(|(b, a)| b.saturating_sub(a) as f64 / t0.elapsed().as_secs_f64().max(1e-9));
     let rec_cpu_end = task_cpu_ns("self", Some(&["record"]));
     let beside_cpu_end = beside_cpu();
     let stats = node.stop();
@@ -114,6 +119,7 @@ pub fn bench_inproc(
         extra: serde_json::json!({
             "node_threads": threads.count(),
             "node_rx_frames": stats.rx_frames,
+            "node_wakeups_per_s": wakeups_per_s,
             "node_stages": stage_means(&stats.stages),
             "node_rx_dropped": stats.rx_dropped,
             "bus_overruns": bus.overruns(),

@@ -482,7 +482,7 @@ impl Component for NodeService {
     }
 
     fn warm_up(&mut self) {
-        if let Some((foot, _)) = self.pipeline.next_decision() {
+        if let Some((Some(foot), _)) = self.pipeline.next_decision() {
             self.pipeline.warm_up(foot);
         }
     }

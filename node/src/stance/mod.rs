@@ -584,37 +584,44 @@ impl StancePipeline {
         }
     }
 
-    /// The foot whose next image decides its step, and when that image is due on the
-    /// receiver's clock (one gap between receipts after the last image's, on the grid of the
-    /// earliest receipts: a late last image does not make the next one look late), soonest first;
-    /// `None` without a model, or when no foot's next image decides a step. A live runner wakes
-    /// before it instead of being woken by it ([`protocol::component::Component::expected_frame_us`]).
-    pub fn next_decision(&self) -> Option<(u8, u64)> {
+    /// The foot whose step is decided soonest, and when the image that decides it is due on
+    /// the receiver's clock ([`ImageClock::due`]; the foot's images k periods ahead), soonest
+    /// first. `Some((None, u64::MAX))` when no step is waiting for an image (every foot in the
+    /// air or decided): the frames before a deciding image need no instant answer. `None`
+    /// without a model, or while a foot waits for a decision whose image cannot be told (its
+    /// frame period not known yet): any frame may decide. A live runner wakes before the
+    /// deciding image instead of being woken by it, and takes the frames before it in batches
+    /// ([`protocol::component::Component::expected_frame_us`]).
+    pub fn next_decision(&self) -> Option<(Option<u8>, u64)> {
         self.classifier.as_ref()?;
         let sample_us = self.cfg.sample_ms * 1000;
         let w1 = self.cfg.window_ms[1] * 1000;
-        let mut next: Option<(u8, u64)> = None;
+        let mut next: (Option<u8>, u64) = (None, u64::MAX);
         for (i, f) in self.feet.iter().enumerate() {
-            let (Some((ts, at)), Some(p)) = (f.clock.next(), f.clock.period_us()) else {
-                continue;
-            };
             if !f.switch.stance || f.decided {
                 continue;
             }
-            let dt = ts.wrapping_sub(f.touchdown_us);
-            let decides = if self.cfg.multi_frame {
-                dt >= w1
-            } else {
-                sample::nearest_is_final(dt, sample_us, Some(p))
-            };
-            if dt > sample::FAR_US || !decides {
-                continue;
+            let last = f.clock.last_ts()?;
+            let p = f.clock.period_us()?;
+            let dt = last.wrapping_sub(f.touchdown_us);
+            if dt > sample::FAR_US {
+                continue; // the last image is from before the touchdown: not this stance's
             }
-            if next.is_none_or(|(_, t)| at < t) {
-                next = Some((i as u8, at));
+            // The first image from dt on that decides: single frame, the first at or past
+            // half a period before the sample time (`nearest_is_final`); multi-frame, the
+            // first at or past the window's end.
+            let target = if self.cfg.multi_frame {
+                w1
+            } else {
+                sample_us.saturating_sub(p / 2)
+            };
+            let k = target.saturating_sub(dt).div_ceil(p).max(1);
+            let at = f.clock.due(k)?;
+            if at < next.1 {
+                next = (Some(i as u8), at);
             }
         }
-        next
+        Some(next)
     }
 
     /// Runs the classifier the step of `foot` will be decided with on the foot's last kept

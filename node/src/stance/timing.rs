@@ -89,12 +89,13 @@ impl ImageClock {
         self.period_us
     }
 
-    /// The next image: its timestamp on the foot's clock and when it is due on the receiver's
-    /// (the grid's time plus the measured lateness); `None` until both periods are known.
-    pub(super) fn next(&self) -> Option<(u32, u64)> {
-        let (last, p, rx_p) = (self.last_ts?, self.period_us?, self.rx_period_us?);
-        let due = (self.grid_rx_us + u64::from(rx_p)).saturating_add_signed(self.late_us.get());
-        Some((last.wrapping_add(p), due))
+    /// When the image `k` periods after the last is due on the receiver's clock (the grid's
+    /// time plus the measured lateness); `None` until both periods are known.
+    pub(super) fn due(&self, k: u32) -> Option<u64> {
+        let rx_p = u64::from(self.rx_period_us?);
+        self.period_us?;
+        let grid = self.grid_rx_us + u64::from(k) * rx_p;
+        Some(grid.saturating_add_signed(self.late_us.get()))
     }
 }
 
@@ -113,18 +114,19 @@ mod tests {
     #[test]
     fn the_next_image_is_due_one_receipt_gap_after_the_last() {
         let mut c = ImageClock::default();
-        assert_eq!(c.next(), None, "no period yet");
+        assert_eq!(c.due(1), None, "no period yet");
         // Robot time at a third of the receiver's: the receipts are 30 ms apart.
         feed(&mut c, 30_000, &[0; 6]);
         assert_eq!(c.period_us(), Some(10_000));
-        assert_eq!(c.next(), Some((60_000, 1_000_000 + 6 * 30_000)));
+        assert_eq!(c.due(1), Some(1_000_000 + 6 * 30_000));
+        assert_eq!(c.due(3), Some(1_000_000 + 8 * 30_000));
     }
 
     #[test]
     fn a_late_image_does_not_make_the_next_one_look_late() {
         let mut c = ImageClock::default();
         feed(&mut c, 10_000, &[0, 0, 0, 0, 0, 800]);
-        let (_, at) = c.next().unwrap_or_default();
+        let at = c.due(1).unwrap_or_default();
         // The smoothed gap took an eighth of the 800 us (100), the grid a sixteenth of what
         // was left; from the late receipt itself it would be 1_060_900.
         assert!(at <= 1_060_000 + 100 + 150, "due at {at}");
@@ -139,7 +141,7 @@ mod tests {
             let rx = 1_000_000 + 10_003 * u64::from(i) + [0, 40, 10, 25][i as usize % 4];
             c.on_image(10_000 * i, rx);
         }
-        let (_, at) = c.next().unwrap_or_default();
+        let at = c.due(1).unwrap_or_default();
         let truth = 1_000_000 + 10_003 * 400;
         // One image in eight earlier than `at`: within the spread of the last receipts.
         assert!(
@@ -154,7 +156,7 @@ mod tests {
         for i in [0u32, 1, 2, 4] {
             c.on_image(10_000 * i, 1_000_000 + 10_000 * u64::from(i) + 300);
         }
-        let (_, at) = c.next().unwrap_or_default();
+        let at = c.due(1).unwrap_or_default();
         assert_eq!(at, 1_040_300 + 10_000);
     }
 }

@@ -65,7 +65,9 @@ mod signals;
 mod threaded;
 
 pub use lockstep::LockStep;
-pub use run::{POLL_AFTER_US, POLL_LEAD_US, PRE_WAKE_US, RunOptions, RunStats, run, run_opened};
+pub use run::{
+    COALESCE_US, POLL_AFTER_US, POLL_LEAD_US, PRE_WAKE_US, RunOptions, RunStats, run, run_opened,
+};
 pub use signals::{SignalError, Signals};
 pub use threaded::{Link, LinkStats, Threaded, spawn, spawn_one};
 
@@ -163,7 +165,10 @@ pub trait Component {
     /// it until a frame comes (for at most [`POLL_AFTER_US`] past the time), instead of being
     /// woken by the frame: a thread woken from sleep started 40-90 µs after the frame, with its
     /// data out of cache (docs/decisions/node-wake.md). The time is when the frame is expected,
-    /// not the earliest it can come: measured, where the frames come from elsewhere.
+    /// not the earliest it can come: measured, where the frames come from elsewhere. Until
+    /// [`PRE_WAKE_US`] before it, no frame needs an instant answer: `run` takes them in
+    /// batches ([`COALESCE_US`]); `u64::MAX` says so with no frame due. `None`: any frame may
+    /// need an instant answer (each wakes the runner).
     fn expected_frame_us(&self) -> Option<u64> {
         None
     }
