@@ -214,6 +214,8 @@ pub(crate) fn run_with<C: Component + ?Sized>(
         }
         let mut next_tick = Instant::now();
         let mut oversleep = StepQuantile::new(OVERSLEEP.0, OVERSLEEP.1, OVERSLEEP.2);
+        // The last burst took `max_burst` frames: more may be queued.
+        let mut backlog = false;
         // Error frames of this handle already in `bus_errors`.
         let mut counted = 0u64;
         // The expected frame the component was last warmed up for.
@@ -262,7 +264,9 @@ pub(crate) fn run_with<C: Component + ?Sized>(
                     }
                 }
             }
-            if coalesce && !wait.is_zero() {
+            // Not while frames are left from the last batch: a stream faster than a burst per
+            // batch (classic frames on vcan, which has no bit rate) would fall behind.
+            if coalesce && !backlog && !wait.is_zero() {
                 std::thread::sleep(wait.min(Duration::from_micros(COALESCE_US)));
                 wait = Duration::ZERO;
             }
@@ -306,6 +310,7 @@ pub(crate) fn run_with<C: Component + ?Sized>(
                     }
                 }
             }
+            backlog = taken >= opts.max_burst.max(1);
             let now = now_us();
             let health = b.health();
             if health.error_frames != counted {
@@ -701,6 +706,38 @@ mod tests {
         let (got, groups) = batches(true);
         assert_eq!(got, (0..20).collect::<Vec<u8>>());
         assert!(groups <= 8, "{groups} groups");
+    }
+
+    #[test]
+    fn a_batch_that_fills_the_burst_is_followed_at_once_not_after_another_sleep() {
+        // Forty frames at once, four a burst: ten bursts back to back (under a millisecond);
+        // a sleep between them would take ten batches (36 ms or more).
+        let bus = InProcBus::new();
+        let mut peer = bus.endpoint();
+        let mut c = Batched {
+            taken: Vec::new(),
+            batch: true,
+        };
+        let stop = Arc::new(AtomicBool::new(false));
+        let stopper = stop.clone();
+        let feeder = std::thread::spawn(move || {
+            std::thread::sleep(Duration::from_millis(20));
+            for b in 0..40 {
+                send(&mut peer, 0x200, b);
+            }
+            std::thread::sleep(Duration::from_millis(80));
+            stopper.store(true, Ordering::Relaxed);
+        });
+        let opts = RunOptions {
+            idle_wait: Some(Duration::from_millis(200)),
+            max_burst: 4,
+            ..RunOptions::default()
+        };
+        run(&mut c, &BusSource::InProc(bus), &opts, &stop);
+        feeder.join().unwrap();
+        assert_eq!(c.taken.len(), 40);
+        let span = c.taken[39].1 - c.taken[0].1;
+        assert!(span < Duration::from_millis(20), "{span:?}");
     }
 
     #[test]
