@@ -585,7 +585,7 @@ impl StancePipeline {
     }
 
     /// The foot whose step is decided soonest, and when the image that decides it is due on
-    /// the receiver's clock ([`ImageClock::due`]; the foot's images k periods ahead), soonest
+    /// the receiver's clock (`stance/timing.rs`: the foot's images k periods ahead), soonest
     /// first. `Some((None, u64::MAX))` when no step is waiting for an image (every foot in the
     /// air or decided): the frames before a deciding image need no instant answer. `None`
     /// without a model, or while a foot waits for a decision whose image cannot be told (its
