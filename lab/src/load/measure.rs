@@ -15,6 +15,9 @@ pub struct Tally {
     pub correct: u64,
     /// Per classified step: the sampled frame's last segment sent -> TerrainClass received, µs.
     pub latencies_us: Vec<f64>,
+    /// The same steps on the bus's clock: the last segment sent -> the TerrainClass's receive
+    /// stamp (as a candump shows it), µs. Without the listener's own wake-up.
+    pub bus_latencies_us: Vec<f64>,
     /// Of the decisions, those heard before the player had logged their step (see `listen`):
     /// counted, without a latency.
     pub heard_before_logged: u64,
@@ -28,7 +31,8 @@ pub struct Tally {
 }
 
 /// Plays `feet` in real time for `total_us` on `tx` and matches each step's TerrainClass heard
-/// on `rx`; `cpu_ns` reads the node's CPU time (at the start and end of the measured window).
+/// on `rx`; `cpu_ns` reads the node's CPU time (at the start and end of the measured window),
+/// `bus_us` the clock the bus stamps its frames with ([`protocol::BusSource::clock`]).
 pub fn measure(
     tx: &mut dyn CanBus,
     rx: &mut dyn CanBus,
@@ -36,8 +40,9 @@ pub fn measure(
     mut feet: Feet,
     total_us: u64,
     cpu_ns: &dyn Fn() -> Option<u64>,
+    bus_us: &dyn Fn() -> u64,
 ) -> Result<Tally, LoadError> {
-    let (sent_tx, sent_rx) = mpsc::channel::<(Sampled, Instant)>();
+    let (sent_tx, sent_rx) = mpsc::channel::<(Sampled, Instant, u64)>();
     let done = AtomicBool::new(false);
     std::thread::scope(|s| {
         let stop = &done;
@@ -71,7 +76,7 @@ pub fn measure(
             match sampled {
                 Ok(Some(sm)) => {
                     steps += u64::from(measured(&sm));
-                    let _ = sent_tx.send((sm, Instant::now()));
+                    let _ = sent_tx.send((sm, Instant::now(), bus_us()));
                 }
                 Ok(None) => {}
                 Err(e) => {
@@ -114,24 +119,24 @@ pub(super) fn measured(s: &Sampled) -> bool {
 pub(super) fn listen(
     bus: &mut dyn CanBus,
     ids: &IdConfig,
-    sent: &mpsc::Receiver<(Sampled, Instant)>,
+    sent: &mpsc::Receiver<(Sampled, Instant, u64)>,
     done: &AtomicBool,
 ) -> Result<Tally, LoadError> {
     let mut t = Tally::default();
-    let mut pending: HashMap<(u8, u16), (Instant, u8, bool)> = HashMap::new();
+    let mut pending: HashMap<(u8, u16), (Instant, u64, u8, bool)> = HashMap::new();
     let mut early: HashMap<(u8, u16), TerrainClass> = HashMap::new();
     while !done.load(Ordering::Relaxed) {
         let got = bus.recv(Duration::from_millis(5))?;
         let now = Instant::now();
-        for (s, at) in sent.try_iter() {
+        for (s, at, at_bus) in sent.try_iter() {
             match early.remove(&(s.foot, s.step)) {
                 Some(tc) if measured(&s) => {
                     t.heard_before_logged += 1;
-                    count(&mut t, &tc, s.terrain, None);
+                    count(&mut t, &tc, s.terrain, None, None);
                 }
                 Some(_) => {}
                 None => {
-                    pending.insert((s.foot, s.step), (at, s.terrain, measured(&s)));
+                    pending.insert((s.foot, s.step), (at, at_bus, s.terrain, measured(&s)));
                 }
             }
         }
@@ -144,16 +149,18 @@ pub(super) fn listen(
             }
             _ => continue,
         };
-        let Some((at, terrain, measured)) = pending.remove(&(foot, tc.step)) else {
+        let Some((at, at_bus, terrain, measured)) = pending.remove(&(foot, tc.step)) else {
             early.insert((foot, tc.step), tc);
             continue;
         };
         if measured {
+            let on_bus = Duration::from_micros(st.t_us.saturating_sub(at_bus));
             count(
                 &mut t,
                 &tc,
                 terrain,
                 Some(now.saturating_duration_since(at)),
+                Some(on_bus),
             );
         }
     }
@@ -161,13 +168,23 @@ pub(super) fn listen(
 }
 
 /// One matched TerrainClass into the tally; `latency` when it is known.
-pub(super) fn count(t: &mut Tally, tc: &TerrainClass, terrain: u8, latency: Option<Duration>) {
+/// `on_bus`: the same latency on the bus's clock.
+pub(super) fn count(
+    t: &mut Tally,
+    tc: &TerrainClass,
+    terrain: u8,
+    latency: Option<Duration>,
+    on_bus: Option<Duration>,
+) {
     t.decisions += 1;
     if tc.flags & flags::NO_SAMPLE == 0 {
         t.classified += 1;
         t.correct += u64::from(tc.terrain == terrain);
         if let Some(l) = latency {
             t.latencies_us.push(l.as_secs_f64() * 1e6);
+        }
+        if let Some(l) = on_bus {
+            t.bus_latencies_us.push(l.as_secs_f64() * 1e6);
         }
     }
 }

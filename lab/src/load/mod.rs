@@ -108,7 +108,8 @@ mod tests {
         let ids = IdConfig::default();
         let bus = protocol::bus::InProcBus::new();
         let (mut node, mut rx) = (bus.endpoint(), bus.endpoint());
-        let (sent_tx, sent_rx) = mpsc::channel::<(Sampled, Instant)>();
+        let (sent_tx, sent_rx) = mpsc::channel::<(Sampled, Instant, u64)>();
+        let clock = bus.clock();
         let done = AtomicBool::new(false);
         let answer = |step: u16, terrain: u8| {
             let tc = TerrainClass {
@@ -129,12 +130,16 @@ mod tests {
             let (ids, done) = (&ids, &done);
             let listener = s.spawn(move || listen(&mut rx, ids, &sent_rx, done));
             // Step 1 logged first, as usual; step 2 answered before the player logged it.
-            sent_tx.send((sampled(1), Instant::now())).unwrap();
+            sent_tx
+                .send((sampled(1), Instant::now(), clock.now_us()))
+                .unwrap();
             std::thread::sleep(Duration::from_millis(20));
             node.send(&answer(1, 2)).unwrap();
             node.send(&answer(2, 3)).unwrap();
             std::thread::sleep(Duration::from_millis(30));
-            sent_tx.send((sampled(2), Instant::now())).unwrap();
+            sent_tx
+                .send((sampled(2), Instant::now(), clock.now_us()))
+                .unwrap();
             std::thread::sleep(Duration::from_millis(30));
             done.store(true, Ordering::Relaxed);
             listener.join().unwrap()
@@ -144,6 +149,13 @@ mod tests {
         assert_eq!(t.heard_before_logged, 1);
         assert_eq!(t.correct, 1, "step 2 answered terrain 3 for a stance of 2");
         assert_eq!(t.latencies_us.len(), 1, "no latency for the early answer");
+        // Answered 20 ms after it was logged, on the bus's clock too.
+        assert_eq!(t.bus_latencies_us.len(), 1);
+        assert!(
+            (19_000.0..200_000.0).contains(&t.bus_latencies_us[0]),
+            "{:?}",
+            t.bus_latencies_us
+        );
     }
 
     #[test]

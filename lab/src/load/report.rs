@@ -63,6 +63,8 @@ impl BenchReport<'_> {
     pub fn to_json(&self) -> serde_json::Value {
         use crate::score::percentile;
         let (t, lat) = (self.tally, self.latencies());
+        let mut bus = t.bus_latencies_us.clone();
+        bus.sort_by(f64::total_cmp);
         serde_json::json!({
             "bus": self.bus,
             "label": self.label,
@@ -87,6 +89,14 @@ impl BenchReport<'_> {
                 "median": percentile(&lat, 0.5),
                 "p99": percentile(&lat, 0.99),
                 "max": lat.last(),
+            },
+            "latency_on_bus_us": {
+                "what": "the same, on the bus's clock: last segment sent -> the TerrainClass's \
+                         receive stamp (without the listener's wake-up)",
+                "n": bus.len(),
+                "median": percentile(&bus, 0.5),
+                "p99": percentile(&bus, 0.99),
+                "max": bus.last(),
             },
             "node_cpu_pct_of_one_core": self.cpu_pct(),
             "node_cpu_us_per_1000_frames": self.cpu_us_per_1000_frames(),

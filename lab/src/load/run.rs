@@ -72,6 +72,7 @@ pub fn bench_inproc(
     let beside_cpu_start = beside_cpu();
     const NODE: [&str; 3] = ["receive", "pipeline", "send"];
     let cpu = || task_cpu_ns("self", Some(&NODE));
+    let clock = bus.clock();
     let (slices0, t0) = (task_slices("self", &NODE), std::time::Instant::now());
     let result = measure(
         &mut bus.endpoint(),
@@ -80,6 +81,7 @@ pub fn bench_inproc(
         feet,
         total_us,
         &cpu,
+        &|| clock.now_us(),
     );
     let wakeups_per_s = task_slices("self", &NODE)
         .zip(slices0)
@@ -166,7 +168,10 @@ pub fn bench_process(
         .and_then(|()| {
             let pid = node.pid();
             let cpu = || task_cpu_ns(&pid, None);
-            measure(&mut tx, &mut rx, &ids, feet, total_us, &cpu)
+            // The sockets' receive stamps are the real-time clock's.
+            let wall = protocol::clock::WallClock::default();
+            let bus_us = || protocol::clock::Clock::now_us(&wall);
+            measure(&mut tx, &mut rx, &ids, feet, total_us, &cpu, &bus_us)
         });
     let memory_mb = memory_mb(&node.pid());
     node.stop();

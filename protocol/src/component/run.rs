@@ -287,8 +287,8 @@ pub(crate) fn run_with<C: Component + ?Sized>(
                     }
                     // Polling for the expected frame (a tick waits for the poll: at most
                     // POLL_LEAD_US plus the oversleep plus POLL_AFTER_US). A yield, not a spin:
-                    // a thread that spun kept a sender on its core from running, and the
-                    // frame it waited for came after the poll (324 µs late in 2 of 4 runs);
+                    // a thread that spun kept a sender on its core from running, and the frame
+                    // it waited for came just after the poll (323-331 µs late in 3 of 7 runs);
                     // on a robot the controller shares the core.
                     Ok(None) if taken == 0 && poll_until.is_some_and(|u| Instant::now() < u) => {
                         std::thread::yield_now();
