@@ -1,22 +1,34 @@
 //! A process's CPU time and resident memory, read from `/proc`.
 
+/// The task folders of a process's threads (`pid` or "self"), all or those named in `names`.
+fn tasks(pid: &str, names: Option<&[&str]>) -> Option<Vec<std::path::PathBuf>> {
+    let dir = std::fs::read_dir(format!("/proc/{pid}/task")).ok()?;
+    let named = |p: &std::path::Path| {
+        names.is_none_or(|names| {
+            let comm = std::fs::read_to_string(p.join("comm")).unwrap_or_default();
+            names.contains(&comm.trim())
+        })
+    };
+    Some(
+        dir.flatten()
+            .map(|e| e.path())
+            .filter(|p| named(p))
+            .collect(),
+    )
+}
+
+/// Field `i` of a thread's schedstat (0: ns on a CPU, 2: times put on a CPU).
+fn schedstat(task: &std::path::Path, i: usize) -> Option<u64> {
+    let s = std::fs::read_to_string(task.join("schedstat")).ok()?;
+    s.split_whitespace().nth(i)?.parse().ok()
+}
+
 /// CPU time (ns) of a process's threads (`pid` or "self"), all or those named in `names`: from
 /// schedstat, or from stat's utime+stime (10 ms ticks) where schedstat is missing.
 pub fn task_cpu_ns(pid: &str, names: Option<&[&str]>) -> Option<u64> {
-    let dir = std::fs::read_dir(format!("/proc/{pid}/task")).ok()?;
     let mut total = 0u64;
-    for e in dir.flatten() {
-        let p = e.path();
-        if let Some(names) = names {
-            let comm = std::fs::read_to_string(p.join("comm")).unwrap_or_default();
-            if !names.contains(&comm.trim()) {
-                continue;
-            }
-        }
-        if let Some(ns) = std::fs::read_to_string(p.join("schedstat"))
-            .ok()
-            .and_then(|s| s.split_whitespace().next()?.parse::<u64>().ok())
-        {
+    for p in tasks(pid, names)? {
+        if let Some(ns) = schedstat(&p, 0) {
             total += ns;
             continue;
         }
@@ -33,18 +45,10 @@ pub fn task_cpu_ns(pid: &str, names: Option<&[&str]>) -> Option<u64> {
 /// How often the threads of a process (`pid` or "self") named in `names` were put on a CPU
 /// (schedstat's third field: each wake-up from sleep is one): the wake-ups a node costs.
 pub fn task_slices(pid: &str, names: &[&str]) -> Option<u64> {
-    let dir = std::fs::read_dir(format!("/proc/{pid}/task")).ok()?;
-    let mut total = 0u64;
-    for e in dir.flatten() {
-        let p = e.path();
-        let comm = std::fs::read_to_string(p.join("comm")).unwrap_or_default();
-        if !names.contains(&comm.trim()) {
-            continue;
-        }
-        let s = std::fs::read_to_string(p.join("schedstat")).ok()?;
-        total += s.split_whitespace().nth(2)?.parse::<u64>().ok()?;
-    }
-    Some(total)
+    tasks(pid, Some(names))?
+        .iter()
+        .map(|p| schedstat(p, 2))
+        .sum()
 }
 
 /// VmRSS and VmHWM (peak) of a process (`pid` or "self"), MB.

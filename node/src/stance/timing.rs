@@ -43,8 +43,8 @@ impl Default for ImageClock {
 
 /// The lateness quantile's steps, µs (down, up): it settles where one image in eight comes
 /// earlier (the runner polls from a little before the time), and follows a few hundred µs
-/// within about two seconds of images. A grid whose smoothed gap is a few µs short (an integer
-/// EMA rounds down) lags the receipts by sixteen times that: 27-55 µs measured.
+/// within about two seconds of images. A grid whose smoothed gap is a few µs short lags the
+/// receipts by sixteen times that (docs/decisions/node-wake.md, "Second stop").
 const LATE_STEPS: (i64, i64) = (14, 2);
 
 impl ImageClock {

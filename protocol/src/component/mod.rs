@@ -63,13 +63,13 @@ mod lockstep;
 mod run;
 mod signals;
 mod threaded;
+mod wake;
 
 pub use lockstep::LockStep;
-pub use run::{
-    COALESCE_US, POLL_AFTER_US, POLL_LEAD_US, PRE_WAKE_US, RunOptions, RunStats, run, run_opened,
-};
+pub use run::{RunOptions, RunStats, run, run_opened};
 pub use signals::{SignalError, Signals};
 pub use threaded::{Link, LinkStats, Threaded, spawn, spawn_one};
+pub use wake::{COALESCE_US, POLL_AFTER_US, POLL_LEAD_US, PRE_WAKE_US};
 
 use crate::bus::ControllerState;
 use crate::frame::{CanFrame, Stamped};

@@ -4,12 +4,12 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
+use super::wake::{COALESCE_US, Plan, Wake};
 use super::{Component, Link, LinkStats, Outbox};
 use crate::bus::{Backoff, BusSource, CanBus, HealthWatch, Tap, after_bus_error, open_with_retry};
 use crate::clock::Clock;
 use crate::error::BusError;
 use crate::frame::Stamped;
-use crate::quantile::StepQuantile;
 
 /// How [`run`] drives a component.
 #[derive(Clone)]
@@ -46,54 +46,6 @@ pub struct RunOptions {
 
 /// How long a socket must stay quiet for a drain ([`RunOptions::drain_on_stop`]) to end.
 pub const DRAIN_QUIET: Duration = Duration::from_millis(20);
-
-/// How long before a component's expected frame ([`Component::expected_frame_us`]) [`run`]
-/// wakes to warm it up, µs: more than a wake from sleep (30-130 µs late in a VM), a cold
-/// warm-up and the poll's lead take.
-pub const PRE_WAKE_US: u64 = 500;
-
-/// How long before the expected time [`run`] polls the bus, µs: the expected time is when the
-/// component expects the frame, not the earliest it can come (the node: one image in eight
-/// comes earlier, 15-45 µs in a VM). The sleep before it ends early by the thread's measured
-/// oversleep, so the poll starts here, not a wake-up's lateness after.
-pub const POLL_LEAD_US: u64 = 50;
-
-/// How long past the expected time [`run`] polls before it sleeps again, µs: a frame that comes
-/// later than that (a late sender, a bus busy with other frames) wakes the thread as before.
-pub const POLL_AFTER_US: u64 = 300;
-
-/// While the component's expected frame is further than [`PRE_WAKE_US`] away, [`run`] sleeps
-/// this long at a time without watching the bus, then takes every frame queued, µs: the frames
-/// before it need no instant answer. Eight feet woke the node 930 times a second (one image's
-/// burst each), 285 with this; 1 ms saved nothing (docs/decisions/node-wake.md). A socket's
-/// receive buffer holds thousands of frames; 4 ms of eight feet is about 105.
-pub const COALESCE_US: u64 = 4_000;
-
-/// The thread's timer slack while it waits for expected frames, ns: Linux lets a sleep run
-/// 50 µs late by default; 1 µs halves the oversleep in a VM (89 -> 34 µs median, measured).
-const TIMER_SLACK_NS: u64 = 1_000;
-
-/// The sleep before a poll ends this much early, µs: the running 7/8 quantile of the thread's
-/// oversleep (its steps down and up), from 100 µs; at most `MAX_OVERSLEEP_US`, so the poll
-/// starts after the warm-up.
-const OVERSLEEP: (i64, i64, i64) = (100, 2, 14);
-const MAX_OVERSLEEP_US: i64 = 300;
-
-/// Sets the calling thread's timer slack to [`TIMER_SLACK_NS`] (Linux; elsewhere nothing): the
-/// runner's thread, once its component expects frames.
-fn set_timer_slack() {
-    #[cfg(target_os = "linux")]
-    // SAFETY: PR_SET_TIMERSLACK reads one integer and sets the calling thread's slack only.
-    unsafe {
-        libc::prctl(
-            libc::PR_SET_TIMERSLACK,
-            TIMER_SLACK_NS as libc::c_ulong,
-            0 as libc::c_ulong,
-            0 as libc::c_ulong,
-            0 as libc::c_ulong,
-        );
-    }
-}
 
 impl Default for RunOptions {
     fn default() -> Self {
@@ -213,13 +165,11 @@ pub(crate) fn run_with<C: Component + ?Sized>(
             continue 'open;
         }
         let mut next_tick = Instant::now();
-        let mut oversleep = StepQuantile::new(OVERSLEEP.0, OVERSLEEP.1, OVERSLEEP.2);
+        let mut wake = Wake::default();
         // The last burst took `max_burst` frames: more may be queued.
         let mut backlog = false;
         // Error frames of this handle already in `bus_errors`.
         let mut counted = 0u64;
-        // The expected frame the component was last warmed up for.
-        let mut warmed_for = None;
         while !stopping() && !component.done() {
             between(component);
             // Everything queued (up to a burst), then the tick: a burst never waits one tick
@@ -229,39 +179,32 @@ pub(crate) fn run_with<C: Component + ?Sized>(
                 Some(idle) => (next_tick + idle).saturating_duration_since(Instant::now()),
                 None => next_tick.saturating_duration_since(Instant::now()),
             };
-            // A frame to answer at once is due (`expected_frame_us`): wake PRE_WAKE_US before
-            // it to warm up, sleep again until POLL_LEAD_US before it (less the thread's
-            // oversleep), then poll the bus until a frame comes or POLL_AFTER_US past it.
+            // A frame to answer at once is due (`expected_frame_us`): the plan says whether to
+            // sleep in batches, warm up, sleep to the poll, or poll (`wake.rs`).
             let mut poll_until = None;
             let mut woken_for = None;
             let mut coalesce = false;
             if let Some(at) = component.expected_frame_us() {
-                let now = now_us();
+                if wake.warm_up_due(at, now_us()) {
+                    component.warm_up();
+                }
                 let wall = |us: u64| Duration::from_secs_f64(us as f64 / scale.max(1e-9) * 1e-6);
-                if now + PRE_WAKE_US < at {
-                    wait = wait.min(wall(at - PRE_WAKE_US - now));
-                    coalesce = true;
-                } else if now <= at.saturating_add(POLL_AFTER_US) {
-                    if warmed_for != Some(at) {
-                        if warmed_for.is_none() {
-                            set_timer_slack();
-                        }
-                        component.warm_up();
-                        warmed_for = Some(at);
+                match wake.plan(at, now_us()) {
+                    Plan::Batch { for_us } => {
+                        wait = wait.min(wall(for_us));
+                        coalesce = true;
                     }
-                    // The warm-up took time: where are we now?
-                    let now = now_us();
-                    let early = oversleep.get().clamp(0, MAX_OVERSLEEP_US) as u64;
-                    let wake = at.saturating_sub(POLL_LEAD_US + early);
-                    if now < wake {
-                        if wall(wake - now) <= wait {
-                            woken_for = Some(wake);
+                    Plan::Sleep { for_us, until_us } => {
+                        if wall(for_us) <= wait {
+                            woken_for = Some(until_us);
                         }
-                        wait = wait.min(wall(wake - now));
-                    } else if now < at.saturating_add(POLL_AFTER_US) {
-                        poll_until = Some(Instant::now() + wall(at + POLL_AFTER_US - now));
+                        wait = wait.min(wall(for_us));
+                    }
+                    Plan::Poll { for_us } => {
+                        poll_until = Some(Instant::now() + wall(for_us));
                         wait = Duration::ZERO;
                     }
+                    Plan::AsUsual => {}
                 }
             }
             // Not while frames are left from the last batch: a stream faster than a burst per
@@ -287,20 +230,17 @@ pub(crate) fn run_with<C: Component + ?Sized>(
                     }
                     // Polling for the expected frame (a tick waits for the poll: at most
                     // POLL_LEAD_US plus the oversleep plus POLL_AFTER_US). A yield, not a spin:
-                    // a thread that spun kept a sender on its core from running, and the frame
-                    // it waited for came just after the poll (323-331 µs late in 3 of 7 runs);
-                    // on a robot the controller shares the core.
+                    // a spin kept a sender on the core from running (node-wake.md), and on a
+                    // robot the controller shares the core.
                     Ok(None) if taken == 0 && poll_until.is_some_and(|u| Instant::now() < u) => {
                         std::thread::yield_now();
                     }
                     Ok(None) => {
                         // A sleep before a poll that ran out: how late did it end?
                         if taken == 0
-                            && let Some(wake) = woken_for
+                            && let Some(until) = woken_for
                         {
-                            oversleep.observe(
-                                (now_us() as i64 - wake as i64).clamp(0, MAX_OVERSLEEP_US),
-                            );
+                            wake.slept(until, now_us());
                         }
                         break;
                     }
@@ -635,7 +575,9 @@ mod tests {
         assert_eq!(c.events, ["warm-up", "frame"]);
         // Earlier than PRE_WAKE_US before the time: no warm-up yet.
         let c = expects(
-            Arc::new(crate::clock::ManualClock::new(at - PRE_WAKE_US - 100)),
+            Arc::new(crate::clock::ManualClock::new(
+                at - crate::component::PRE_WAKE_US - 100,
+            )),
             at,
             Some(30),
             60,
