@@ -7,7 +7,7 @@
 
 use super::Kernels;
 use super::features::FeatureExtractor;
-use super::kernels::{centre, gram_inverse, half_matrix, project, quad_form, sq_dists};
+use super::kernels::{centre, gram_inverse, half_matrix, load_area, project, quad_form, sq_dists};
 use super::model::{MinContact, Model};
 use super::repair;
 use crate::unknown::novelty::MAX_K;
@@ -370,7 +370,8 @@ impl Classifier {
 
     /// The working image shows a foot on the ground (the model's [`MinContact`]).
     pub fn in_contact(&self) -> bool {
-        self.contact.holds(&self.work)
+        let (load, area) = load_area(&self.work, self.avx2_fma);
+        self.contact.holds_for(load, area)
     }
 
     /// Log posterior per class of the last decision (equal priors; all -inf after a decision
@@ -397,7 +398,7 @@ impl Classifier {
         // An integer sum: exact, and it vectorises (an f64 running sum is one long dependency
         // chain). Only when the model scales or checks the load.
         let total = if m.normalize_load.is_some() || m.load_ranges.is_some() {
-            self.work.iter().map(|&p| p as u64).sum::<u64>() as f64
+            load_area(&self.work, self.avx2_fma).0 as f64
         } else {
             0.0
         };

@@ -76,6 +76,18 @@ pub(super) fn roughness_sums(work: &[u16], rows: usize, cols: usize, avx2_fma: b
     portable::roughness_sums(work, rows, cols)
 }
 
+/// A working image's load (the sum of its pixels) and area (pixels above zero): exact.
+pub(super) fn load_area(work: &[u16], avx2_fma: bool) -> (u64, u32) {
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = avx2_fma;
+    #[cfg(target_arch = "x86_64")]
+    if avx2_fma {
+        // SAFETY: the CPU supports the features the function was compiled for.
+        return unsafe { x86_64::load_area_avx2(work) };
+    }
+    portable::load_area(work)
+}
+
 /// `out = f - mean` and `|f - mean|^2` (in f64).
 pub(super) fn centre(f: &[f32], mean: &[f32], out: &mut [f32], avx2_fma: bool) -> f64 {
     #[cfg(not(target_arch = "x86_64"))]
@@ -187,6 +199,20 @@ mod tests {
                     "row {j}: {qj} vs {want}"
                 );
             }
+        }
+    }
+
+    #[test]
+    fn load_and_area_are_exact_past_a_u32_block() {
+        // 70,000 pixels at the top of u16: the sum overflows one u32 block, not two.
+        let mut work = vec![u16::MAX; 70_000];
+        work[3] = 0;
+        work[69_999] = 0;
+        let want_load: u64 = work.iter().map(|&p| p as u64).sum();
+        for avx2_fma in [false, Kernels::Native.avx2_fma()] {
+            assert_eq!(load_area(&work, avx2_fma), (want_load, 69_998));
+            assert_eq!(load_area(&work[..1600], avx2_fma), (1599 * 65_535, 1599));
+            assert_eq!(load_area(&[], avx2_fma), (0, 0));
         }
     }
 

@@ -85,6 +85,24 @@ pub(crate) fn centre(f: &[f32], mean: &[f32], out: &mut [f32]) -> f64 {
     s
 }
 
+/// Load and area of a working image. The sums run in u32 lanes over blocks that cannot
+/// overflow them (65,536 pixels of at most 65,535), which the compiler vectorises; a u64 fold
+/// widened every pixel twice and took 8% of a decision (`perf record` on the classify bench).
+#[inline(always)]
+pub(crate) fn load_area(work: &[u16]) -> (u64, u32) {
+    let (mut load, mut area) = (0u64, 0u32);
+    for block in work.chunks(1 << 16) {
+        let (mut l, mut a) = (0u32, 0u32);
+        for &p in block {
+            l += p as u32;
+            a += (p > 0) as u32;
+        }
+        load += l as u64;
+        area += a;
+    }
+    (load, area)
+}
+
 #[inline(always)]
 pub(crate) fn sq_dists(samples: &[f32], q: &[f32], out: &mut [f64]) {
     if q.is_empty() {

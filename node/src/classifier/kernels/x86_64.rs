@@ -175,3 +175,8 @@ pub(super) fn centre_avx2(f: &[f32], mean: &[f32], out: &mut [f32]) -> f64 {
 pub(super) fn sq_dists_avx2(samples: &[f32], q: &[f32], out: &mut [f64]) {
     portable::sq_dists(samples, q, out);
 }
+
+#[target_feature(enable = "avx2,fma")]
+pub(super) fn load_area_avx2(work: &[u16]) -> (u64, u32) {
+    portable::load_area(work)
+}

@@ -56,15 +56,18 @@ impl MinContact {
 
     /// Load and area of a working image.
     pub fn measure(work: &[u16]) -> (u64, u32) {
-        work.iter().fold((0u64, 0u32), |(l, a), &p| {
-            (l + p as u64, a + (p > 0) as u32)
-        })
+        crate::classifier::kernels::load_area(work, false)
     }
 
     /// The image shows a foot on the ground: at least this load and area, and never blank.
     pub fn holds(&self, work: &[u16]) -> bool {
         let (l, a) = Self::measure(work);
-        a > 0 && l >= self.load && a >= self.area
+        self.holds_for(l, a)
+    }
+
+    /// [`MinContact::holds`] for a working image's load and area, measured by the caller.
+    pub fn holds_for(&self, load: u64, area: u32) -> bool {
+        area > 0 && load >= self.load && area >= self.area
     }
 }
 
