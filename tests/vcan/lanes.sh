@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Runs the vcan test binary (tests/vcan.rs) on SocketCAN interfaces it sets up here; called by
+# Runs the vcan test binary (tests/vcan.rs, its modules in tests/vcan/) on SocketCAN interfaces
+# it sets up here; called by
 # tests/vcan/run.sh on this kernel, in User-mode Linux or in the VM:
 #
 #   tests/vcan/lanes.sh VCAN_TEST_BINARY [TEST_NAME_FILTER]
@@ -31,12 +32,12 @@ done
 ip link set lo up 2>/dev/null || true
 
 alone=(
-  node_bench_on_vcan_reports_latency_cpu_and_memory
-  images_stream_at_100_hz_for_10_s_none_lost
+  bench::node_bench_on_vcan_reports_latency_cpu_and_memory
+  sockets::images_stream_at_100_hz_for_10_s_none_lost
   # In a lane beside the capture test, its 50% damage run got 78 and 74 of 88 learned steps
   # right (alone in CI: 76, 78, 79), the whole run 74 of 92 against its floor of 80%: too
   # near its bounds to be judged under another robot's load.
-  node_classifies_every_gait_with_a_g2_model_survives_damage_and_ignores_a_flood
+  gaits::node_classifies_every_gait_with_a_g2_model_survives_damage_and_ignores_a_flood
 )
 # Alone too, and with the robot's clock at PRESRS_SLOW_SPEED where set (run.sh sets it where
 # the kernel is emulated), the tests whose robot-time bounds hold wall-clock work: the leg's
@@ -47,14 +48,14 @@ alone=(
 # TCG its link came back 1.02 robot s after the fault, past its 0.8 s; in User-mode Linux at
 # 0.5 the node's restart took 1.38 robot s of its 1.5).
 slow=(
-  leg_bridge_drives_each_protocols_simulated_motors_as_processes
-  sim_node_and_controller_as_processes_classify_steps_and_survive_bus_and_process_faults
+  motors::leg_bridge_drives_each_protocols_simulated_motors_as_processes
+  faults::sim_node_and_controller_as_processes_classify_steps_and_survive_bus_and_process_faults
 )
 # In a lane, each test's time grew by a fifth to a third (capture 354 -> 456 s, cantools'
 # decode of a sim run 50 -> 95 s). Lane a: the capture path; lane b every other test (MCAP and
 # the live view, cantools, candump, the short ones).
 lane_a=(
-  capture_path_over_socketcan_from_candump_logs_to_a_deployed_model
+  capture::capture_path_over_socketcan_from_candump_logs_to_a_deployed_model
 )
 
 logs=$(mktemp -d)
