@@ -27,6 +27,8 @@ use protocol::tactile::{ImageRef, Reassembler, Segmenter, Variant};
 use protocol::{BusError, Message};
 use rand::{Rng, SeedableRng};
 
+// A crate root's modules are looked for beside it in tests/, where other test binaries live:
+// `#[path]` keeps these in tests/vcan/.
 #[path = "vcan/bench.rs"]
 mod bench;
 #[path = "vcan/capture.rs"]

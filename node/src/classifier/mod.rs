@@ -7,6 +7,7 @@
 //! readers.
 
 pub mod dataset;
+mod decision;
 pub mod features;
 pub mod image;
 mod kernels;

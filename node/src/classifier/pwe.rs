@@ -2,8 +2,9 @@
 //! Parzen-window (Gaussian kernel density) decision. Every buffer is allocated when the
 //! classifier is built; classifying an image allocates nothing.
 //!
-//! One concept in one file (over 600 lines): the run-time classifier's buffers and the steps that
-//! share them; split, each step would reach into the others' buffers.
+//! One concept in one file: the run-time classifier's buffers and the steps that
+//! share them; split, each step would reach into the others' buffers. What it returns,
+//! [`Decision`], is in `decision.rs`.
 
 use super::Kernels;
 use super::features::FeatureExtractor;
@@ -11,80 +12,9 @@ use super::kernels::{centre, gram_inverse, half_matrix, load_area, project, quad
 use super::model::{MinContact, Model};
 use super::repair;
 use crate::unknown::novelty::MAX_K;
-use crate::unknown::{self, Bands, Measured, Reason};
+use crate::unknown::{self, Bands, Measured};
 
-/// The outcome for one image.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Decision {
-    /// The class, or `None` when the image is unknown ground (see `reason`) or shows no contact.
-    pub class: Option<usize>,
-    /// The most probable class, known or not.
-    pub best: usize,
-    /// Terrain id of `class` (0xFF when unknown).
-    pub terrain_id: u8,
-    /// Posterior of the best class (equal priors), 0..=1.
-    pub confidence: f64,
-    /// Log Parzen density of the best class (-inf without contact).
-    pub log_density: f64,
-    /// The image shows a foot on the ground (see [`MinContact`]). Without contact nothing else
-    /// was computed: the decision is unknown, confidence 0, and no class is "best".
-    pub contact: bool,
-    /// How unlike any known terrain the image is, larger = less like (see
-    /// [`crate::unknown::novelty`]); for a model without a novelty score, the negated log density.
-    /// +inf without contact.
-    pub novelty: f64,
-    /// The best class's threshold the novelty was held against: above it, unknown. (For a
-    /// model without a novelty score, the negated density threshold.)
-    pub threshold: f64,
-    /// Which check called the image unknown ([`crate::unknown::image_verdict`]); `None` for a
-    /// terrain and for an image without contact.
-    pub reason: Option<Reason>,
-}
-
-impl Decision {
-    /// The decision for an image without contact: unknown, confidence 0.
-    pub const NO_CONTACT: Decision = Decision {
-        class: None,
-        best: 0,
-        terrain_id: protocol::messages::TERRAIN_UNKNOWN,
-        confidence: 0.0,
-        log_density: f64::NEG_INFINITY,
-        contact: false,
-        novelty: f64::INFINITY,
-        threshold: f64::INFINITY,
-        reason: None,
-    };
-
-    /// What to call this decision among the model's class `names`: the class, `unknown`, or
-    /// `unknown (no contact)` for an image without contact, which is no terrain whatever it
-    /// lies nearest.
-    pub fn label<'a>(&self, names: &'a [String]) -> &'a str {
-        match self.class {
-            _ if !self.contact => "unknown (no contact)",
-            Some(k) => names.get(k).map_or("unknown", String::as_str),
-            None => "unknown",
-        }
-    }
-
-    /// The decision as `presrs classify --json` prints it: `file`, `terrain` ([`Self::label`]),
-    /// `contact`, `best` (the nearest class, also when unknown), `confidence`, `novelty` and
-    /// `threshold` (null without contact: JSON has no infinity), so that anyone can draw the
-    /// novelty's ROC on their own images.
-    pub fn to_json(&self, file: &str, names: &[String]) -> serde_json::Value {
-        let num = |v: f64| v.is_finite().then_some(v);
-        serde_json::json!({
-            "file": file,
-            "terrain": self.label(names),
-            "contact": self.contact,
-            "best": self.contact.then(|| names.get(self.best).map(String::as_str)).flatten(),
-            "confidence": self.confidence,
-            "novelty": num(self.novelty),
-            "threshold": num(self.threshold),
-            "reason": self.reason.map(Reason::name),
-        })
-    }
-}
-
+pub use super::decision::Decision;
 pub use super::model::{DepthMismatch, ImageMismatch, SizeMismatch};
 
 /// A model ready to classify: planned FFT and scratch buffers sized once, so that a decision allocates nothing.
@@ -384,21 +314,33 @@ impl Classifier {
     /// "unknown" without features (a blank or nearly blank frame lay nearest one class's
     /// samples and came out as that terrain at confidence 1.0).
     pub fn decide(&mut self) -> Decision {
-        if !self.in_contact() {
+        let (load, area) = load_area(&self.work, self.avx2_fma);
+        if !self.contact.holds_for(load, area) {
             self.log_posteriors.fill(f64::NEG_INFINITY);
             return Decision::NO_CONTACT;
         }
-        self.decide_in_contact()
+        self.decide_with_load(load)
     }
 
     /// [`Classifier::decide`] for a working image the caller has found in contact
-    /// ([`Classifier::in_contact`]), without measuring it again.
+    /// ([`Classifier::in_contact`]), without checking it again. Its load is measured here: the
+    /// caller may have repaired the image since.
     pub fn decide_in_contact(&mut self) -> Decision {
         let m = &self.model;
-        // An integer sum: exact, and it vectorises (an f64 running sum is one long dependency
-        // chain). Only when the model scales or checks the load.
+        let load = if m.normalize_load.is_some() || m.load_ranges.is_some() {
+            load_area(&self.work, self.avx2_fma).0
+        } else {
+            0
+        };
+        self.decide_with_load(load)
+    }
+
+    /// The decision for a working image in contact whose load is `load`.
+    fn decide_with_load(&mut self, load: u64) -> Decision {
+        let m = &self.model;
+        // Only when the model scales or checks the load.
         let total = if m.normalize_load.is_some() || m.load_ranges.is_some() {
-            load_area(&self.work, self.avx2_fma).0 as f64
+            load as f64
         } else {
             0.0
         };
@@ -661,49 +603,5 @@ fn insert_smallest(b: &mut [f64], d2: f64) {
             j -= 1;
         }
         b[j] = d2;
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_decision_without_contact_is_no_terrain_whatever_it_lies_nearest() {
-        let names = vec!["wood".to_string(), "carpet".to_string()];
-        let mut d = Decision::NO_CONTACT;
-        d.class = Some(1);
-        assert_eq!(d.label(&names), "unknown (no contact)");
-        d.contact = true;
-        assert_eq!(d.label(&names), "carpet");
-        d.class = None;
-        assert_eq!(d.label(&names), "unknown");
-        d.class = Some(7);
-        assert_eq!(d.label(&names), "unknown");
-    }
-
-    #[test]
-    fn the_json_report_gives_the_score_and_its_threshold_or_null() {
-        let names = vec!["wood".to_string(), "carpet".to_string()];
-        let v = Decision::NO_CONTACT.to_json("a.pgm", &names);
-        assert_eq!(v["terrain"], "unknown (no contact)");
-        assert!(v["best"].is_null() && v["novelty"].is_null() && v["threshold"].is_null());
-        let d = Decision {
-            class: None,
-            best: 1,
-            contact: true,
-            confidence: 0.75,
-            novelty: 1.5,
-            threshold: 1.1,
-            ..Decision::NO_CONTACT
-        };
-        let v = d.to_json("b.pgm#2", &names);
-        assert_eq!(v["file"], "b.pgm#2");
-        assert_eq!(v["terrain"], "unknown");
-        assert_eq!(v["best"], "carpet");
-        assert_eq!(
-            (v["novelty"].as_f64(), v["threshold"].as_f64()),
-            (Some(1.5), Some(1.1))
-        );
     }
 }

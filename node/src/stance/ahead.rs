@@ -49,7 +49,7 @@ impl StancePipeline {
     /// Runs the classifier the step of `foot` will be decided with on the foot's last kept
     /// image and drops the result: the model's matrices and samples, and the code that reads
     /// them, are in cache when the deciding image comes (a foot alone idles 10 ms between
-    /// images, and its decision took 46-50 us cold against 18-20 us with eight feet). The
+    /// images: cold and warm decisions in docs/decisions/node-wake.md). The
     /// classifier's state is its scratch, written again by the next decision: nothing about
     /// the step changes.
     pub fn warm_up(&mut self, foot: u8) {

@@ -85,9 +85,8 @@ pub(crate) fn centre(f: &[f32], mean: &[f32], out: &mut [f32]) -> f64 {
     s
 }
 
-/// Load and area of a working image. The sums run in u32 lanes over blocks that cannot
-/// overflow them (65,536 pixels of at most 65,535), which the compiler vectorises; a u64 fold
-/// widened every pixel twice and took 8% of a decision (`perf record` on the classify bench).
+/// Load and area of a working image, in u32 lanes over blocks that cannot overflow them
+/// (65,536 pixels of at most 65,535), which vectorise (docs/decisions/node-wake.md, "Third stop").
 #[inline(always)]
 pub(crate) fn load_area(work: &[u16]) -> (u64, u32) {
     let (mut load, mut area) = (0u64, 0u32);
