@@ -64,6 +64,8 @@ pub mod quantile;
 pub mod tactile;
 #[cfg(feature = "std")]
 pub mod terrain;
+#[cfg(feature = "std")]
+pub mod traffic;
 
 #[cfg(feature = "std")]
 pub use error::BusError;

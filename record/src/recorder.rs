@@ -6,8 +6,9 @@ use std::collections::HashMap;
 use std::fmt::Write;
 
 use protocol::dbc::{Signal, signals, value_table};
-use protocol::messages::{self, Message, TerrainClass};
-use protocol::tactile::{Reassembler, TactileImage};
+use protocol::messages::TerrainClass;
+use protocol::tactile::TactileImage;
+use protocol::traffic::{Heard, Traffic};
 use protocol::{IdConfig, MessageKind, Stamped, TerrainCatalog};
 
 use crate::RecordError;
@@ -127,12 +128,11 @@ impl std::fmt::Display for RecordStats {
     }
 }
 
-/// Decodes frames into channels for one [`Sink`]. Owns its reassembler: the recording sees
-/// every image the traffic carries, whatever the node made of it.
+/// Decodes frames into channels for one [`Sink`]. Listens for itself ([`Traffic`]): the
+/// recording sees every image the traffic carries, whatever the node made of it.
 pub struct Recorder {
-    ids: IdConfig,
+    traffic: Traffic,
     catalog: TerrainCatalog,
-    reassembler: Reassembler,
     channels: HashMap<Topic, usize>,
     signals: HashMap<MessageKind, Vec<Signal>>,
     labels: HashMap<&'static str, Vec<(u32, String)>>,
@@ -152,9 +152,8 @@ impl Recorder {
             .map(|&t| (t, value_table(t, &catalog)))
             .collect();
         Self {
-            ids,
+            traffic: Traffic::new(ids),
             catalog,
-            reassembler: Reassembler::default(),
             channels: HashMap::new(),
             signals,
             labels,
@@ -168,7 +167,13 @@ impl Recorder {
 
     /// Counts so far.
     pub fn stats(&self) -> RecordStats {
-        self.stats
+        let c = self.traffic.counts();
+        RecordStats {
+            frames: c.frames,
+            undecodable: c.undecodable,
+            foreign: c.foreign,
+            ..self.stats
+        }
     }
 
     /// Live recordings: the recorder's own drop count, added to NodeStatus messages.
@@ -178,33 +183,16 @@ impl Recorder {
 
     /// One frame of the traffic.
     pub fn frame(&mut self, st: &Stamped, sink: &mut dyn Sink) -> Result<(), RecordError> {
-        self.stats.frames += 1;
-        let (foot, msg) = match messages::decode(&st.frame, &self.ids) {
-            Ok(Some(m)) => m,
-            Ok(None) => {
-                self.stats.foreign += 1;
-                return Ok(());
-            }
-            Err(_) => {
-                self.stats.undecodable += 1;
-                return Ok(());
-            }
-        };
         let t_ns = st.t_us.saturating_mul(1000);
-        if let Message::TactileSegment(variant) = msg {
-            if self
-                .reassembler
-                .push(variant, foot, st.frame.data(), st.t_us)
-                .is_some()
-            {
-                self.image(foot, t_ns, sink)?;
+        match self.traffic.hear(st) {
+            Heard::Image { foot } => self.image(foot, t_ns, sink),
+            Heard::Message { foot, msg } => {
+                let kind = msg.kind();
+                self.json_message(kind, st.frame.data())?;
+                self.emit(Topic::Message(kind, foot), t_ns, sink)
             }
-            return Ok(());
+            Heard::Nothing => Ok(()),
         }
-        let kind = msg.kind();
-        let foot = if kind.per_foot() { foot } else { 0 };
-        self.json_message(kind, st.frame.data())?;
-        self.emit(Topic::Message(kind, foot), t_ns, sink)
     }
 
     /// A TerrainClass decided while recording (by a node with a model), on `/footN/terrain/model`.
@@ -316,7 +304,7 @@ impl Recorder {
 
     /// The reassembler's last image as a `foxglove.RawImage` on `/footN/image`.
     fn image(&mut self, foot: u8, t_ns: u64, sink: &mut dyn Sink) -> Result<(), RecordError> {
-        let img: &TactileImage = self.reassembler.last_image();
+        let img: &TactileImage = self.traffic.last_image();
         let bytes = &mut self.bytes;
         // Foxglove reads mono16 little-endian.
         let (encoding, bpp) = img.mono_bytes(bytes);
@@ -362,7 +350,7 @@ fn json_string(b: &mut String, s: &str) {
 mod tests {
     use super::*;
     use protocol::messages::{
-        FootContact, GaitReason, GaitStatus, LegState, NodeState, NodeStatus,
+        FootContact, GaitReason, GaitStatus, LegState, Message, NodeState, NodeStatus,
     };
     use protocol::tactile::{ImageRef, Segmenter, Variant};
 

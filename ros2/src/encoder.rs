@@ -6,7 +6,7 @@
 use std::collections::HashMap;
 
 use protocol::messages::{self, GaitReason, Message};
-use protocol::tactile::Reassembler;
+use protocol::traffic::{Heard, Traffic};
 use protocol::{IdConfig, Stamped, TerrainCatalog};
 
 use crate::Ros2Error;
@@ -90,15 +90,15 @@ pub struct EncodeStats {
 
 /// Frames in, ROS 2 messages out.
 pub struct Encoder {
-    ids: IdConfig,
+    traffic: Traffic,
     catalog: TerrainCatalog,
-    reassembler: Reassembler,
     names: Names,
     hardware_id: String,
     buf: Vec<u8>,
     health: BridgeHealth,
     legs: HashMap<u8, ros::DiagnosticStatus>,
-    stats: EncodeStats,
+    /// Messages written.
+    messages: u64,
 }
 
 impl Encoder {
@@ -106,9 +106,8 @@ impl Encoder {
     pub fn new(ids: IdConfig, catalog: TerrainCatalog, names: &Names) -> Self {
         let ns = names.namespace.trim_matches('/');
         Self {
-            ids,
+            traffic: Traffic::new(ids),
             catalog,
-            reassembler: Reassembler::default(),
             names: names.clone(),
             hardware_id: if ns.is_empty() {
                 "presrs".into()
@@ -118,7 +117,7 @@ impl Encoder {
             buf: Vec::with_capacity(8192),
             health: BridgeHealth::default(),
             legs: HashMap::new(),
-            stats: EncodeStats::default(),
+            messages: 0,
         }
     }
 
@@ -129,7 +128,13 @@ impl Encoder {
 
     /// Counts so far.
     pub fn stats(&self) -> EncodeStats {
-        self.stats
+        let c = self.traffic.counts();
+        EncodeStats {
+            frames: c.frames,
+            undecodable: c.undecodable,
+            foreign: c.foreign,
+            messages: self.messages,
+        }
     }
 
     /// The bridge's health for the next `/diagnostics`.
@@ -139,33 +144,16 @@ impl Encoder {
 
     /// One frame of the traffic.
     pub fn frame(&mut self, st: &Stamped, sink: &mut dyn RosSink) -> Result<(), Ros2Error> {
-        self.stats.frames += 1;
-        let (foot, msg) = match messages::decode(&st.frame, &self.ids) {
-            Ok(Some(m)) => m,
-            Ok(None) => {
-                self.stats.foreign += 1;
-                return Ok(());
-            }
-            Err(_) => {
-                self.stats.undecodable += 1;
-                return Ok(());
-            }
-        };
         let t_ns = st.t_us.saturating_mul(1000);
         let header = |frame_id: String| Header {
             stamp: Time::from_ns(t_ns),
             frame_id,
         };
-        match msg {
-            Message::TactileSegment(variant) => {
-                if self
-                    .reassembler
-                    .push(variant, foot, st.frame.data(), st.t_us)
-                    .is_none()
-                {
-                    return Ok(());
-                }
-                let img = self.reassembler.last_image();
+        let (foot, msg) = match self.traffic.hear(st) {
+            Heard::Nothing => return Ok(()),
+            Heard::Message { foot, msg } => (foot, msg),
+            Heard::Image { foot } => {
+                let img = self.traffic.last_image();
                 let mut data = Vec::new();
                 let (encoding, bpp) = img.mono_bytes(&mut data);
                 let m = ros::Image {
@@ -177,8 +165,12 @@ impl Encoder {
                     step: img.cols as u32 * bpp,
                     data,
                 };
-                self.emit(RosTopic::Image(foot), t_ns, &m, sink)
+                return self.emit(RosTopic::Image(foot), t_ns, &m, sink);
             }
+        };
+        match msg {
+            // Whole images come as `Heard::Image`, above.
+            Message::TactileSegment(_) => Ok(()),
             Message::TerrainClass(c) => {
                 let m = ros::TerrainClass {
                     header: header(format!("foot{foot}")),
@@ -262,7 +254,7 @@ impl Encoder {
     ) -> Result<(), Ros2Error> {
         to_cdr(msg, &mut self.buf)?;
         sink.write(topic, t_ns, &self.buf)?;
-        self.stats.messages += 1;
+        self.messages += 1;
         Ok(())
     }
 
@@ -328,7 +320,10 @@ impl Encoder {
                 ("dropped_frames", h.dropped.to_string()),
                 ("published", h.published.to_string()),
                 ("router_losses", h.router_losses.to_string()),
-                ("undecodable_frames", self.stats.undecodable.to_string()),
+                (
+                    "undecodable_frames",
+                    self.traffic.counts().undecodable.to_string(),
+                ),
             ]),
         }
     }
@@ -442,5 +437,9 @@ mod tests {
         assert!(sink.0.is_empty());
         let s = e.stats();
         assert_eq!((s.undecodable, s.foreign), (1, 1));
+        // The bridge's own diagnostics count them too.
+        let status = e.bridge_status();
+        let undecodable = status.values.iter().find(|v| v.key == "undecodable_frames");
+        assert_eq!(undecodable.map(|v| v.value.as_str()), Some("1"));
     }
 }
