@@ -293,6 +293,30 @@ impl SeedSpread {
         Spread::of(&per_seed)
     }
 
+    /// The seed whose separable classes (those not in `except`) were found least, and its
+    /// least-found class: where the spread over seeds comes from.
+    pub fn least_found(&self, except: &[String]) -> Option<(u64, &OpenSetRow)> {
+        fn kept<'a>(rows: &'a [OpenSetRow], except: &[String]) -> Vec<&'a OpenSetRow> {
+            rows.iter()
+                .filter(|r| !except.contains(&r.held_out))
+                .collect()
+        }
+        let share = |rows: &[&OpenSetRow]| {
+            rows.iter().map(|r| r.unknown_held_out).sum::<f64>() / rows.len() as f64
+        };
+        self.seeds
+            .iter()
+            .zip(&self.rows)
+            .map(|(&seed, rows)| (seed, kept(rows, except)))
+            .filter(|(_, rows)| !rows.is_empty())
+            .min_by(|a, b| share(&a.1).total_cmp(&share(&b.1)))
+            .and_then(|(seed, rows)| {
+                rows.into_iter()
+                    .min_by(|a, b| a.unknown_held_out.total_cmp(&b.unknown_held_out))
+                    .map(|r| (seed, r))
+            })
+    }
+
     /// The spread of one figure of the means.
     pub fn of(&self, f: fn(&OpenSetRow) -> f64) -> Spread {
         Spread::of(&self.means.iter().map(f).collect::<Vec<_>>())

@@ -317,8 +317,8 @@ pub(super) fn open_set_options_separable(
          neighbour's, at least 80% of a left-out class found, and the worst seed's left-out \
          share within 20 points of its median. The best single option is the one with the \
          largest AUROC on these classes.\n\n\
-         | source | default: AUROC | left-out unknown (median, worst seed) | best single option | its AUROC | its left-out | nearest neighbour AUROC | targets |\n\
-         |---|---|---|---|---|---|---|---|\n",
+         | source | default: AUROC | left-out unknown (median, worst seed) | the worst seed's least-found class (its checks) | best single option | its AUROC | its left-out | nearest neighbour AUROC | targets |\n\
+         |---|---|---|---|---|---|---|---|---|\n",
     );
     for ((name, d), opts) in names.iter().zip(default).zip(options) {
         let except: Vec<String> = d.inseparable().into_iter().map(|(n, _, _)| n).collect();
@@ -354,9 +354,20 @@ pub(super) fn open_set_options_separable(
         } else {
             format!("worst seed within 20 points: met ({gap:.1})")
         });
+        let least = d
+            .least_found(&except)
+            .map(|(seed, r)| {
+                format!(
+                    "seed {seed}: {} {} (`{}`)",
+                    r.held_out,
+                    pct(r.unknown_held_out),
+                    r.checks
+                )
+            })
+            .unwrap_or_default();
         let _ = writeln!(
             md,
-            "| {name} | **{auroc:.3}** | **{}** ({}, {}) | `{c}` | {best_auroc:.3} | {} | {nn:.3} | {} |",
+            "| {name} | **{auroc:.3}** | **{}** ({}, {}) | {least} | `{c}` | {best_auroc:.3} | {} | {nn:.3} | {} |",
             pct(held.mean),
             pct(held.median),
             pct(held.min),
@@ -656,7 +667,8 @@ mod tests {
         let c = SINGLE_OPTIONS[0];
         let md = open_set_options_separable(&["src"], &[d], &[vec![(c, o)]]);
         let want = format!(
-            "| src | **0.990** | **75.0%** (75.0%, 60.0%) | `{c}` | 0.995 | 50.0% | 0.900 | \
+            "| src | **0.990** | **75.0%** (75.0%, 60.0%) | seed 2: a 60.0% (``) | `{c}` | 0.995 | \
+             50.0% | 0.900 | \
              AUROC >= best single: 0.005 short; AUROC >= nearest neighbour: met; \
              left-out >= 80%: 5.0% short; worst seed within 20 points: met (15.0) |"
         );
