@@ -222,15 +222,30 @@ fn open_set_takes_the_models_split_and_rate_and_refuses_ones_that_cannot_work() 
     let (by_gait, options) = by_gait
         .split_once("The default against one option fixed by hand")
         .unwrap_or_default();
-    let option_rows: Vec<&str> = options
-        .lines()
-        .filter(|l| l.starts_with("| simulator"))
-        .collect();
+    // Then the same on the separable classes, with each target's verdict.
+    let (options, separable) = options
+        .split_once("The same on the separable classes")
+        .unwrap_or_default();
+    let rows = |md: &str| -> Vec<String> {
+        md.lines()
+            .filter(|l| l.starts_with("| simulator"))
+            .map(String::from)
+            .collect()
+    };
+    let option_rows = rows(options);
     assert_eq!(option_rows.len(), 3, "{options}");
     for r in option_rows {
         // A candidate by its `--unknown-checks` list, and nine columns.
         assert!(r.contains(" | `knn"), "{r}");
         assert_eq!(r.matches(" | ").count(), 8, "{r}");
+    }
+    let separable_rows = rows(separable);
+    assert_eq!(separable_rows.len(), 3, "{separable}");
+    for r in separable_rows {
+        // Nine columns: the worst seed's least-found class, and every target named.
+        assert_eq!(r.matches(" | ").count(), 8, "{r}");
+        assert!(r.contains("| seed "), "{r}");
+        assert!(r.contains("worst seed within 20 points"), "{r}");
     }
     // Only the hopping stances carry more than one gait.
     let gait_rows: Vec<&str> = by_gait.lines().filter(|l| l.starts_with("| ")).collect();
