@@ -222,6 +222,11 @@ pub struct SeedSpread {
     pub rows: Vec<Vec<OpenSetRow>>,
 }
 
+/// The mean of `f` over `rows` (NaN for none).
+fn mean_of(rows: &[&OpenSetRow], f: fn(&OpenSetRow) -> f64) -> f64 {
+    rows.iter().map(|r| f(r)).sum::<f64>() / rows.len() as f64
+}
+
 /// The AUROC at which a left-out class counts as separable from the known ones: the issue's
 /// own bar for a score that works.
 pub const SEPARABLE_AUROC: f64 = 0.9;
@@ -274,20 +279,34 @@ impl SeedSpread {
             .collect()
     }
 
+    /// Whether any seed's rows (one per left-out class) were kept.
+    pub fn has_rows(&self) -> bool {
+        self.rows.iter().any(|r| !r.is_empty())
+    }
+
+    /// Each seed with its rows of the classes not in `except` (seeds with none left out).
+    fn kept_rows<'a, 'e>(
+        &'a self,
+        except: &'e [String],
+    ) -> impl Iterator<Item = (u64, Vec<&'a OpenSetRow>)> + use<'a, 'e> {
+        self.seeds
+            .iter()
+            .zip(&self.rows)
+            .filter_map(move |(&seed, rows)| {
+                let kept: Vec<&OpenSetRow> = rows
+                    .iter()
+                    .filter(|r| !except.contains(&r.held_out))
+                    .collect();
+                (!kept.is_empty()).then_some((seed, kept))
+            })
+    }
+
     /// The spread over the seeds of `f`'s mean over each seed's rows of the classes not in
     /// `except`.
     pub fn of_classes(&self, except: &[String], f: fn(&OpenSetRow) -> f64) -> Spread {
         let per_seed: Vec<f64> = self
-            .rows
-            .iter()
-            .map(|rows| {
-                let kept: Vec<f64> = rows
-                    .iter()
-                    .filter(|r| !except.contains(&r.held_out))
-                    .map(f)
-                    .collect();
-                kept.iter().sum::<f64>() / kept.len() as f64
-            })
+            .kept_rows(except)
+            .map(|(_, rows)| mean_of(&rows, f))
             .filter(|x| !x.is_nan())
             .collect();
         Spread::of(&per_seed)
@@ -296,25 +315,14 @@ impl SeedSpread {
     /// The seed whose separable classes (those not in `except`) were found least, and its
     /// least-found class: where the spread over seeds comes from.
     pub fn least_found(&self, except: &[String]) -> Option<(u64, &OpenSetRow)> {
-        fn kept<'a>(rows: &'a [OpenSetRow], except: &[String]) -> Vec<&'a OpenSetRow> {
-            rows.iter()
-                .filter(|r| !except.contains(&r.held_out))
-                .collect()
-        }
-        let share = |rows: &[&OpenSetRow]| {
-            rows.iter().map(|r| r.unknown_held_out).sum::<f64>() / rows.len() as f64
-        };
-        self.seeds
-            .iter()
-            .zip(&self.rows)
-            .map(|(&seed, rows)| (seed, kept(rows, except)))
-            .filter(|(_, rows)| !rows.is_empty())
-            .min_by(|a, b| share(&a.1).total_cmp(&share(&b.1)))
-            .and_then(|(seed, rows)| {
-                rows.into_iter()
-                    .min_by(|a, b| a.unknown_held_out.total_cmp(&b.unknown_held_out))
-                    .map(|r| (seed, r))
-            })
+        let found = |r: &OpenSetRow| r.unknown_held_out;
+        let (seed, rows) = self
+            .kept_rows(except)
+            .min_by(|a, b| mean_of(&a.1, found).total_cmp(&mean_of(&b.1, found)))?;
+        let least = rows
+            .into_iter()
+            .min_by(|a, b| a.unknown_held_out.total_cmp(&b.unknown_held_out))?;
+        Some((seed, least))
     }
 
     /// The spread of one figure of the means.

@@ -56,11 +56,6 @@ impl Traffic {
         }
     }
 
-    /// The identifiers listened to.
-    pub fn ids(&self) -> &IdConfig {
-        &self.ids
-    }
-
     /// Counts so far.
     pub fn counts(&self) -> TrafficCounts {
         self.counts

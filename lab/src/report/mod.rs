@@ -168,6 +168,7 @@ mod damage;
 mod dynamic;
 mod gaits;
 mod open_set;
+mod open_set_seeds;
 mod plot;
 mod resolution;
 mod static_table;
