@@ -34,7 +34,7 @@ cargo clippy -p presrs-protocol --no-default-features --target thumbv7em-none-ea
 # ignored; tests/vcan/run.sh runs them below, on real SocketCAN.
 part "cargo test (unit, property, cantools/python-can interop)"
 cargo test --workspace --features interop,vcan
-part "vcan suite, the host's part: the test binary, the release build, the system tests' model"
+part "vcan suite, the host's part: the test build's binaries, the system tests' model"
 tests/vcan/run.sh --prepare
 # Where this kernel has no CAN the vcan run is User-mode Linux, one CPU, which run.sh pins to
 # core 0 (or a VM). The arm64 part stays on every core at idle priority: User-mode Linux leaves

@@ -29,7 +29,7 @@ cd "$root"
 # aarch64 builds' own: cargo locks a target directory's profile directory while it builds (a
 # cross build locks the host's release/ too, for its build scripts and proc macros), so in the
 # same one ./test-all.sh's aarch64 builds, started at once, would wait on clippy, `cargo test`
-# and the vcan suite's release build, or make them wait.
+# and the amd64 release build, or make them wait.
 meta=$(cargo metadata --no-deps --format-version 1)
 target_dir=$(python3 -c 'import json, sys; print(json.load(sys.stdin)["target_directory"])' <<<"$meta")
 version=$(python3 -c 'import json, sys; print(next(p["version"] for p in json.load(sys.stdin)["packages"] if p["name"] == "presrs"))' <<<"$meta")
@@ -65,12 +65,20 @@ if [ "$build_only" = 1 ]; then
   step "builds done"
   exit 0
 fi
+# The amd64 package's x86-64 release binary, in the host's target directory, beside the next
+# two steps (the emulated tests hold one core; both work in the aarch64 directory): the vcan
+# suite runs the test build's binaries, so no release build precedes this one.
+step "the amd64 package's binary: cargo build --release --bin presrs (beside the next steps)"
+cargo build --release --quiet --bin presrs &
+amd64_build=$!
 step "node crate tests under qemu-aarch64"
 cross cargo test "${node_tests[@]}"
 
 step "arm64 Debian package"; cross scripts/package-deb.sh --arch arm64
 # Beside the amd64 one, where scripts/test-package.sh looks.
 mkdir -p "$target_dir/debian" && cp "$cross_dir/debian/presrs_${version}_arm64.deb" "$target_dir/debian/"
+wait "$amd64_build" || { echo "test-arm64: the amd64 release build failed" >&2; exit 1; }
+step "the amd64 package's binary built"
 # The CLI's classification tests against the binary the arm64 package ships, driven by the
 # host's test binary, the one ./test-all.sh's `cargo test` built (scripts/test-exe.sh).
 step "CLI classification tests on the arm64 binary under qemu-aarch64"

@@ -8,8 +8,8 @@
 # Prints how many vcan tests passed; zero is a failure, never a skip.
 #
 #   tests/vcan/run.sh              build, then run
-#   tests/vcan/run.sh --prepare    only the host's builds (the test binary, the release binary,
-#                                  the system tests' model); what the run needs goes to a file
+#   tests/vcan/run.sh --prepare    only the host's part (the test build's binaries, the system
+#                                  tests' model); what the run needs goes to a file
 #   tests/vcan/run.sh --prepared   only the run, from that file: it builds nothing, so
 #                                  ./test-all.sh builds the arm64 part beside it
 set -euo pipefail
@@ -32,16 +32,19 @@ work="$target_dir/vcan-system"
 prepared="$work/prepared.env"
 
 prepare() {
-  # The binary ./test-all.sh's `cargo test` built (nothing rebuilt after it).
-  echo "vcan suite: building the test binary (at $SECONDS s)"
+  # The binaries ./test-all.sh's `cargo test` built (nothing rebuilt after it): the suite, the
+  # `presrs` the CLI tests run and the foot_firmware example. The dev profile optimises the
+  # simulator, the node and their numeric crates (Cargo.toml), which keeps the processes on
+  # robot time in the VM; a release build of its own cost the test command ~600 s (clean-clone
+  # run of 2026-11-28) and the suite ran green on both (docs/decisions/test-command-time.md).
+  echo "vcan suite: the test binary, presrs and the firmware example of the test build (at $SECONDS s)"
   bin=$(scripts/test-exe.sh vcan)
+  PRESRS_BIN=$(scripts/test-exe.sh presrs bin)
+  PRESRS_FIRMWARE=$(scripts/test-exe.sh foot_firmware example)
 
-  # The system tests run `presrs sim/node/controller` as processes: the release build keeps real
-  # time (also emulated), and the node needs a model trained on simulated G2 stances.
-  echo "vcan suite: building presrs (release) and training the system tests' G2 model (at $SECONDS s)"
-  cargo build --release --quiet
-  cargo build --release --quiet -p presrs-protocol --example foot_firmware
-  PRESRS_BIN="$target_dir/release/presrs"
+  # The system tests run `presrs sim/node/controller` as processes; the node needs a model
+  # trained on simulated G2 stances.
+  echo "vcan suite: training the system tests' G2 model (at $SECONDS s)"
   if [ ! -s "$work/g2-model.json" ] || [ "$PRESRS_BIN" -nt "$work/g2-model.json" ]; then
     rm -rf "$work" && mkdir -p "$work"
     "$PRESRS_BIN" dataset dynamic --gait G2 --n 60 --seed 21 --out "$work/g2" >/dev/null
@@ -69,7 +72,7 @@ prepare() {
     echo "bin='$bin'"
     echo "PRESRS_BIN='$PRESRS_BIN'"
     echo "PRESRS_MODEL='$work/g2-model.json'"
-    echo "PRESRS_FIRMWARE='$target_dir/release/examples/foot_firmware'"
+    echo "PRESRS_FIRMWARE='$PRESRS_FIRMWARE'"
     echo "PRESRS_DBC_CACHE='$PRESRS_DBC_CACHE'"
   } > "$prepared"
 }
