@@ -1,8 +1,11 @@
 #!/usr/bin/env bash
 # Builds the Debian package: target/debian/presrs_<version>_<arch>.deb
 #
-#   scripts/package-deb.sh --arch amd64|arm64 [--no-build]
+#   scripts/package-deb.sh --arch amd64|arm64 [--no-build | --binary PATH]
 #
+# --binary packages an already built presrs for that architecture instead of the release build
+# (the test command packages its test build's binary for amd64: the packaging is what it tests,
+# and a second x86-64 build of the workspace cost 500 s of its 2132, docs/decisions/test-command-time.md).
 # arm64 is cross-built on an x86-64 machine with Debian's gcc-aarch64-linux-gnu as the linker
 # (installed by scripts/install-deps.sh --cross arm64, with the rustup target). On an arm64
 # machine, --arch arm64 builds natively. The package holds:
@@ -19,13 +22,14 @@ root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root"
 
 arch=$(dpkg --print-architecture 2>/dev/null || echo amd64)
-build=1
+build=1; given_bin=""
 while [ $# -gt 0 ]; do
   case "$1" in
     --arch) arch="${2:?--arch takes amd64 or arm64}"; shift 2 ;;
     --no-build) build=0; shift ;;
-    -h|--help) sed -n '2,15p' "$0"; exit 0 ;;
-    *) echo "package-deb: unknown argument \`$1\` (use --arch amd64|arm64 [--no-build])" >&2; exit 2 ;;
+    --binary) given_bin="${2:?--binary takes the path of a built presrs}"; build=0; shift 2 ;;
+    -h|--help) sed -n '2,19p' "$0"; exit 0 ;;
+    *) echo "package-deb: unknown argument \`$1\` (use --arch amd64|arm64 [--no-build | --binary PATH])" >&2; exit 2 ;;
   esac
 done
 case "$arch" in
@@ -55,7 +59,8 @@ if [ "$build" = 1 ]; then
   echo "package-deb: cargo build --release ${target_args[*]}"
   cargo build --release --quiet "${target_args[@]}" --bin presrs
 fi
-[ -x "$bin" ] || { echo "package-deb: no binary at $bin (build it, or drop --no-build)" >&2; exit 1; }
+[ -z "$given_bin" ] || bin=$given_bin
+[ -x "$bin" ] || { echo "package-deb: no binary at $bin (build it, or drop --no-build / --binary)" >&2; exit 1; }
 
 stage="$target_dir/debian/presrs_${version}_${arch}"
 deb="$target_dir/debian/presrs_${version}_${arch}.deb"

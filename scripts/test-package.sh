@@ -9,7 +9,16 @@
 #   libgcc-s1:arm64, `dpkg -i` installs the arm64 package there, and its /usr/bin/presrs, run
 #   under qemu-aarch64 with that root's libraries, classifies every image of two simulated
 #   datasets (static presses; G2 stances) as the x86-64 binary does.
+#
+#   scripts/test-package.sh [--x86 PATH]   PATH: the x86-64 presrs to compare with (the test
+#                                          command's test build); without it, the release build
 set -euo pipefail
+x86=""
+case "${1:-}" in
+  "") ;;
+  --x86) x86="${2:?--x86 takes the path of an x86-64 presrs}" ;;
+  *) echo "test-package: unknown argument \`$1\` (use --x86 PATH, or none)" >&2; exit 2 ;;
+esac
 root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root"
 [ "$(id -u)" -eq 0 ] || { echo "test-package: needs root (chroot, debootstrap)" >&2; exit 1; }
@@ -80,8 +89,10 @@ arm_presrs=(qemu-aarch64 -L "$r" "$r/usr/bin/presrs")
 "${arm_presrs[@]}" --help >/dev/null || fail "the arm64 presrs does not start under qemu-aarch64"
 
 # The same terrain from both binaries for every image: models and data made on x86-64.
-cargo build --release --quiet --bin presrs
-x86="$target_dir/release/presrs"
+if [ -z "$x86" ]; then
+  cargo build --release --quiet --bin presrs
+  x86="$target_dir/release/presrs"
+fi
 data="$work/data"; rm -rf "$data"; mkdir -p "$data"
 "$x86" dataset static --out "$data/static" --seed 3 >/dev/null
 "$x86" dataset dynamic --gait G2 --out "$data/g2" --seed 3 >/dev/null
