@@ -50,8 +50,16 @@ pub const CHECK_COST: f64 = 0.05;
 /// find "nearly the most" new ground: among them, the fewest known images called unknown wins.
 pub const NEAR: f64 = 0.05;
 
-/// Known shares closer than this are a tie: fewer extra checks, then the AUROC, decide.
-pub const TIE: f64 = 0.005;
+/// Whether two known shares, each of `n` judged images, are a tie (fewer extra checks, then the
+/// AUROC, decide): closer than one standard deviation of their difference, `sqrt(2 p (1 - p) /
+/// n)` at their mean share `p` (at least one image). A fixed half point let one image of 90
+/// decide between the two novelty scores where every left-out terrain was found by both, and
+/// the one kept then missed a terrain the other found (docs/decisions/unknown-choice.md).
+pub fn tie(x: f64, y: f64, n: usize) -> bool {
+    let n = n.max(1) as f64;
+    let p = ((x + y) / 2.0).clamp(1.0 / n, 1.0 - 1.0 / n);
+    (x - y).abs() <= (2.0 * p * (1.0 - p) / n).sqrt()
+}
 
 /// With no candidate within the budget, those within this of the fewest known images called
 /// unknown are weighed as if they were.
@@ -232,6 +240,7 @@ pub fn choose(
             found: mean(&found[i]),
             found_per_class: found[i].clone(),
             known_unknown: known[i][1] as f64 / known[i][0].max(1) as f64,
+            known_judged: known[i][0],
         })
         .collect();
     let chosen = pick(&outcomes, budget);
@@ -391,7 +400,7 @@ fn fold(
 
 /// The kept candidate: of those within the budget, the ones that find nearly the most
 /// left-out ground (within [`NEAR`] of the best, each extra check counted [`CHECK_COST`]
-/// less), and of them the one that calls the fewest known images unknown; ties go to fewer
+/// less), and of them the one that calls the fewest known images unknown; ties ([`tie`]) go to fewer
 /// extra checks, then the larger AUROC, then the grid's order. With nothing within the budget,
 /// the same among those within [`FALLBACK_SLACK`] of the fewest known images called unknown.
 ///
@@ -425,7 +434,11 @@ fn pick(outcomes: &[Outcome], budget: f64) -> Option<usize> {
         .filter(|&i| worth(&outcomes[i]) >= best - NEAR - 1e-12)
         .min_by(|&a, &b| {
             let (x, y) = (&outcomes[a], &outcomes[b]);
-            let known = if (x.known_unknown - y.known_unknown).abs() <= TIE {
+            let known = if tie(
+                x.known_unknown,
+                y.known_unknown,
+                x.known_judged.min(y.known_judged),
+            ) {
                 std::cmp::Ordering::Equal
             } else {
                 x.known_unknown.total_cmp(&y.known_unknown)
@@ -633,6 +646,7 @@ mod tests {
             found,
             found_per_class: vec![],
             known_unknown: known,
+            known_judged: 100_000,
         };
         let p = Candidate::PLAIN;
         let n = Candidate {
@@ -671,6 +685,26 @@ mod tests {
             })
             .collect();
         assert_eq!(pick(&over, 0.05), Some(1));
+        // Every terrain found by both scores, one image of 90 apart: a tie, which the grid's
+        // order (the score with the residual) decides, not that one image.
+        let k = Candidate {
+            score: NoveltyScore::Knn,
+            ..p
+        };
+        let few = |c, known: f64| Outcome {
+            known_judged: 90,
+            ..o(c, 0.97, 1.0, known)
+        };
+        assert_eq!(
+            pick(&[few(p, 3.0 / 90.0), few(k, 2.0 / 90.0)], 0.05),
+            Some(0)
+        );
+        // Ten images of 90 apart are not a tie.
+        assert_eq!(
+            pick(&[few(p, 12.0 / 90.0), few(k, 2.0 / 90.0)], 0.2),
+            Some(1)
+        );
+        assert!(tie(0.03, 0.02, 90) && !tie(0.03, 0.02, 100_000) && !tie(0.13, 0.02, 90));
         // And the table says so, naming the fix, rather than claim the budget held.
         let c = Choice {
             candidate: over[1].candidate,

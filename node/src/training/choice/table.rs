@@ -15,6 +15,8 @@ pub struct Outcome {
     pub found_per_class: Vec<f64>,
     /// The share of the judged known images called unknown, pooled.
     pub known_unknown: f64,
+    /// The judged known images, pooled over the left-out terrains (the share's count).
+    pub known_judged: usize,
 }
 
 /// Which images were judged as known ground.
