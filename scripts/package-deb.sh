@@ -3,9 +3,9 @@
 #
 #   scripts/package-deb.sh --arch amd64|arm64 [--no-build | --binary PATH]
 #
-# --binary packages an already built presrs for that architecture instead of the release build
-# (the test command packages its test build's binary for amd64: the packaging is what it tests,
-# and a second x86-64 build of the workspace cost 500 s of its 2132, docs/decisions/test-command-time.md).
+# --binary packages an already built presrs for that architecture instead of the release
+# build (the test command packages its test build's binary for amd64: the packaging is what it
+# tests; docs/decisions/test-command-time.md, sixth stop).
 # arm64 is cross-built on an x86-64 machine with Debian's gcc-aarch64-linux-gnu as the linker
 # (installed by scripts/install-deps.sh --cross arm64, with the rustup target). On an arm64
 # machine, --arch arm64 builds natively. The package holds:

@@ -400,9 +400,10 @@ fn fold(
 
 /// The kept candidate: of those within the budget, the ones that find nearly the most
 /// left-out ground (within [`NEAR`] of the best, each extra check counted [`CHECK_COST`]
-/// less), and of them the one that calls the fewest known images unknown; ties ([`tie`]) go to fewer
-/// extra checks, then the larger AUROC, then the grid's order. With nothing within the budget,
-/// the same among those within [`FALLBACK_SLACK`] of the fewest known images called unknown.
+/// less), and of them the one that calls the fewest known images unknown; ties ([`tie`]) go
+/// to fewer extra checks, then the larger AUROC, then the grid's order. With nothing within
+/// the budget, the same among those within [`FALLBACK_SLACK`] of the fewest known images
+/// called unknown.
 ///
 /// Why not the most left-out ground alone, or the largest AUROC: on a share measured on half a
 /// run (one image is half a point) the choice flipped between folds, and the largest AUROC
