@@ -32,9 +32,9 @@ pub struct ControllerConfig {
     pub heartbeat_timeout_ms: u64,
     /// Bumpless start: how long the controller listens before it commands, ms (0: command at
     /// once). A controller (re)started on a bus where the leg already hops takes over at the
-    /// next touchdown it hears, from what the bus says (see [`Controller`]); when no
-    /// touchdown comes within this time it starts as on a fresh robot. A leg of motors whose
-    /// bridge says nobody commands it is taken at once.
+    /// next touchdown it hears, from what the bus says (see [`Controller`](crate::Controller));
+    /// when no touchdown comes within this time it starts as on a fresh robot. A leg of motors
+    /// whose bridge says nobody commands it is taken at once.
     pub takeover_ms: u64,
     /// LegCommand rate, Hz.
     pub command_hz: f64,

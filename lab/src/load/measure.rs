@@ -32,7 +32,7 @@ pub struct Tally {
 
 /// Plays `feet` in real time for `total_us` on `tx` and matches each step's TerrainClass heard
 /// on `rx`; `cpu_ns` reads the node's CPU time (at the start and end of the measured window),
-/// `bus_us` the clock the bus stamps its frames with ([`protocol::BusSource::clock`]).
+/// `bus_us` the clock the bus stamps its frames with ([`protocol::bus::BusSource::clock`]).
 pub fn measure(
     tx: &mut dyn CanBus,
     rx: &mut dyn CanBus,

@@ -116,7 +116,7 @@ impl Experiment {
     ];
 }
 
-/// A lab's own dataset (DIR/<class>/<images>, as `presrs train` reads it).
+/// A lab's own dataset (`DIR/<class>/<images>`, as `presrs train` reads it).
 pub struct UserData {
     /// Where it was read from (named in the report).
     pub dir: PathBuf,

@@ -16,8 +16,9 @@ pub struct Decision {
     pub confidence: f64,
     /// Log Parzen density of the best class (-inf without contact).
     pub log_density: f64,
-    /// The image shows a foot on the ground (see [`MinContact`]). Without contact nothing else
-    /// was computed: the decision is unknown, confidence 0, and no class is "best".
+    /// The image shows a foot on the ground (see [`MinContact`](super::model::MinContact)).
+    /// Without contact nothing else was computed: the decision is unknown, confidence 0, and no
+    /// class is "best".
     pub contact: bool,
     /// How unlike any known terrain the image is, larger = less like (see
     /// [`crate::unknown::novelty`]); for a model without a novelty score, the negated log density.

@@ -115,8 +115,8 @@ impl Default for TrainOptions {
 
 impl TrainOptions {
     /// The options that no data can make work: a downsampling factor, an unknown rate or a
-    /// split out of range. [`train`] checks them too; a caller that trains later (an
-    /// experiment's last section) checks them before it starts.
+    /// split out of range. [`train`](super::train::train) checks them too; a caller that trains
+    /// later (an experiment's last section) checks them before it starts.
     pub fn check(&self) -> Result<(), TrainError> {
         if !(1..=MAX_DOWNSAMPLE).contains(&self.downsample) {
             return Err(TrainError::Downsample(self.downsample));

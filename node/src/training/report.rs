@@ -3,7 +3,7 @@
 
 use crate::classifier::train::Split;
 
-/// A model from [`TrainingSet::train_calibrated`].
+/// A model from [`TrainingSet::train_calibrated`](super::set::TrainingSet::train_calibrated).
 pub struct Trained {
     /// The model.
     pub model: crate::classifier::Model,

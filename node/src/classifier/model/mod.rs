@@ -184,7 +184,7 @@ pub struct Model {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bits: Option<u8>,
     /// The novelty score that decides "unknown" and its calibration (see
-    /// [`super::novelty`]). Absent in older model files: the per-class density thresholds
+    /// [`crate::unknown::novelty`]). Absent in older model files: the per-class density thresholds
     /// (`unknown_thresholds`) decide, as they did.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub novelty: Option<crate::unknown::novelty::Novelty>,
