@@ -38,7 +38,7 @@ pub use names::{BadNamespace, Names};
 pub use options::Ros2Options;
 pub use output::{Ros2Output, Ros2Summary};
 #[cfg(feature = "zenoh")]
-pub use publisher::{ZenohOptions, ZenohPublisher};
+pub use publisher::{DEFAULT_ROUTER, ZenohOptions, ZenohPublisher};
 
 /// Why a ROS 2 output failed.
 #[derive(Debug, thiserror::Error)]

@@ -29,7 +29,7 @@ pub const DEFAULT_ROUTER: &str = "tcp/localhost:7447";
 /// Where the session connects.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct ZenohOptions {
-    /// Routers to connect to (`tcp/HOST:7447`); empty: `DEFAULT_ROUTER` (`tcp/localhost:7447`).
+    /// Routers to connect to (`tcp/HOST:7447`); empty: [`DEFAULT_ROUTER`].
     pub connect: Vec<String>,
     /// A Zenoh configuration file (JSON5): the lab's network, TLS, access control. Our
     /// settings above apply only where it says nothing.

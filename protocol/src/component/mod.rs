@@ -66,7 +66,7 @@ mod threaded;
 mod wake;
 
 pub use lockstep::LockStep;
-pub use run::{RunOptions, RunStats, run, run_opened};
+pub use run::{DRAIN_QUIET, RunOptions, RunStats, run, run_opened};
 pub use signals::{SignalError, Signals};
 pub use threaded::{Link, LinkStats, Threaded, spawn, spawn_one};
 pub use wake::{COALESCE_US, POLL_AFTER_US, POLL_LEAD_US, PRE_WAKE_US};

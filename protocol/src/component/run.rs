@@ -33,7 +33,7 @@ pub struct RunOptions {
     /// reports or a watcher reads.
     pub link: Option<Arc<LinkStats>>,
     /// After the stop, go on reading what reached the socket, until it has been quiet for
-    /// `DRAIN_QUIET` (20 ms) or for at most this long: for a recorder beside a process that stops
+    /// [`DRAIN_QUIET`] or for at most this long: for a recorder beside a process that stops
     /// it when done, whose last frames are otherwise in the socket and lost to the recording
     /// (measured on vcan under emulation: 799 of the 800 images `presrs sim --mcap` sent).
     /// `None` (the default): the run ends at the stop.

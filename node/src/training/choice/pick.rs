@@ -12,8 +12,7 @@ pub const BUDGET_FACTOR: f64 = 2.5;
 
 /// What an extra check (load, texture) must add to the share of left-out ground found to be
 /// kept: a band drawn on two runs costs more on the next one than on the calibration run's
-/// other half (measured: a load check within the budget there called 13% of a fresh run on
-/// another sensor unknown), so a check pays for itself or stays off.
+/// other half, so a check pays for itself or stays off (unknown-choice.md, "The constants").
 pub const CHECK_COST: f64 = 0.05;
 
 /// Candidates whose left-out share (less [`CHECK_COST`] per check) lies within this of the best
@@ -22,9 +21,8 @@ pub const NEAR: f64 = 0.05;
 
 /// Whether two known shares, each of `n` judged images, are a tie (fewer extra checks, then the
 /// AUROC, decide): closer than one standard deviation of their difference, `sqrt(2 p (1 - p) /
-/// n)` at their mean share `p` (at least one image). A fixed half point let one image of 90
-/// decide between the two novelty scores where every left-out terrain was found by both, and
-/// the one kept then missed a terrain the other found (docs/decisions/unknown-choice.md).
+/// n)` at their mean share `p` (at least one image), not a fixed share: unknown-choice.md,
+/// "Kept (seventh stop)".
 pub fn tie(x: f64, y: f64, n: usize) -> bool {
     let n = n.max(1) as f64;
     let p = ((x + y) / 2.0).clamp(1.0 / n, 1.0 - 1.0 / n);
@@ -49,8 +47,7 @@ pub const FALLBACK_SLACK: f64 = 0.01;
 pub(super) fn pick(outcomes: &[Outcome], budget: f64) -> Option<usize> {
     let finite = |v: f64| if v.is_finite() { v } else { f64::NEG_INFINITY };
     // With nothing within the budget, the cheapest candidates (within a point of the fewest
-    // known unknown) are judged as the budget's would be: the fewest alone once kept a score
-    // that found 62% of the left-out ground for 0.8 points less than one that found 83%.
+    // known unknown) are judged as the budget's would be (unknown-choice.md, "The constants").
     let least = outcomes
         .iter()
         .map(|o| o.known_unknown)
