@@ -174,39 +174,17 @@ pub(crate) fn run_with<C: Component + ?Sized>(
             between(component);
             // Everything queued (up to a burst), then the tick: a burst never waits one tick
             // per frame, and a stream never holds the tick back.
-            let mut wait = match opts.idle_wait {
+            let tick_wait = match opts.idle_wait {
                 // Ticks come after frames; with none, after `idle_wait`.
                 Some(idle) => (next_tick + idle).saturating_duration_since(Instant::now()),
                 None => next_tick.saturating_duration_since(Instant::now()),
             };
-            // A frame to answer at once is due (`expected_frame_us`): the plan says whether to
-            // sleep in batches, warm up, sleep to the poll, or poll (`wake.rs`).
-            let mut poll_until = None;
-            let mut woken_for = None;
-            let mut coalesce = false;
-            if let Some(at) = component.expected_frame_us() {
-                if wake.warm_up_due(at, now_us()) {
-                    component.warm_up();
-                }
-                let wall = |us: u64| Duration::from_secs_f64(us as f64 / scale.max(1e-9) * 1e-6);
-                match wake.plan(at, now_us()) {
-                    Plan::Batch { for_us } => {
-                        wait = wait.min(wall(for_us));
-                        coalesce = true;
-                    }
-                    Plan::Sleep { for_us, until_us } => {
-                        if wall(for_us) <= wait {
-                            woken_for = Some(until_us);
-                        }
-                        wait = wait.min(wall(for_us));
-                    }
-                    Plan::Poll { for_us } => {
-                        poll_until = Some(Instant::now() + wall(for_us));
-                        wait = Duration::ZERO;
-                    }
-                    Plan::AsUsual => {}
-                }
-            }
+            let Waiting {
+                mut wait,
+                poll_until,
+                woken_for,
+                coalesce,
+            } = waiting(component, &mut wake, tick_wait, &now_us, scale);
             // Not while frames are left from the last batch: a stream faster than a burst per
             // batch (classic frames on vcan, which has no bit rate) would fall behind.
             if coalesce && !backlog && !wait.is_zero() {
@@ -302,6 +280,61 @@ pub(crate) fn run_with<C: Component + ?Sized>(
     stats.send_errors = load(&link.tx_dropped) - dropped0;
     stats.end_us = end;
     stats
+}
+
+/// How one pass of [`run_with`]'s loop waits before it takes frames.
+struct Waiting {
+    /// The first receive's timeout.
+    wait: Duration,
+    /// Polling for the expected frame until then.
+    poll_until: Option<Instant>,
+    /// A sleep planned to end at this time (runner's clock, µs), to measure the oversleep.
+    woken_for: Option<u64>,
+    /// Sleep in a batch first, without watching the bus.
+    coalesce: bool,
+}
+
+/// The tick's `wait`, shortened where a frame to answer at once is due
+/// ([`Component::expected_frame_us`]): the plan says whether to sleep in batches, warm up,
+/// sleep to the poll, or poll (`wake.rs`). Warms the component up when that is due.
+fn waiting<C: Component + ?Sized>(
+    component: &mut C,
+    wake: &mut Wake,
+    wait: Duration,
+    now_us: &impl Fn() -> u64,
+    scale: f64,
+) -> Waiting {
+    let mut w = Waiting {
+        wait,
+        poll_until: None,
+        woken_for: None,
+        coalesce: false,
+    };
+    let Some(at) = component.expected_frame_us() else {
+        return w;
+    };
+    if wake.warm_up_due(at, now_us()) {
+        component.warm_up();
+    }
+    let wall = |us: u64| Duration::from_secs_f64(us as f64 / scale.max(1e-9) * 1e-6);
+    match wake.plan(at, now_us()) {
+        Plan::Batch { for_us } => {
+            w.wait = w.wait.min(wall(for_us));
+            w.coalesce = true;
+        }
+        Plan::Sleep { for_us, until_us } => {
+            if wall(for_us) <= w.wait {
+                w.woken_for = Some(until_us);
+            }
+            w.wait = w.wait.min(wall(for_us));
+        }
+        Plan::Poll { for_us } => {
+            w.poll_until = Some(Instant::now() + wall(for_us));
+            w.wait = Duration::ZERO;
+        }
+        Plan::AsUsual => {}
+    }
+    w
 }
 
 /// One received frame: counted, copied to the tap (unless the component's own), handed over.
