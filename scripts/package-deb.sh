@@ -11,7 +11,8 @@
 # machine, --arch arm64 builds natively. The package holds:
 #   /usr/bin/presrs
 #   /lib/systemd/system/presrs-node.service, presrs-controller.service, presrs-leg.service,
-#   presrs-bridge.service (not enabled on install)
+#   presrs-bridge.service and their templates presrs-node@.service ... (the interface from the
+#   instance name: presrs-node@can1.service; none enabled on install)
 #   /usr/share/presrs/ros2/presrs_msgs/ (the ROS 2 interface package, for the ROS side)
 #   /etc/presrs/node.toml, controller.toml (conffiles: an edited one survives upgrade and remove)
 #   /usr/share/doc/presrs/ (the DBC, README, protocol, deploy and real-robot docs)
@@ -71,10 +72,12 @@ strip="${cross_prefix}strip"
 command -v "$strip" >/dev/null || strip=strip
 install -D -m 755 "$bin" "$stage/usr/bin/presrs"
 "$strip" --strip-debug "$stage/usr/bin/presrs"
-install -D -m 644 packaging/systemd/presrs-node.service "$stage/lib/systemd/system/presrs-node.service"
-install -D -m 644 packaging/systemd/presrs-controller.service "$stage/lib/systemd/system/presrs-controller.service"
-install -D -m 644 packaging/systemd/presrs-leg.service "$stage/lib/systemd/system/presrs-leg.service"
-install -D -m 644 packaging/systemd/presrs-bridge.service "$stage/lib/systemd/system/presrs-bridge.service"
+# Each part's unit on can0 and its template for any interface (presrs-node@can1.service).
+for u in node controller leg bridge; do
+  for f in "presrs-$u.service" "presrs-$u@.service"; do
+    install -D -m 644 "packaging/systemd/$f" "$stage/lib/systemd/system/$f"
+  done
+done
 for f in package.xml CMakeLists.txt msg/TerrainClass.msg msg/FootContact.msg msg/GaitState.msg; do
   install -D -m 644 "ros2/presrs_msgs/$f" "$stage/usr/share/presrs/ros2/presrs_msgs/$f"
 done

@@ -61,6 +61,15 @@ done
 # verify resolves ExecStart= and the units' dependencies inside the root.
 systemd-analyze verify --root="$r" presrs-node.service presrs-controller.service presrs-leg.service presrs-bridge.service ||
   fail "systemd-analyze verify rejects the units"
+# The templates, for the interface each instance names (can0 and can1).
+for i in can0 can1; do
+  units=()
+  for u in node controller leg bridge; do
+    [ -e "$r/lib/systemd/system/presrs-$u@.service" ] || fail "presrs-$u@.service not installed"
+    units+=("presrs-$u@$i.service")
+  done
+  systemd-analyze verify --root="$r" "${units[@]}" || fail "systemd-analyze verify rejects the $i instances"
+done
 echo "# edited on the robot" >> "$r/etc/presrs/node.toml"
 echo '{"user": "model"}' > "$r/etc/presrs/model.json"
 in_root "$r" dpkg -r presrs >/dev/null || fail "dpkg -r presrs"
@@ -71,7 +80,7 @@ grep -q "edited on the robot" "$r/etc/presrs/node.toml" || fail "reinstall overw
 in_root "$r" dpkg -P presrs >/dev/null || fail "dpkg -P presrs"
 [ ! -e "$r/etc/presrs/controller.toml" ] || fail "purge left controller.toml"
 [ -e "$r/etc/presrs/model.json" ] || fail "purge removed the user's model"
-echo "test-package: amd64: installs into a fresh $codename root, runs, units verify, edited config kept on remove and reinstall, purge keeps the model"
+echo "test-package: amd64: installs into a fresh $codename root, runs, units and their can0/can1 instances verify, edited config kept on remove and reinstall, purge keeps the model"
 
 # ---- arm64: a root with Debian's arm64 libc, the package installed there, its binary run
 r="$work/root-arm64"; fresh "$r"
@@ -108,7 +117,10 @@ a = [l.rstrip("\n").split("\t") for l in open(sys.argv[1])]
 b = [l.rstrip("\n").split("\t") for l in open(sys.argv[2])]
 assert len(a) == len(b) and len(a) > 0, f"{len(a)} vs {len(b)} lines"
 differ = [(x[0], x[1], y[1]) for x, y in zip(a, b) if x[0] != y[0] or x[1] != y[1]]
-dconf = max(abs(float(x[2]) - float(y[2])) for x, y in zip(a, b))
+# An unknown image has no confidence ("-"): both must say so.
+differ += [(x[0], x[2], y[2]) for x, y in zip(a, b) if (x[2] == "-") != (y[2] == "-")]
+dconf = max((abs(float(x[2]) - float(y[2])) for x, y in zip(a, b) if "-" not in (x[2], y[2])),
+            default=0.0)
 print(f"test-package: {sys.argv[3]}: {len(a)} images, {len(a) - len(differ)} same terrain on arm64 "
       f"(qemu) and x86-64, largest confidence difference {dconf:.3f}")
 for d in differ[:10]:

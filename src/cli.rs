@@ -108,7 +108,13 @@ pub fn classify(
             if json {
                 println!("{}", d.to_json(&file, &names));
             } else {
-                println!("{file}\t{}\t{:.3}", d.label(&names), d.confidence);
+                // Unknown ground chose no terrain: no confidence (`--json` gives the nearest
+                // class's, as `best`).
+                let confidence = match d.class {
+                    Some(_) => format!("{:.3}", d.confidence),
+                    None => "-".into(),
+                };
+                println!("{file}\t{}\t{confidence}", d.label(&names));
             }
         }
     }

@@ -24,9 +24,10 @@ pub struct DemoArgs {
     /// Print the summary as one JSON object.
     #[arg(long)]
     pub json: bool,
-    /// Step log (CSV).
-    #[arg(long, default_value = "demo-steps.csv")]
-    pub csv: PathBuf,
+    /// Write every step to this CSV (time, step, true and classified terrain, confidence,
+    /// gait, speed); nothing is written without it.
+    #[arg(long, value_name = "FILE")]
+    pub csv: Option<PathBuf>,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Run the simulator, the node and the controller as three concurrent tasks on the wall
@@ -225,9 +226,15 @@ pub fn run(a: DemoArgs) -> Result<ExitCode> {
 
 /// One step's line of the live log.
 fn print_row(row: &StepRecord) {
+    // An unknown step has no confidence: the frame's is the rejected class's.
+    let confidence = if row.classified == protocol::Terrain::UNKNOWN.name() {
+        "-".to_string()
+    } else {
+        format!("{:.1}%", row.confidence_pct)
+    };
     println!(
-        "t {:7.2} s  step {:4}  true {:<8} classified {:<8} {:5.1}%  gait G{}  {:.2} m/s",
-        row.t_s, row.step, row.truth, row.classified, row.confidence_pct, row.gait, row.speed_m_s
+        "t {:7.2} s  step {:4}  true {:<8} classified {:<8} {confidence:>6}  gait G{}  {:.2} m/s",
+        row.t_s, row.step, row.truth, row.classified, row.gait, row.speed_m_s
     );
 }
 
@@ -241,17 +248,18 @@ fn summarize(
     a: &DemoArgs,
     leg: Option<(sim::service::LegStateCheck, leg::LegCounters)>,
 ) -> Result<ExitCode> {
-    let csv =
-        std::fs::File::create(&a.csv).with_context(|| format!("creating {}", a.csv.display()))?;
-    lab::score::write_steps(std::io::BufWriter::new(csv), rows)
-        .with_context(|| format!("writing {}", a.csv.display()))?;
+    if let Some(p) = &a.csv {
+        let csv = std::fs::File::create(p).with_context(|| format!("--csv {}", p.display()))?;
+        lab::score::write_steps(std::io::BufWriter::new(csv), rows)
+            .with_context(|| format!("--csv {}", p.display()))?;
+    }
     let report = lab::score::DemoReport {
         summary: Summary::of(rows, &cfg.terrain_gaits).with_unknown(rows, known, cfg.safe_gait),
         falls,
         realtime: a.realtime,
         track_m: track.length(),
         safe_gait: cfg.safe_gait,
-        csv: a.csv.display().to_string(),
+        csv: a.csv.as_ref().map(|p| p.display().to_string()),
         leg: leg
             .zip(a.leg)
             .map(|((state, counters), kind)| (kind.name().to_string(), state, counters)),

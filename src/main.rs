@@ -67,7 +67,8 @@ enum Cmd {
     /// images, joint states, gait and /diagnostics, on Zenoh in rmw_zenoh's format (no ROS
     /// install on the robot).
     Bridge(ros2_cmd::BridgeArgs),
-    /// A recording at a glance: a foot's pressure image beside terrain, gait and speed (PNG).
+    /// A recording at a glance: a foot's pressure image beside what the recording holds
+    /// (terrain, contact, gait, speed), as a PNG.
     View(mcap_cmd::ViewArgs),
     /// Simulator, node and controller in one process on the in-process bus: the closed loop.
     Demo(demo::DemoArgs),

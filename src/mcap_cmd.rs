@@ -25,8 +25,9 @@ pub struct McapArgs {
     #[arg(long, value_name = "NS", default_value = "", requires = "ros2")]
     pub namespace: String,
     /// Also run the node with this model on the way: its TerrainClass per step goes on
-    /// `/footN/terrain/model`, beside any TerrainClass already in the log.
-    #[arg(long, conflicts_with = "ros2")]
+    /// `/footN/terrain/model` (with --ros2: `footN/terrain/model` in the bag), beside any
+    /// TerrainClass already in the log; the same decisions `presrs node --replay --csv` lists.
+    #[arg(long)]
     pub model: Option<PathBuf>,
     /// Node config (TOML): identifiers, feet, stance timing (see `examples/node.toml`).
     #[arg(long)]
@@ -57,15 +58,13 @@ pub fn run(a: McapArgs) -> Result<ExitCode> {
     let mut records = file.records()?;
     if a.ros2 {
         let names = ros2::Names::new(0, &a.namespace)?;
-        let s = ros2::write_bag(
-            records.by_ref().map(|r| r.stamped),
-            ids,
-            catalog,
-            names,
-            &a.out,
-        )
-        .context("--out")?;
+        let mut bag = ros2::RosBag::create(&a.out, names.clone()).context("--out")?;
+        let mut enc = ros2::Encoder::new(ids, catalog, &names);
+        lab::replay::log_to_bag(&mut records, node.as_mut(), &mut enc, &mut bag)
+            .context("--out")?;
+        bag.finish().context("--out")?;
         records.finish()?;
+        let s = enc.stats();
         if a.json {
             println!(
                 "{}",
@@ -110,13 +109,14 @@ pub struct ViewArgs {
     /// The foot to show.
     #[arg(long, default_value_t = 0)]
     pub foot: u8,
-    /// Show the image nearest this time, s from the start (default: the most loaded image of
-    /// the last step decided).
+    /// Show the image nearest this time, s from the start. Default: the stance that says most
+    /// about the run, its first step called unknown (the model's decisions first), else its
+    /// middle step; the title names it.
     #[arg(long, value_name = "S")]
     pub at: Option<f64>,
 }
 
-/// `presrs view`: a recording's pressure image, terrain, gait and speed in one PNG.
+/// `presrs view`: a recording's pressure image beside a panel per kind of data it holds.
 pub fn view(a: ViewArgs) -> Result<ExitCode> {
     let msgs = record::read::read_json(&a.recording)?;
     anyhow::ensure!(
@@ -132,10 +132,7 @@ pub fn view(a: ViewArgs) -> Result<ExitCode> {
         &msgs,
         a.foot,
         a.at,
-        &format!(
-            "{name}: foot {}'s pressure image, terrain, gait and speed",
-            a.foot
-        ),
+        &format!("{name}, foot {}", a.foot),
         &a.out,
     )
     .with_context(|| format!("--out {}", a.out.display()))?;

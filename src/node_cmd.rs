@@ -28,9 +28,18 @@ pub struct NodeArgs {
     /// Node config (TOML); see `examples/node.toml`.
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Replay: print each TerrainClass as a JSON line.
+    /// Replay: print each TerrainClass as a JSON line (`t_us`: when the node decided the step,
+    /// on the log's clock, µs; `step`: the foot's step counter, as on the bus).
     #[arg(long)]
     pub json: bool,
+    /// One CSV row per step and foot, live or on a replay: foot, step (the bus's counter,
+    /// numbered as `capture`'s manifest), touchdown_s (the debounced touchdown) and
+    /// decision_s (when the node decided), both on the log's clock (its timestamps; live, the
+    /// bus's receive clock), terrain, unknown_reason, confidence_pct (empty for unknown
+    /// ground: no terrain was chosen) and gait (the controller's, empty before its first
+    /// GaitStatus).
+    #[arg(long, value_name = "FILE")]
+    pub csv: Option<PathBuf>,
     /// Overrides the config's `terrains` key.
     #[command(flatten)]
     pub terrains: protocol::TerrainsArg,
@@ -50,16 +59,17 @@ pub fn run(a: NodeArgs) -> Result<ExitCode> {
         (Some(log), _) => {
             anyhow::ensure!(
                 a.live.mcap.is_none() && a.live.foxglove.is_none() && !a.ros2.any(),
-                "--mcap, --foxglove, --ros2 and --ros2-bag record a live node; for a log, run `presrs mcap {} --out FILE.mcap --model {}` (or `presrs mcap --ros2 {} --out DIR`)",
+                "--mcap, --foxglove, --ros2 and --ros2-bag record a live node; for a log, run `presrs mcap {} --out FILE.mcap --model {}` (or `presrs mcap --ros2 {} --out DIR --model {}`)",
                 log.display(),
                 a.model.display(),
-                log.display()
+                log.display(),
+                a.model.display()
             );
             // The same decisions on every replay: a refit lands at the step that asked for it.
             cfg.refit = cfg.refit.reproducible();
             let node = NodeService::new(cfg, model)
                 .with_context(|| format!("--model {}", a.model.display()))?;
-            replay(node, log, a.json)
+            replay(node, log, a.json, a.csv.as_deref())
         }
         (None, Some(iface)) => {
             let signals = Signals::install()?;
@@ -72,9 +82,18 @@ pub fn run(a: NodeArgs) -> Result<ExitCode> {
                 multi_frame = cfg.multi_frame,
                 "presrs node starting"
             );
-            let node = NodeService::new(cfg, model)
+            let mut node = NodeService::new(cfg, model)
                 .with_context(|| format!("--model {}", a.model.display()))?;
             // After the checks above: a bad model or config is an error before any file exists.
+            let steps = a
+                .csv
+                .as_deref()
+                .map(|p| node::step_table::StepLog::create(p, node.catalog().clone()))
+                .transpose()
+                .context("--csv")?;
+            if let Some(s) = steps.as_ref().and_then(|s| s.sender()) {
+                node.set_step_log(s);
+            }
             let outputs = crate::ros2_cmd::LiveOutputs::start(
                 &a.live,
                 &a.ros2,
@@ -99,6 +118,10 @@ pub fn run(a: NodeArgs) -> Result<ExitCode> {
             }
             running.stop();
             outputs.finish();
+            if let (Some(s), Some(path)) = (steps, &a.csv) {
+                let (rows, dropped) = s.finish().context("--csv")?;
+                tracing::info!(rows, dropped, path = %path.display(), "step table written");
+            }
             Ok(ExitCode::SUCCESS)
         }
         (None, None) => anyhow::bail!("give --iface IFACE or --replay FILE.log"),
@@ -106,13 +129,33 @@ pub fn run(a: NodeArgs) -> Result<ExitCode> {
 }
 
 /// The log through the node on the log's own clock ([`node::replay`]), each decision printed.
-fn replay(mut node: NodeService, log: &Path, json: bool) -> Result<ExitCode> {
+fn replay(mut node: NodeService, log: &Path, json: bool, csv: Option<&Path>) -> Result<ExitCode> {
+    use std::io::Write;
     // Checked to its end before the first decision is printed, then streamed.
     let file = protocol::candump::LogFile::check(log)?;
     let mut records = file.records()?;
     let catalog = node.catalog().clone();
+    let mut table = match csv {
+        Some(p) => {
+            let f = std::fs::File::create(p).with_context(|| format!("--csv {}", p.display()))?;
+            let mut w = std::io::BufWriter::new(f);
+            writeln!(w, "{}", node::step_table::HEADER)?;
+            Some(w)
+        }
+        None => None,
+    };
+    let mut write_err = None;
     let summary = node::replay::replay_log(&mut node, &mut records, &mut |(t_us, o)| {
-        let node::service::Output::Class { foot, class, gait } = o else {
+        if let (Some(w), Some(row)) = (table.as_mut(), node::step_table::StepRow::of(t_us, &o))
+            && write_err.is_none()
+            && let Err(e) = writeln!(w, "{}", row.to_csv(&catalog))
+        {
+            write_err = Some(e);
+        }
+        let node::service::Output::Class {
+            foot, class, gait, ..
+        } = o
+        else {
             return;
         };
         if json {
@@ -123,6 +166,13 @@ fn replay(mut node: NodeService, log: &Path, json: bool) -> Result<ExitCode> {
         }
     });
     records.finish()?;
+    if let (Some(p), Some(e)) = (csv, write_err) {
+        return Err(e).with_context(|| format!("--csv {}", p.display()));
+    }
+    if let (Some(p), Some(mut w)) = (csv, table) {
+        w.flush()
+            .with_context(|| format!("--csv {}", p.display()))?;
+    }
     eprintln!("{summary}");
     Ok(ExitCode::SUCCESS)
 }

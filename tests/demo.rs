@@ -38,6 +38,34 @@ fn demo_runs_the_loop_and_reports_json() {
         .count();
     assert_eq!(cached, 1, "one cached demo model");
 
+    // Without --csv, a demo writes nothing where it runs (its model cache lives elsewhere),
+    // and an unknown step shows no confidence.
+    let empty = dir.join("empty");
+    std::fs::create_dir_all(&empty).unwrap();
+    let out = common::output_ok(
+        Command::new(env!("CARGO_BIN_EXE_presrs"))
+            .args(["demo", "--steps", "16", "--track"])
+            .arg(common::root().join("examples/sand-track.toml"))
+            .current_dir(&empty)
+            .env("XDG_CACHE_HOME", &dir),
+    );
+    assert_eq!(
+        std::fs::read_dir(&empty).unwrap().count(),
+        0,
+        "demo wrote into its directory"
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(!text.contains("step log:"), "{text}");
+    let unknown: Vec<&str> = text
+        .lines()
+        .filter(|l| l.contains("classified unknown"))
+        .collect();
+    assert!(
+        !unknown.is_empty(),
+        "sand is unknown ground on some step:\n{text}"
+    );
+    assert!(unknown.iter().all(|l| !l.contains('%')), "{unknown:?}");
+
     // Then, on the cached model (one test, so that nothing else loads the machine while the
     // real-time loop runs): `--realtime` and `--fixed-gait`.
     realtime_and_fixed_gait(&dir);

@@ -209,7 +209,13 @@ fn the_readme_path_for_a_labs_robot_runs_as_written() {
     for c in train.iter().chain(&replay).chain(&mcap).chain(&view) {
         run(&dir, c);
     }
-    for made in ["set/manifest.csv", "model.json", "run.mcap", "view.png"] {
+    for made in [
+        "set/manifest.csv",
+        "model.json",
+        "run.mcap",
+        "view.png",
+        "steps.csv",
+    ] {
         let len = std::fs::metadata(dir.join(made))
             .map(|m| m.len())
             .unwrap_or(0);

@@ -53,15 +53,15 @@ fn replay_prints_the_pipelines_decisions_with_the_logs_timestamps() {
     let mut p = StancePipeline::new(NodeConfig::default(), Some(model));
     let mut want = Vec::new();
     for r in &records {
-        p.on_frame(r, &mut |(foot, tc): (
-            u8,
-            protocol::messages::TerrainClass,
-        )| { want.push((r.t_us, foot, tc)) });
+        p.on_frame(r, &mut |d: node::stance::Decided| {
+            want.push((r.t_us, d.foot, d.class))
+        });
     }
     assert!(want.len() > 5, "only {} decisions in 6 s", want.len());
 
     let got = replay_json(&log, &model_path);
     assert_eq!(got.len(), want.len());
+    step_table_matches(&log, &model_path, &got, &robot.steps, base);
     for (g, (t_us, foot, tc)) in got.iter().zip(&want) {
         assert_eq!(g["t_us"], *t_us);
         assert_eq!(g["foot"], *foot);
@@ -109,6 +109,55 @@ fn replay_prints_the_pipelines_decisions_with_the_logs_timestamps() {
         );
     }
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `--csv`: one row per step, the same decisions as `--json`, each touchdown within one frame
+/// (10 ms) of the simulator's.
+fn step_table_matches(
+    log: &std::path::Path,
+    model: &std::path::Path,
+    json: &[serde_json::Value],
+    truth: &[sim::runner::StepTruth],
+    base: u64,
+) {
+    let csv = log.with_extension("csv");
+    common::output_ok(
+        Command::new(env!("CARGO_BIN_EXE_presrs"))
+            .args(["node", "--replay", log.to_str().unwrap()])
+            .args(["--model", model.to_str().unwrap(), "--csv"])
+            .arg(&csv),
+    );
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(lines.next(), Some(node::step_table::HEADER));
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), json.len(), "one row per decision");
+    let secs = |s: &str| protocol::candump::parse_seconds(s).unwrap();
+    for (r, j) in rows.iter().zip(json) {
+        assert_eq!(r.len(), 8, "{r:?}");
+        assert_eq!(r[0], j["foot"].to_string());
+        assert_eq!(r[1], j["step"].to_string());
+        assert_eq!(secs(r[3]), j["t_us"].as_u64().unwrap(), "decision time");
+        assert_eq!(r[4], j["terrain"].as_str().unwrap());
+        assert_eq!(r[5], j["unknown_reason"].as_str().unwrap_or(""));
+        match j["confidence_pct"].as_f64() {
+            Some(c) => assert!(
+                (r[6].parse::<f64>().unwrap() - c).abs() < 0.051,
+                "{r:?} {j}"
+            ),
+            None => assert_eq!(r[6], "", "an unknown step has no confidence"),
+        }
+        // The step counter numbers touchdowns from 1, as the simulator's truth lists them.
+        let step: usize = r[1].parse().unwrap();
+        let td = truth[step - 1];
+        let got = secs(r[2]);
+        let want = base + td.touchdown_us;
+        assert!(
+            got.abs_diff(want) <= 10_000,
+            "step {step}: touchdown {got} against the truth's {want}"
+        );
+        assert!(got <= secs(r[3]), "touchdown after its decision: {r:?}");
+    }
 }
 
 #[test]

@@ -2,7 +2,7 @@
 
 use node::{NodeConfig, RefitMode, StancePipeline};
 use protocol::Stamped;
-use protocol::messages::{TerrainClass, flags};
+use protocol::messages::flags;
 use sim::runner::{SimConfig, SimRobot};
 
 #[test]
@@ -27,7 +27,7 @@ fn exactly_one_terrain_class_per_step_despite_switch_bounce() {
         "{} decisions for {steps} steps",
         decided.len()
     );
-    for (i, (_, tc)) in decided.iter().enumerate() {
+    for (i, node::stance::Decided { class: tc, .. }) in decided.iter().enumerate() {
         assert_eq!(tc.step as usize, i + 1, "step numbers run on");
         // Without a model every step reports "no sample" and unknown terrain.
         assert_ne!(tc.flags & flags::NO_SAMPLE, 0);
@@ -72,14 +72,14 @@ fn the_decision_comes_with_the_sampled_frame_not_a_frame_later() {
         let mut frames = Vec::new();
         robot.advance_to(t, &mut frames);
         for frame in frames {
-            p.on_frame(&Stamped { t_us: t, frame }, &mut |(_, tc): (
-                u8,
-                TerrainClass,
-            )| {
-                if tc.flags & flags::NO_SAMPLE == 0 {
-                    latencies.push(tc.latency_us)
-                }
-            });
+            p.on_frame(
+                &Stamped { t_us: t, frame },
+                &mut |node::stance::Decided { class: tc, .. }| {
+                    if tc.flags & flags::NO_SAMPLE == 0 {
+                        latencies.push(tc.latency_us)
+                    }
+                },
+            );
         }
     }
     assert!(latencies.len() > 5, "{} classified steps", latencies.len());
@@ -134,12 +134,10 @@ fn damaged_run(
         let mut frames = Vec::new();
         robot.advance_to(t, &mut frames);
         for frame in frames {
-            p.on_frame(&Stamped { t_us: t, frame }, &mut |(_, tc): (
-                u8,
-                TerrainClass,
-            )| {
-                decided.push(tc)
-            });
+            p.on_frame(
+                &Stamped { t_us: t, frame },
+                &mut |node::stance::Decided { class: tc, .. }| decided.push(tc),
+            );
         }
     }
     let correct = decided

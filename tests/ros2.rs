@@ -175,6 +175,76 @@ fn the_demo_bag_and_the_logs_bag_equal_the_log_decoded_by_cantools() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// `presrs mcap --ros2 LOG --model M`: the model's decisions on `footN/terrain/model` beside
+/// the log's, equal to `presrs node --replay LOG --model M --csv`'s rows (unknown ground with a
+/// NaN confidence, an empty one in the CSV), and every topic offered with the bridge's QoS,
+/// read back by rosbags and Python's `mcap`.
+#[test]
+fn the_logs_bag_carries_the_models_decisions_as_the_step_table_lists_them() {
+    let dir = tempdir("model");
+    let log = dir.join("sand.log");
+    common::output_ok(
+        presrs()
+            .args(["demo", "--steps", "40", "--track"])
+            .arg(common::root().join("examples/sand-track.toml"))
+            .arg("--candump")
+            .arg(&log)
+            .env("XDG_CACHE_HOME", &dir),
+    );
+    let model = common::small_model(&dir);
+    let csv = dir.join("steps.csv");
+    common::output_ok(
+        presrs()
+            .args(["node", "--replay"])
+            .arg(&log)
+            .arg("--model")
+            .arg(&model)
+            .arg("--csv")
+            .arg(&csv),
+    );
+    let bag = dir.join("bag");
+    common::output_ok(
+        presrs()
+            .args(["mcap", "--ros2"])
+            .arg(&log)
+            .arg("--out")
+            .arg(&bag)
+            .arg("--model")
+            .arg(&model),
+    );
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let rows = text.lines().count() - 1;
+    assert!(rows >= 38, "{rows} steps in the table");
+    assert!(
+        text.lines()
+            .any(|l| l.contains(",unknown,") && l.split(',').nth(6) == Some("")),
+        "no unknown step (sand is not the model's) in\n{text}"
+    );
+    let r = check(&["model".as_ref(), bag.as_os_str(), csv.as_os_str()], &[]);
+    assert_eq!(r["compared"], rows as u64, "{r}");
+    assert_eq!(
+        (r["version"].as_u64(), r["ros_distro"].as_str()),
+        (Some(9), Some("jazzy"))
+    );
+    let qos = &r["qos"]["/foot0/terrain/model"];
+    assert_eq!(
+        (
+            &qos["reliability"],
+            &qos["durability"],
+            &qos["history"],
+            &qos["depth"]
+        ),
+        (
+            &"reliable".into(),
+            &"volatile".into(),
+            &"keep_last".into(),
+            &10.into()
+        ),
+        "{r}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// The subscriber's JSON file.
 fn read_json(p: &Path) -> Value {
     serde_json::from_slice(&std::fs::read(p).unwrap()).unwrap()

@@ -108,8 +108,8 @@ pub struct DemoReport {
     pub track_m: f64,
     /// The controller's safe gait (for unknown terrain).
     pub safe_gait: u8,
-    /// The step log written.
-    pub csv: String,
+    /// The step log written (`--csv`), if one was asked for.
+    pub csv: Option<String>,
     /// The leg through motors (`--leg`): its protocol, the bridge's LegState against the truth
     /// and the bridge's counters.
     pub leg: Option<(String, sim::service::LegStateCheck, leg::LegCounters)>,
@@ -202,7 +202,10 @@ impl std::fmt::Display for DemoReport {
         for ((t, g), (v, k)) in &sum.speeds {
             writeln!(f, "  {t:<8} G{g}: {v:.2} ({k} steps)")?;
         }
-        writeln!(f, "step log: {}", self.csv)
+        match &self.csv {
+            Some(c) => writeln!(f, "step log: {c}"),
+            None => Ok(()),
+        }
     }
 }
 
@@ -614,10 +617,16 @@ pub const STEPS_CSV_HEADER: &str = "t_s,step,true_terrain,classified,confidence_
 pub fn write_steps(mut w: impl std::io::Write, rows: &[StepRecord]) -> std::io::Result<()> {
     writeln!(w, "{STEPS_CSV_HEADER}")?;
     for r in rows {
+        // An unknown step has no confidence: the frame's is the rejected class's.
+        let confidence = if r.classified == protocol::Terrain::UNKNOWN.name() {
+            String::new()
+        } else {
+            format!("{:.1}", r.confidence_pct)
+        };
         writeln!(
             w,
-            "{:.3},{},{},{},{:.1},{},{:.3}",
-            r.t_s, r.step, r.truth, r.classified, r.confidence_pct, r.gait, r.speed_m_s
+            "{:.3},{},{},{},{confidence},{},{:.3}",
+            r.t_s, r.step, r.truth, r.classified, r.gait, r.speed_m_s
         )?;
     }
     w.flush()

@@ -9,14 +9,13 @@
 
 use protocol::Terrain;
 use protocol::candump::LogRecord;
-use protocol::messages::TerrainClass;
 
 #[cfg(doc)]
 use crate::capture::Labelling;
 use crate::capture::Skip;
 use crate::classifier::Model;
 use crate::config::NodeConfig;
-use crate::stance::StancePipeline;
+use crate::stance::{Decided, StancePipeline};
 use crate::unknown::energy::{self, ReturnMap};
 
 /// Why no energy check could be fitted.
@@ -124,8 +123,8 @@ pub fn fit_energy(
         let mut p = StancePipeline::new(cfg.clone(), Some(plain.clone()));
         let mut last = vec![None; cfg.feet as usize];
         for r in &mut *run.records {
-            p.tick(r.stamped.t_us, &mut |_: (u8, TerrainClass)| {});
-            p.on_frame(&r.stamped, &mut |_: (u8, TerrainClass)| {});
+            p.tick(r.stamped.t_us, &mut |_: Decided| {});
+            p.on_frame(&r.stamped, &mut |_: Decided| {});
             for foot in 0..cfg.feet {
                 let o = p.energy_observation(foot);
                 if o.is_none() || o == last[foot as usize] {

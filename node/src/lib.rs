@@ -44,6 +44,7 @@ pub mod replay;
 pub mod service;
 pub mod stance;
 pub mod stats;
+pub mod step_table;
 pub mod training;
 pub mod unknown;
 

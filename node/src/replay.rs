@@ -124,15 +124,16 @@ pub fn replay_log<R: Borrow<LogRecord>>(
     }
 }
 
-/// One TerrainClass as a line for people: time (s), foot, step, terrain name, confidence,
-/// damage and flags.
+/// One TerrainClass as a line for people: time (s), foot, step, terrain name, confidence
+/// (`-` for unknown ground: no terrain was chosen, and the rejected class's posterior would
+/// read as certainty), damage and flags.
 pub fn class_line(t_us: u64, foot: u8, tc: &TerrainClass, catalog: &TerrainCatalog) -> String {
     format!(
-        "{:.6} foot {foot} step {:5} {:<13} {:5.1}%  damage {:4.1}%  flags 0x{:02X}{}",
+        "{:.6} foot {foot} step {:5} {:<13} {:>6}  damage {:4.1}%  flags 0x{:02X}{}",
         t_us as f64 * 1e-6,
         tc.step,
         catalog.describe(tc.terrain),
-        tc.confidence_pct,
+        confidence_text(tc),
         tc.damage_pct,
         tc.flags,
         tc.unknown_reason()
@@ -140,8 +141,24 @@ pub fn class_line(t_us: u64, foot: u8, tc: &TerrainClass, catalog: &TerrainCatal
     )
 }
 
-/// One TerrainClass as a JSON object: every field of the message, the terrain also by name.
-/// `gait` is the gait in force (`null` before any GaitStatus).
+/// The chosen terrain's confidence for people (`87.5%`), `-` for an unknown step.
+pub fn confidence_text(tc: &TerrainClass) -> String {
+    match known_confidence(tc) {
+        Some(c) => format!("{c:.1}%"),
+        None => "-".to_string(),
+    }
+}
+
+/// The chosen terrain's posterior, %, or `None` for an unknown step: the TerrainClass frame
+/// carries the best class's posterior even when the checks rejected it, which no output for
+/// people shows as the step's confidence.
+pub fn known_confidence(tc: &TerrainClass) -> Option<f64> {
+    (tc.terrain != protocol::messages::TERRAIN_UNKNOWN).then_some(tc.confidence_pct)
+}
+
+/// One TerrainClass as a JSON object: every field of the message, the terrain also by name;
+/// `confidence_pct` is `null` for an unknown step ([`known_confidence`]). `gait` is the gait
+/// in force (`null` before any GaitStatus).
 pub fn class_json(
     t_us: u64,
     foot: u8,
@@ -151,7 +168,7 @@ pub fn class_json(
 ) -> serde_json::Value {
     serde_json::json!({
         "t_us": t_us, "foot": foot, "step": tc.step, "terrain": catalog.describe(tc.terrain),
-        "terrain_id": tc.terrain, "confidence_pct": tc.confidence_pct,
+        "terrain_id": tc.terrain, "confidence_pct": known_confidence(tc),
         "damage_pct": tc.damage_pct, "flags": tc.flags, "latency_us": tc.latency_us,
         "unknown_reason": tc.unknown_reason().map(|r| r.name()), "gait": gait,
     })

@@ -163,6 +163,13 @@ fn classes(said: &[(u64, Output)]) -> Vec<(u64, TerrainClass)> {
 #[test]
 fn one_decision_per_step_from_the_image_nearest_the_sample_time() {
     let mut node = NodeService::new(NodeConfig::default(), model()).unwrap();
+    // The live step table (`presrs node --csv`) gets every decision, off the node's thread.
+    let dir = std::env::temp_dir().join(format!("presrs-service-steps-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let table =
+        presrs_node::step_table::StepLog::create(&dir.join("s.csv"), TerrainCatalog::paper())
+            .unwrap();
+    node.set_step_log(table.sender().unwrap());
     let mut foot = FakeFoot::new();
     let mut frames = Vec::new();
     let terrains = [0, 1, 2, 2, 0, 1];
@@ -170,6 +177,21 @@ fn one_decision_per_step_from_the_image_nearest_the_sample_time() {
         frames.extend(foot.stance(terrain, 1_000_000 + k as u64 * 400_000, 200, |_| true));
     }
     let said = lock_step(&mut node, &frames, 1_000_000 + 7 * 400_000);
+    drop(node);
+    assert_eq!(table.finish().unwrap(), (terrains.len() as u64, 0));
+    let csv = std::fs::read_to_string(dir.join("s.csv")).unwrap();
+    for (k, line) in csv.lines().skip(1).enumerate() {
+        let f: Vec<&str> = line.split(',').collect();
+        let td = protocol::candump::parse_seconds(f[2]).unwrap();
+        let want = 1_000_000 + k as u64 * 400_000;
+        // The touchdown on the receiver's clock, within the switch's 5 ms report period.
+        assert!(
+            td.abs_diff(want) <= 5_000,
+            "step {k}: touchdown {td} for {want}: {line}"
+        );
+        assert_eq!(f[4], NAMES[terrains[k]], "{line}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
     let got = classes(&said);
     assert_eq!(got.len(), terrains.len(), "{got:?}");
     let catalog = TerrainCatalog::paper();

@@ -30,7 +30,6 @@
 
 use std::path::{Path, PathBuf};
 
-pub mod base64;
 #[cfg(feature = "foxglove")]
 mod foxglove_server;
 mod live;

@@ -3,6 +3,8 @@
 
 use std::path::Path;
 
+use base64::Engine;
+
 use crate::RecordError;
 
 /// One message of a recording.
@@ -47,6 +49,14 @@ pub fn read_json(path: &Path) -> Result<Vec<Recorded>, RecordError> {
     Ok(out)
 }
 
+/// Standard base64, padding optional on reading: a `foxglove.RawImage`'s `data`, as any JSON
+/// writer may have padded it.
+const BASE64: base64::engine::GeneralPurpose = base64::engine::GeneralPurpose::new(
+    &base64::alphabet::STANDARD,
+    base64::engine::GeneralPurposeConfig::new()
+        .with_decode_padding_mode(base64::engine::DecodePaddingMode::Indifferent),
+);
+
 /// A `foxglove.RawImage` message's mono8 pixels: (width, height, row-major bytes); `None` for
 /// another encoding or a malformed message.
 pub fn mono8_image(json: &serde_json::Value) -> Option<(usize, usize, Vec<u8>)> {
@@ -57,6 +67,6 @@ pub fn mono8_image(json: &serde_json::Value) -> Option<(usize, usize, Vec<u8>)> 
         json["width"].as_u64()? as usize,
         json["height"].as_u64()? as usize,
     );
-    let px = crate::base64::decode(json["data"].as_str()?)?;
+    let px = BASE64.decode(json["data"].as_str()?).ok()?;
     (px.len() == w * h).then_some((w, h, px))
 }

@@ -5,6 +5,8 @@
 use std::collections::HashMap;
 use std::fmt::Write;
 
+use base64::Engine;
+
 use protocol::dbc::{Signal, signals, value_table};
 use protocol::messages::TerrainClass;
 use protocol::tactile::TactileImage;
@@ -267,12 +269,22 @@ impl Recorder {
         let Some(sigs) = self.signals.get(&kind) else {
             return Err(RecordError::Internal("a message kind without signals"));
         };
+        // Unknown ground chose no terrain: its confidence is not the step's (schema.rs).
+        let unknown = kind == MessageKind::TerrainClass
+            && sigs
+                .iter()
+                .find(|s| s.name == "TerrainId")
+                .is_some_and(|s| s.raw(data) == i64::from(protocol::messages::TERRAIN_UNKNOWN));
+        let mut rejected = None;
         for (i, s) in sigs.iter().enumerate() {
             if i > 0 {
                 b.push(',');
             }
             let _ = write!(b, "\"{}\":", s.name);
-            if schema::is_integer(s) {
+            if unknown && s.name == "Confidence" {
+                b.push_str("null");
+                rejected = Some(finite(s.physical(data)));
+            } else if schema::is_integer(s) {
                 let _ = write!(b, "{}", s.raw(data));
             } else {
                 let _ = write!(b, "{}", finite(s.physical(data)));
@@ -292,6 +304,9 @@ impl Recorder {
                     }
                 }
             }
+        }
+        if let Some(c) = rejected {
+            let _ = write!(b, ",\"{}\":{c}", schema::REJECTED_CONFIDENCE);
         }
         if kind == MessageKind::NodeStatus
             && let Some(n) = self.recording_dropped
@@ -319,7 +334,7 @@ impl Recorder {
             img.rows,
             img.cols as usize * bpp as usize
         );
-        crate::base64::encode(b, bytes);
+        base64::engine::general_purpose::STANDARD.encode_string(bytes.as_slice(), b);
         b.push_str("\"}");
         self.stats.images += 1;
         self.emit(Topic::Image(foot), t_ns, sink)
@@ -351,6 +366,7 @@ mod tests {
     use super::*;
     use protocol::messages::{
         FootContact, GaitReason, GaitStatus, LegState, Message, NodeState, NodeStatus,
+        TERRAIN_UNKNOWN,
     };
     use protocol::tactile::{ImageRef, Segmenter, Variant};
 
@@ -439,6 +455,34 @@ mod tests {
         assert_eq!(s["RecordingDropped"], 4);
         assert_eq!(m.messages[0].1, 10_000, "log time in ns");
         assert_eq!(m.channels[0].schema.name, "presrs.LegState");
+        // A known step's confidence is the frame's; unknown ground's is null, the frame's value
+        // kept as the rejected class's.
+        let tc = |terrain| TerrainClass {
+            step: 4,
+            terrain,
+            confidence_pct: 90.0,
+            damage_pct: 0.0,
+            flags: 0,
+            latency_us: 0,
+        };
+        r.frame(&stamped(40, Message::TerrainClass(tc(0)), 1), &mut m)
+            .unwrap();
+        r.frame(
+            &stamped(50, Message::TerrainClass(tc(TERRAIN_UNKNOWN)), 1),
+            &mut m,
+        )
+        .unwrap();
+        let t = json(&m, "/foot1/terrain");
+        assert_eq!(
+            (t[0]["Confidence"].as_f64(), t[0].get("RejectedConfidence")),
+            (Some(90.0), None)
+        );
+        assert!(t[1]["Confidence"].is_null(), "{}", t[1]);
+        assert_eq!(t[1]["RejectedConfidence"], 90.0);
+        let schema: serde_json::Value =
+            serde_json::from_str(&schema::message(MessageKind::TerrainClass).unwrap().json)
+                .unwrap();
+        assert_eq!(schema["properties"]["Confidence"]["type"][1], "null");
     }
 
     #[test]

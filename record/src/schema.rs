@@ -48,6 +48,11 @@ fn describe(s: &Signal) -> String {
 /// Extra property the live node adds to its NodeStatus channel.
 pub const RECORDING_DROPPED: &str = "RecordingDropped";
 
+/// A TerrainClass of unknown ground (TerrainId 255) chose no terrain: its `Confidence` is
+/// recorded as `null`, and the frame's value (the posterior of the class the checks
+/// rejected) under this name, so that no plot reads it as the step's certainty.
+pub const REJECTED_CONFIDENCE: &str = "RejectedConfidence";
+
 /// The schema of a fixed-layout message, `None` for the tactile segments (recorded as images).
 pub fn message(kind: MessageKind) -> Option<Schema> {
     if matches!(
@@ -74,6 +79,26 @@ pub fn message(kind: MessageKind) -> Option<Schema> {
                 serde_json::json!({
                     "type": "string",
                     "description": format!("{}'s label in the DBC's {table} value table", s.name),
+                }),
+            );
+        }
+        if kind == MessageKind::TerrainClass && s.name == "Confidence" {
+            p.insert("type".into(), serde_json::json!(["number", "null"]));
+            p.insert(
+                "description".into(),
+                format!(
+                    "{}; null for unknown ground (TerrainId 255): no terrain was chosen, and the \
+                     frame's value is in {REJECTED_CONFIDENCE}",
+                    describe(&s)
+                )
+                .into(),
+            );
+            props.insert(
+                REJECTED_CONFIDENCE.into(),
+                serde_json::json!({
+                    "type": "number",
+                    "unit": s.unit,
+                    "description": "unknown ground only: the posterior of the class the unknown-ground checks rejected (the frame's Confidence)",
                 }),
             );
         }

@@ -1,7 +1,9 @@
 //! A rosbag2 directory that `ros2 bag play` and `rosbags` read: one MCAP file with profile
 //! `ros2`, a `ros2msg` schema per type and `cdr` messages (the bridge's bytes), and the
-//! `metadata.yaml` beside it (rosbag2 format version 8). The YAML is written by hand: it is a
-//! fixed shape of numbers and names, not worth a YAML crate.
+//! `metadata.yaml` beside it (rosbag2 format version 9, as ROS 2 Jazzy's `ros2 bag record`
+//! writes it, with each topic's offered QoS: the bridge's publisher profile, [`QOS_PROFILE`]).
+//! The YAML is written by hand: it is a fixed shape of numbers and names, not worth a YAML
+//! crate.
 
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -13,6 +15,37 @@ use crate::encoder::{RosSink, RosTopic};
 use crate::names::Names;
 use crate::typehash::rihs01;
 use crate::types::schema_text;
+
+/// The ROS 2 distribution the bag's format and the bridge's wire format follow.
+pub const ROS_DISTRO: &str = "jazzy";
+
+/// The QoS every topic of the bridge is offered with, as rosbag2 (format 9) lists it: the one
+/// [`crate::names::QOS`] writes in rmw_zenoh's tokens (reliable, volatile, keep-last 10, and
+/// rmw's infinite durations for the rest). Indented by `indent` spaces, without a line end.
+pub fn qos_profile_yaml(indent: usize) -> String {
+    // rmw's "infinite" duration (RMW_DURATION_INFINITE), for deadline, lifespan and lease.
+    const INFINITE: [&str; 2] = ["    sec: 9223372036", "    nsec: 854775807"];
+    let mut lines = vec![
+        "- history: keep_last",
+        "  depth: 10",
+        "  reliability: reliable",
+        "  durability: volatile",
+    ];
+    for d in ["  deadline:", "  lifespan:"] {
+        lines.push(d);
+        lines.extend(INFINITE);
+    }
+    lines.push("  liveliness: automatic");
+    lines.push("  liveliness_lease_duration:");
+    lines.extend(INFINITE);
+    lines.push("  avoid_ros_namespace_conventions: false");
+    let p = " ".repeat(indent);
+    lines
+        .iter()
+        .map(|l| format!("{p}{l}"))
+        .collect::<Vec<_>>()
+        .join("\n")
+}
 
 struct Topic {
     channel: u16,
@@ -104,7 +137,7 @@ impl RosBag {
         let name = self.names.topic(&topic.relative());
         let hash = rihs01(ty);
         let metadata = BTreeMap::from([
-            ("offered_qos_profiles".to_string(), String::new()),
+            ("offered_qos_profiles".to_string(), qos_profile_yaml(0)),
             ("topic_type_hash".to_string(), hash.clone()),
         ]);
         let channel = w
@@ -141,7 +174,7 @@ impl RosBag {
         let start = self.first_ns.unwrap_or(0);
         let duration = self.last_ns.saturating_sub(start);
         let mut y = String::new();
-        y.push_str("rosbag2_bagfile_information:\n  version: 8\n  storage_identifier: mcap\n");
+        y.push_str("rosbag2_bagfile_information:\n  version: 9\n  storage_identifier: mcap\n");
         y.push_str(&format!(
             "  duration:\n    nanoseconds: {duration}\n  starting_time:\n    \
              nanoseconds_since_epoch: {start}\n  message_count: {}\n  topics_with_message_count:\n",
@@ -150,16 +183,20 @@ impl RosBag {
         for t in self.topics.values() {
             y.push_str(&format!(
                 "    - topic_metadata:\n        name: \"{}\"\n        type: \"{}\"\n        \
-                 serialization_format: cdr\n        offered_qos_profiles: \"\"\n        \
+                 serialization_format: cdr\n        offered_qos_profiles:\n{}\n        \
                  type_description_hash: \"{}\"\n      message_count: {}\n",
-                t.name, t.ty, t.hash, t.count
+                t.name,
+                t.ty,
+                qos_profile_yaml(10),
+                t.hash,
+                t.count
             ));
         }
         y.push_str(&format!(
             "  compression_format: \"\"\n  compression_mode: \"\"\n  relative_file_paths:\n    \
              - \"{f}\"\n  files:\n    - path: \"{f}\"\n      starting_time:\n        \
              nanoseconds_since_epoch: {start}\n      duration:\n        nanoseconds: {duration}\n      \
-             message_count: {}\n  custom_data: ~\n  ros_distro: presrs\n",
+             message_count: {}\n  custom_data: ~\n  ros_distro: {ROS_DISTRO}\n",
             self.messages,
             f = self.file_name
         ));

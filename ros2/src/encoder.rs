@@ -19,6 +19,9 @@ use crate::types::{self, MsgType};
 pub enum RosTopic {
     /// `footN/terrain`: `presrs_msgs/msg/TerrainClass`, one per step.
     Terrain(u8),
+    /// `footN/terrain/model`: the same type, the steps a model decided on the way (`presrs mcap
+    /// --ros2 --model`), beside the ones the log carried.
+    ModelTerrain(u8),
     /// `footN/contact`: `presrs_msgs/msg/FootContact`.
     Contact(u8),
     /// `footN/image`: `sensor_msgs/msg/Image`, each pressure image (mono8 or mono16).
@@ -36,6 +39,7 @@ impl RosTopic {
     pub fn relative(&self) -> String {
         match *self {
             RosTopic::Terrain(f) => format!("foot{f}/terrain"),
+            RosTopic::ModelTerrain(f) => format!("foot{f}/terrain/model"),
             RosTopic::Contact(f) => format!("foot{f}/contact"),
             RosTopic::Image(f) => format!("foot{f}/image"),
             RosTopic::Joints(f) => format!("leg{f}/joint_states"),
@@ -47,7 +51,7 @@ impl RosTopic {
     /// Its message type.
     pub fn msg_type(&self) -> &'static MsgType {
         match self {
-            RosTopic::Terrain(_) => &types::TERRAIN_CLASS,
+            RosTopic::Terrain(_) | RosTopic::ModelTerrain(_) => &types::TERRAIN_CLASS,
             RosTopic::Contact(_) => &types::FOOT_CONTACT,
             RosTopic::Image(_) => &types::IMAGE,
             RosTopic::Joints(_) => &types::JOINT_STATE,
@@ -172,21 +176,7 @@ impl Encoder {
             // Whole images come as `Heard::Image`, above.
             Message::TactileSegment(_) => Ok(()),
             Message::TerrainClass(c) => {
-                let m = ros::TerrainClass {
-                    header: header(format!("foot{foot}")),
-                    foot,
-                    step: c.step,
-                    terrain_id: c.terrain,
-                    terrain_name: self.catalog.describe(c.terrain),
-                    confidence: (c.confidence_pct / 100.0) as f32,
-                    unknown_reason: c
-                        .unknown_reason()
-                        .map(|r| r.name().to_string())
-                        .unwrap_or_default(),
-                    damage: (c.damage_pct / 100.0) as f32,
-                    latency_us: c.latency_us,
-                    flags: c.flags,
-                };
+                let m = self.terrain(header(format!("foot{foot}")), foot, &c);
                 self.emit(RosTopic::Terrain(foot), t_ns, &m, sink)
             }
             Message::FootContact(c) => {
@@ -242,6 +232,49 @@ impl Encoder {
             }
             // The controller's set points are the leg's business; the leg's state is published.
             Message::LegCommand(_) => Ok(()),
+        }
+    }
+
+    /// A step a model decided on the way (`presrs mcap --ros2 --model`): on
+    /// `footN/terrain/model`, at the time it was decided, as the bus's would be.
+    pub fn model_decision(
+        &mut self,
+        t_us: u64,
+        foot: u8,
+        c: &messages::TerrainClass,
+        sink: &mut dyn RosSink,
+    ) -> Result<(), Ros2Error> {
+        let t_ns = t_us.saturating_mul(1000);
+        let header = Header {
+            stamp: Time::from_ns(t_ns),
+            frame_id: format!("foot{foot}"),
+        };
+        let m = self.terrain(header, foot, c);
+        self.emit(RosTopic::ModelTerrain(foot), t_ns, &m, sink)
+    }
+
+    /// A TerrainClass as its ROS 2 message; unknown ground chose no terrain, so its
+    /// `confidence` is NaN (the frame's is the rejected class's posterior).
+    fn terrain(&self, header: Header, foot: u8, c: &messages::TerrainClass) -> ros::TerrainClass {
+        let unknown = c.terrain == messages::TERRAIN_UNKNOWN;
+        ros::TerrainClass {
+            header,
+            foot,
+            step: c.step,
+            terrain_id: c.terrain,
+            terrain_name: self.catalog.describe(c.terrain),
+            confidence: if unknown {
+                f32::NAN
+            } else {
+                (c.confidence_pct / 100.0) as f32
+            },
+            unknown_reason: c
+                .unknown_reason()
+                .map(|r| r.name().to_string())
+                .unwrap_or_default(),
+            damage: (c.damage_pct / 100.0) as f32,
+            latency_us: c.latency_us,
+            flags: c.flags,
         }
     }
 

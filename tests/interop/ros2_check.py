@@ -14,6 +14,7 @@ live SUB.json BAGDIR...         the subscriber saw each bag's messages, once, in
 Each prints a JSON summary; a failed check exits 1 saying what differs.
 """
 import json
+import math
 import os
 import sys
 import time
@@ -157,7 +158,9 @@ def subscribe(port, out, seconds):
 def summary(ros_type, m):
     """The values the tests compare, per type."""
     if ros_type == "presrs_msgs/msg/TerrainClass":
-        return [m.foot, m.step, m.terrain_id, m.terrain_name, round(m.confidence * 200),
+        # Unknown ground chose no terrain: its confidence is NaN.
+        conf = None if math.isnan(m.confidence) else round(m.confidence * 200)
+        return [m.foot, m.step, m.terrain_id, m.terrain_name, conf,
                 m.unknown_reason, m.flags, m.latency_us]
     if ros_type == "presrs_msgs/msg/FootContact":
         return [m.foot, bool(m.stance), m.seq, m.foot_timestamp_us]
@@ -223,7 +226,8 @@ def bag(path, dbc, log):
     for (kind, foot), vals in frames.items():
         if kind == "TerrainClass":
             got = [v for _, v in msgs.get(topic(f"foot{foot}/terrain"), [])]
-            want = [[foot, v["Step"], v["TerrainId"], None, round(v["Confidence"] * 2), None,
+            want = [[foot, v["Step"], v["TerrainId"], None,
+                     None if v["TerrainId"] == 255 else round(v["Confidence"] * 2), None,
                      None, v["LatencyUs"]] for v in vals]
             strip = [[g[0], g[1], g[2], None, g[4], None, None, g[7]] for g in got]
             if strip != want:
@@ -294,6 +298,74 @@ def live(sub_json, bags):
     print(json.dumps({"topics": report}))
 
 
+def yaml_load(text):
+    """YAML by ruamel.yaml (rosbags' own YAML library: no other package needed)."""
+    from ruamel.yaml import YAML
+
+    return YAML(typ="safe").load(text)
+
+
+QOS_FIELDS = ("reliability", "durability", "history", "depth")
+
+
+def qos_ok(text_or_list, where):
+    """An offered QoS profile list as rosbag2 writes it: YAML (text, or already parsed) with a
+    known reliability, durability and history and a depth."""
+    items = yaml_load(text_or_list) if isinstance(text_or_list, str) else text_or_list
+    if not isinstance(items, list) or not items:
+        fail(f"{where}: offered_qos_profiles is not a list of profiles: {text_or_list!r}")
+    for q in items:
+        missing = [k for k in QOS_FIELDS if k not in q]
+        if missing:
+            fail(f"{where}: QoS profile lacks {missing}: {q}")
+        if q["reliability"] not in ("reliable", "best_effort") or q["durability"] not in (
+                "volatile", "transient_local") or q["history"] not in ("keep_last", "keep_all"):
+            fail(f"{where}: QoS values not ROS 2's: {q}")
+        if not isinstance(q["depth"], int):
+            fail(f"{where}: depth {q['depth']!r}")
+    return items[0]
+
+
+def model(path, csv_path, ns):
+    """`presrs mcap --ros2 --model`'s bag against `presrs node --replay --csv`'s table: one
+    footN/terrain/model message per row, with its values; and every topic's QoS, in
+    metadata.yaml and in the MCAP channel, parses as YAML with the four fields."""
+    import csv as csvmod
+
+    from mcap.reader import make_reader
+
+    msgs, _ = read_bag(path)
+    rows = list(csvmod.DictReader(open(csv_path)))
+    by_foot = defaultdict(list)
+    for r in rows:
+        by_foot[int(r["foot"])].append(r)
+    compared = 0
+    for foot, want in by_foot.items():
+        got = [(t, v) for t, v in msgs.get(f"{ns}/foot{foot}/terrain/model", [])]
+        if len(got) != len(want):
+            fail(f"{path}: {len(got)} foot{foot}/terrain/model messages, the CSV has {len(want)} rows")
+        for (t, g), r in zip(got, want):
+            conf = None if r["confidence_pct"] == "" else round(float(r["confidence_pct"]) * 2)
+            w = [foot, int(r["step"]), r["terrain"], conf, r["unknown_reason"]]
+            if [g[0], g[1], g[3], g[4], g[5]] != w:
+                fail(f"{path}: foot{foot}/terrain/model {g} differs from the CSV row {r}")
+            decided_ns = int(round(float(r["decision_s"]) * 1e6)) * 1000
+            if t != decided_ns:
+                fail(f"{path}: message at {t} ns, the CSV decided it at {decided_ns}")
+            compared += 1
+    meta = yaml_load(open(os.path.join(path, "metadata.yaml")).read())["rosbag2_bagfile_information"]
+    profiles = {}
+    for tm in meta["topics_with_message_count"]:
+        m = tm["topic_metadata"]
+        profiles[m["name"]] = qos_ok(m["offered_qos_profiles"], f"metadata.yaml {m['name']}")
+    mcaps = [f for f in os.listdir(path) if f.endswith(".mcap")]
+    with open(os.path.join(path, mcaps[0]), "rb") as f:
+        for ch in make_reader(f).get_summary().channels.values():
+            qos_ok(ch.metadata["offered_qos_profiles"], f"MCAP channel {ch.topic}")
+    print(json.dumps({"compared": compared, "ros_distro": meta.get("ros_distro"),
+                      "version": meta.get("version"), "qos": profiles}))
+
+
 def main():
     cmd = sys.argv[1] if len(sys.argv) > 1 else ""
     if cmd == "router":
@@ -304,6 +376,8 @@ def main():
         bag(sys.argv[2], sys.argv[3], sys.argv[4])
     elif cmd == "live":
         live(sys.argv[2], sys.argv[3:])
+    elif cmd == "model":
+        model(sys.argv[2], sys.argv[3], os.environ.get("PRESRS_NS", ""))
     else:
         fail(__doc__)
 

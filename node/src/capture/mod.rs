@@ -15,14 +15,13 @@ use protocol::Stamped;
 use protocol::candump::{format_seconds, parse_seconds};
 use protocol::component::{Component, Outbox};
 use protocol::emit::Emit;
-use protocol::messages::TerrainClass;
 use protocol::terrain::{Terrain, TerrainCatalog};
 
 use crate::classifier::PressureImage;
 use crate::classifier::dataset::write_pgm;
 use crate::config::{NodeConfig, RepairMode};
 use crate::health::LineHealth;
-use crate::stance::StancePipeline;
+use crate::stance::{Decided, StancePipeline};
 
 mod labels;
 mod manifest;
@@ -202,7 +201,7 @@ impl Capture {
         self.gaits.on_frame(st, &self.ids);
         let decided = &mut self.decided;
         self.pipeline
-            .on_frame(st, &mut |(foot, _): (u8, TerrainClass)| decided.push(foot));
+            .on_frame(st, &mut |d: Decided| decided.push(d.foot));
         self.take(out);
     }
 
@@ -211,9 +210,7 @@ impl Capture {
     pub fn tick(&mut self, now_us: u64, out: &mut (impl Emit<CapturedStep> + ?Sized)) {
         let decided = &mut self.decided;
         self.pipeline
-            .tick(now_us, &mut |(foot, _): (u8, TerrainClass)| {
-                decided.push(foot)
-            });
+            .tick(now_us, &mut |d: Decided| decided.push(d.foot));
         self.take(out);
     }
 

@@ -48,7 +48,8 @@ use crate::classifier::model::{CatalogMismatch, ModelError};
 use crate::config::NodeConfig;
 use crate::gait::{GaitTally, GaitTrack, describe_counts};
 use crate::replay::EnergyTally;
-use crate::stance::{Counters, StancePipeline};
+use crate::stance::{Counters, Decided, StancePipeline};
+use crate::step_table::StepSender;
 
 /// Why the node cannot start, or cannot take a model.
 #[derive(Debug, Error)]
@@ -87,12 +88,25 @@ pub enum Output {
         /// The gait in force when it was decided (the controller's last GaitStatus; `None`
         /// before any): not on the bus frame, which carries the decision alone.
         gait: Option<u8>,
+        /// The step's touchdown on the receiver's clock (µs; a replay's: the log's
+        /// timestamps): see [`crate::stance::Decided::touchdown_us`].
+        touchdown_us: u64,
     },
     /// The heartbeat, at `status_hz`.
     Status(NodeStatus),
 }
 
 impl Output {
+    /// The step `d` decided with `gait` in force.
+    fn class(d: Decided, gait: Option<u8>) -> Self {
+        Output::Class {
+            foot: d.foot,
+            class: d.class,
+            gait,
+            touchdown_us: d.touchdown_us,
+        }
+    }
+
     /// The frame that carries this on `ids`: TerrainClass on its foot's id, NodeStatus on
     /// the node's.
     pub fn to_frame(&self, ids: &IdConfig) -> Option<CanFrame> {
@@ -100,6 +114,14 @@ impl Output {
             Output::Class { foot, class, .. } => Message::TerrainClass(class).to_frame(ids, foot),
             Output::Status(s) => Message::NodeStatus(s).to_frame(ids, 0),
         }
+    }
+}
+
+/// Hands a decided step to the live step table, if there is one.
+#[inline]
+fn offer(steps: &Option<StepSender>, t_us: u64, o: &Output) {
+    if let (Some(s), Some(row)) = (steps, crate::step_table::StepRow::of(t_us, o)) {
+        s.offer(row);
     }
 }
 
@@ -125,6 +147,8 @@ pub struct NodeService {
     /// Read every frame on the bus, not only the node's own kinds: a recorder tap keeps the
     /// whole bus.
     read_all: bool,
+    /// Where each decided step also goes (`presrs node --csv`): a bounded queue, never waited on.
+    steps: Option<StepSender>,
 }
 
 impl NodeService {
@@ -153,7 +177,14 @@ impl NodeService {
             gait: GaitTrack::default(),
             tally: GaitTally::default(),
             last_logged_unknown: 0,
+            steps: None,
         })
+    }
+
+    /// Offers every step decided from now on to `steps` (a live step table,
+    /// [`crate::step_table::StepLog`]), off the node's thread.
+    pub fn set_step_log(&mut self, steps: StepSender) {
+        self.steps = Some(steps);
     }
 
     /// Measures decisions' latency (TerrainClass `latency_us`) on `clock`, read when each
@@ -166,12 +197,14 @@ impl NodeService {
     /// One received frame; the decisions it completes go to `out`.
     pub fn process(&mut self, frame: &Stamped, out: &mut (impl Emit<Output> + ?Sized)) {
         self.gait.on_frame(frame, self.pipeline.ids());
-        let (gait, tally) = (self.gait.current(), &mut self.tally);
-        self.pipeline
-            .on_frame(frame, &mut |(foot, class): (u8, TerrainClass)| {
-                tally.add(gait, class.terrain == TERRAIN_UNKNOWN);
-                out.emit(Output::Class { foot, class, gait })
-            });
+        let (gait, tally, steps) = (self.gait.current(), &mut self.tally, &self.steps);
+        let t_us = frame.t_us;
+        self.pipeline.on_frame(frame, &mut |d: Decided| {
+            tally.add(gait, d.class.terrain == TERRAIN_UNKNOWN);
+            let o = Output::class(d, gait);
+            offer(steps, t_us, &o);
+            out.emit(o)
+        });
     }
 
     /// A recorded run on its own clock: each frame's time ticks the node before the frame is
@@ -192,12 +225,13 @@ impl NodeService {
     /// Everything due by `now_us` (the clock of [`Stamped::t_us`]): steps whose sample deadline
     /// has passed with no nearer frame possible, and NodeStatus when a status period is up.
     pub fn tick(&mut self, now_us: u64, out: &mut (impl Emit<Output> + ?Sized)) {
-        let (gait, tally) = (self.gait.current(), &mut self.tally);
-        self.pipeline
-            .tick(now_us, &mut |(foot, class): (u8, TerrainClass)| {
-                tally.add(gait, class.terrain == TERRAIN_UNKNOWN);
-                out.emit(Output::Class { foot, class, gait })
-            });
+        let (gait, tally, steps) = (self.gait.current(), &mut self.tally, &self.steps);
+        self.pipeline.tick(now_us, &mut |d: Decided| {
+            tally.add(gait, d.class.terrain == TERRAIN_UNKNOWN);
+            let o = Output::class(d, gait);
+            offer(steps, now_us, &o);
+            out.emit(o)
+        });
         // A clock that jumped back (a new bus clock) must not silence the heartbeat.
         let due = self
             .next_status_us

@@ -65,6 +65,8 @@ pub struct Counters {
 struct Foot {
     switch: Switch,
     touchdown_us: u32,
+    /// The touchdown on the receiver's clock ([`Decided::touchdown_us`]).
+    touchdown_rx_us: u64,
     decided: bool,
     step: u16,
     /// Single frame: the best candidate so far (|dt - sample| in µs) and its pixels.
@@ -115,6 +117,7 @@ impl Foot {
         Self {
             switch: Switch::default(),
             touchdown_us: 0,
+            touchdown_rx_us: 0,
             decided: true,
             step: 0,
             best_err: None,
@@ -162,6 +165,19 @@ pub struct StancePipeline {
     /// Per class of the model: stances the energy check judged, and of them those outside
     /// the class's map (sized when a model with another class count is installed).
     energy_tally: Vec<[u32; 2]>,
+}
+
+/// One step's decision as the pipeline hands it on: exactly one per step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Decided {
+    /// The foot that stepped.
+    pub foot: u8,
+    /// The decision, as the bus carries it.
+    pub class: TerrainClass,
+    /// The step's touchdown (the debounced switch edge) on the receiver's clock, a log's
+    /// timestamps (µs): the foot's own time of the edge moved onto the receive time of the
+    /// report that confirmed it.
+    pub touchdown_us: u64,
 }
 
 /// The image a step was decided on, as the node picked it: see [`StancePipeline::sample`].
@@ -345,7 +361,7 @@ impl StancePipeline {
     }
 
     /// Processes one received frame; every TerrainClass it decides goes to `out`.
-    pub fn on_frame(&mut self, st: &Stamped, out: &mut (impl Emit<(u8, TerrainClass)> + ?Sized)) {
+    pub fn on_frame(&mut self, st: &Stamped, out: &mut (impl Emit<Decided> + ?Sized)) {
         self.counters.frames += 1;
         self.now_rx_us = st.t_us;
         let decoded = match messages::decode(&st.frame, &self.cfg.ids) {
@@ -373,12 +389,7 @@ impl StancePipeline {
         }
     }
 
-    fn on_contact(
-        &mut self,
-        foot: u8,
-        fc: FootContact,
-        out: &mut (impl Emit<(u8, TerrainClass)> + ?Sized),
-    ) {
+    fn on_contact(&mut self, foot: u8, fc: FootContact, out: &mut (impl Emit<Decided> + ?Sized)) {
         // The state this report ends held until now: settle it first. A foot that reports only
         // its edges (and sends no image in flight) would otherwise never confirm a liftoff,
         // and every later stance would run on as the first one (1 of 3 steps decided).
@@ -390,7 +401,7 @@ impl StancePipeline {
     }
 
     /// Accepts a switch state that has held for the debounce time by `now` (foot clock).
-    fn settle(&mut self, foot: u8, now: u32, out: &mut (impl Emit<(u8, TerrainClass)> + ?Sized)) {
+    fn settle(&mut self, foot: u8, now: u32, out: &mut (impl Emit<Decided> + ?Sized)) {
         let debounce = self.cfg.debounce_us;
         let f = &mut self.feet[foot as usize];
         let Some(edge) = f.switch.settle(now, debounce) else {
@@ -412,6 +423,11 @@ impl StancePipeline {
                 t[1] = t[1].saturating_add(u32::from(outside));
             }
             f.touchdown_us = at_us;
+            // `now` is the foot's time in the report received at `now_rx_us`; the edge was
+            // confirmed a debounce time after it happened.
+            f.touchdown_rx_us = self
+                .now_rx_us
+                .saturating_sub(u64::from(now.wrapping_sub(at_us)));
             f.decided = false;
             f.best_err = None;
             f.sum_lp.fill(0.0);
@@ -430,12 +446,7 @@ impl StancePipeline {
         }
     }
 
-    fn on_image(
-        &mut self,
-        foot: u8,
-        rx_us: u64,
-        out: &mut (impl Emit<(u8, TerrainClass)> + ?Sized),
-    ) {
+    fn on_image(&mut self, foot: u8, rx_us: u64, out: &mut (impl Emit<Decided> + ?Sized)) {
         let ts = self.reassembler.last_image().timestamp_us;
         // The image's own timestamp also settles a pending switch edge.
         self.settle(foot, ts, out);
@@ -529,7 +540,7 @@ impl StancePipeline {
         foot: u8,
         dt: u32,
         rx_us: u64,
-        out: &mut (impl Emit<(u8, TerrainClass)> + ?Sized),
+        out: &mut (impl Emit<Decided> + ?Sized),
     ) {
         let sample_us = self.cfg.sample_ms * 1000;
         let img = self.reassembler.last_image();
@@ -556,7 +567,7 @@ impl StancePipeline {
     /// at 0.35), and an extrapolated foot clock could pass the deadline before a nearer frame
     /// arrived. So the deadline only moves with frames; a foot that falls silent is decided at
     /// liftoff.
-    pub fn tick(&mut self, now_rx_us: u64, out: &mut (impl Emit<(u8, TerrainClass)> + ?Sized)) {
+    pub fn tick(&mut self, now_rx_us: u64, out: &mut (impl Emit<Decided> + ?Sized)) {
         let sample_us = self.cfg.sample_ms * 1000;
         let w1 = self.cfg.window_ms[1] * 1000;
         for foot in 0..self.feet.len() {
@@ -585,7 +596,7 @@ impl StancePipeline {
         }
     }
 
-    fn decide(&mut self, foot: u8, out: &mut (impl Emit<(u8, TerrainClass)> + ?Sized)) {
+    fn decide(&mut self, foot: u8, out: &mut (impl Emit<Decided> + ?Sized)) {
         let cfg = &self.cfg;
         let f = &mut self.feet[foot as usize];
         f.decided = true;
@@ -673,6 +684,10 @@ impl StancePipeline {
             .as_ref()
             .map_or(self.now_rx_us, |c| c.now_us().max(self.now_rx_us));
         tc.latency_us = decision::latency_us(&tc, now, f.best_rx_us);
-        out.emit((foot, tc));
+        out.emit(Decided {
+            foot,
+            class: tc,
+            touchdown_us: f.touchdown_rx_us,
+        });
     }
 }
