@@ -227,6 +227,29 @@ fn draw_image(
     Ok(())
 }
 
+/// The frame every time panel is drawn in.
+struct PanelArea<'a, 'b> {
+    area: &'a DrawingArea<BitMapBackend<'b>, Shift>,
+    span: f64,
+    /// Height of the time axis' labels (the last panel names the axis).
+    x_area: u32,
+    last: bool,
+    /// The shown image's time, marked on every panel.
+    cursor: Option<f64>,
+}
+
+impl PanelArea<'_, '_> {
+    /// The cursor's line from `lo` to `hi`.
+    fn cursor_line(&self, lo: f64, hi: f64) -> Option<PathElement<(f64, f64)>> {
+        self.cursor
+            .map(|x| PathElement::new(vec![(x, lo), (x, hi)], GREY))
+    }
+
+    fn x_desc(&self) -> &'static str {
+        if self.last { "Time (s)" } else { "" }
+    }
+}
+
 /// One time panel; returns how each of its series was drawn (in the layout's order).
 fn draw_panel(
     area: &DrawingArea<BitMapBackend<'_>, Shift>,
@@ -235,146 +258,158 @@ fn draw_panel(
     cursor: Option<f64>,
     last: bool,
 ) -> Result<Vec<Mark>, ReportError> {
-    let span = d.span;
-    let x_area = if last { 40 } else { 24 };
-    let cursor_line =
-        |lo: f64, hi: f64| cursor.map(|x| PathElement::new(vec![(x, lo), (x, hi)], GREY));
+    let p = PanelArea {
+        area,
+        span: d.span,
+        x_area: if last { 40 } else { 24 },
+        last,
+        cursor,
+    };
     match kind {
-        PanelKind::Terrain => {
-            // One row per terrain name seen, in the order met.
-            let mut names: BTreeMap<String, usize> = BTreeMap::new();
-            for (_, m) in d.truth.iter().chain(&d.classes).chain(&d.model) {
-                if let Some(n) = m.json["Terrain"].as_str() {
-                    let k = names.len();
-                    names.entry(n.to_string()).or_insert(k);
-                }
-            }
-            let mut labels: Vec<(usize, String)> =
-                names.iter().map(|(n, &i)| (i, n.clone())).collect();
-            labels.sort();
-            let labels: Vec<String> = labels.into_iter().map(|(_, n)| n).collect();
-            let row = |m: &Recorded| {
-                m.json["Terrain"]
-                    .as_str()
-                    .and_then(|n| names.get(n))
-                    .map(|&i| i as f64)
-            };
-            let top = names.len().max(1) as f64 - 0.5;
-            let mut c = time_chart(area, span, -0.5f64..top, x_area)?;
-            c.configure_mesh()
-                .y_labels(names.len().max(1))
-                .y_label_formatter(&|v| {
-                    let i = v.round();
-                    if (v - i).abs() < 0.01 && i >= 0.0 {
-                        labels.get(i as usize).cloned().unwrap_or_default()
-                    } else {
-                        String::new()
-                    }
-                })
-                .x_desc(if last { "Time (s)" } else { "" })
-                .draw()
-                .map_err(pe)?;
-            let mut marks = Vec::new();
-            let with_terrain: Vec<_> = d
-                .truth
-                .iter()
-                .filter_map(|(t, m)| Some((*t, row(m)?)))
-                .collect();
-            if !with_terrain.is_empty() {
-                c.draw_series(LineSeries::new(with_terrain, BLACK.stroke_width(2)))
-                    .map_err(pe)?;
-                marks.push(Mark::Line(BLACK));
-            }
-            if !d.classes.is_empty() {
-                c.draw_series(
-                    d.classes
-                        .iter()
-                        .filter_map(|(t, m)| Some(Circle::new((*t, row(m)?), 4, RED.filled()))),
-                )
-                .map_err(pe)?;
-                marks.push(Mark::Dot(RED));
-            }
-            if !d.model.is_empty() {
-                // Just above the bus's dots where both are drawn.
-                let lift = if d.classes.is_empty() { 0.0 } else { 0.15 };
-                c.draw_series(
-                    d.model
-                        .iter()
-                        .filter_map(|(t, m)| Some(Cross::new((*t, row(m)? + lift), 4, BLUE))),
-                )
-                .map_err(pe)?;
-                marks.push(Mark::Cross(BLUE));
-            }
-            c.draw_series(cursor_line(-0.5, top)).map_err(pe)?;
-            Ok(marks)
-        }
-        PanelKind::Contact => {
-            let mut c = time_chart(area, span, -0.2f64..1.2f64, x_area)?;
-            c.configure_mesh()
-                .y_labels(2)
-                .y_label_formatter(&|v| match v.round() as i32 {
-                    0 => "flight".into(),
-                    1 => "stance".into(),
-                    _ => String::new(),
-                })
-                .x_desc(if last { "Time (s)" } else { "" })
-                .draw()
-                .map_err(pe)?;
-            // A step line: each report holds until the next.
-            let mut pts = Vec::with_capacity(2 * d.contact.len());
-            let mut last_v = None;
-            for (t, m) in &d.contact {
-                let v = if plan::in_stance(m) { 1.0 } else { 0.0 };
-                if let Some(p) = last_v {
-                    pts.push((*t, p));
-                }
-                pts.push((*t, v));
-                last_v = Some(v);
-            }
-            let color = RGBColor(0, 128, 128);
-            c.draw_series(LineSeries::new(pts, color.stroke_width(2)))
-                .map_err(pe)?;
-            c.draw_series(cursor_line(-0.2, 1.2)).map_err(pe)?;
-            Ok(vec![Mark::Line(color)])
-        }
-        PanelKind::Gait => {
-            let pts: Vec<(f64, f64)> = d
-                .gait
-                .iter()
-                .filter_map(|(t, m)| Some((*t, m.json["ActiveGait"].as_f64()?)))
-                .collect();
-            let hi = pts.iter().map(|p| p.1).fold(3.0, f64::max) + 0.5;
-            let mut c = time_chart(area, span, 0.5f64..hi, x_area)?;
-            c.configure_mesh()
-                .y_labels((hi - 0.5) as usize)
-                .y_label_formatter(&|v| format!("G{}", v.round()))
-                .x_desc(if last { "Time (s)" } else { "" })
-                .draw()
-                .map_err(pe)?;
-            c.draw_series(LineSeries::new(pts, BLUE.stroke_width(2)))
-                .map_err(pe)?;
-            c.draw_series(cursor_line(0.5, hi)).map_err(pe)?;
-            Ok(vec![Mark::Line(BLUE)])
-        }
-        PanelKind::Speed => {
-            let pts: Vec<(f64, f64)> = d
-                .truth
-                .iter()
-                .filter_map(|(t, m)| Some((*t, m.json["SpeedMps"].as_f64()?)))
-                .collect();
-            let vmax = pts.iter().map(|p| p.1).fold(0.5, f64::max) * 1.1;
-            let mut c = time_chart(area, span, 0f64..vmax, x_area)?;
-            c.configure_mesh()
-                .x_desc(if last { "Time (s)" } else { "" })
-                .draw()
-                .map_err(pe)?;
-            let green = RGBColor(0, 150, 0);
-            c.draw_series(LineSeries::new(pts, green.stroke_width(2)))
-                .map_err(pe)?;
-            c.draw_series(cursor_line(0.0, vmax)).map_err(pe)?;
-            Ok(vec![Mark::Line(green)])
+        PanelKind::Terrain => terrain_panel(&p, d),
+        PanelKind::Contact => contact_panel(&p, d),
+        PanelKind::Gait => gait_panel(&p, d),
+        PanelKind::Speed => speed_panel(&p, d),
+    }
+}
+
+/// Terrain: one row per name seen; the truth as a line, the bus's decisions as dots, a
+/// model's as crosses.
+fn terrain_panel(p: &PanelArea<'_, '_>, d: &FootData<'_>) -> Result<Vec<Mark>, ReportError> {
+    // One row per terrain name seen, in the order met.
+    let mut names: BTreeMap<String, usize> = BTreeMap::new();
+    for (_, m) in d.truth.iter().chain(&d.classes).chain(&d.model) {
+        if let Some(n) = m.json["Terrain"].as_str() {
+            let k = names.len();
+            names.entry(n.to_string()).or_insert(k);
         }
     }
+    let mut labels: Vec<(usize, String)> = names.iter().map(|(n, &i)| (i, n.clone())).collect();
+    labels.sort();
+    let labels: Vec<String> = labels.into_iter().map(|(_, n)| n).collect();
+    let row = |m: &Recorded| {
+        m.json["Terrain"]
+            .as_str()
+            .and_then(|n| names.get(n))
+            .map(|&i| i as f64)
+    };
+    let top = names.len().max(1) as f64 - 0.5;
+    let mut c = time_chart(p.area, p.span, -0.5f64..top, p.x_area)?;
+    c.configure_mesh()
+        .y_labels(names.len().max(1))
+        .y_label_formatter(&|v| {
+            let i = v.round();
+            if (v - i).abs() < 0.01 && i >= 0.0 {
+                labels.get(i as usize).cloned().unwrap_or_default()
+            } else {
+                String::new()
+            }
+        })
+        .x_desc(p.x_desc())
+        .draw()
+        .map_err(pe)?;
+    let mut marks = Vec::new();
+    let with_terrain: Vec<_> = d
+        .truth
+        .iter()
+        .filter_map(|(t, m)| Some((*t, row(m)?)))
+        .collect();
+    if !with_terrain.is_empty() {
+        c.draw_series(LineSeries::new(with_terrain, BLACK.stroke_width(2)))
+            .map_err(pe)?;
+        marks.push(Mark::Line(BLACK));
+    }
+    if !d.classes.is_empty() {
+        c.draw_series(
+            d.classes
+                .iter()
+                .filter_map(|(t, m)| Some(Circle::new((*t, row(m)?), 4, RED.filled()))),
+        )
+        .map_err(pe)?;
+        marks.push(Mark::Dot(RED));
+    }
+    if !d.model.is_empty() {
+        // Just above the bus's dots where both are drawn.
+        let lift = if d.classes.is_empty() { 0.0 } else { 0.15 };
+        c.draw_series(
+            d.model
+                .iter()
+                .filter_map(|(t, m)| Some(Cross::new((*t, row(m)? + lift), 4, BLUE))),
+        )
+        .map_err(pe)?;
+        marks.push(Mark::Cross(BLUE));
+    }
+    c.draw_series(p.cursor_line(-0.5, top)).map_err(pe)?;
+    Ok(marks)
+}
+
+/// The foot switch as a step line: stance or flight.
+fn contact_panel(p: &PanelArea<'_, '_>, d: &FootData<'_>) -> Result<Vec<Mark>, ReportError> {
+    let mut c = time_chart(p.area, p.span, -0.2f64..1.2f64, p.x_area)?;
+    c.configure_mesh()
+        .y_labels(2)
+        .y_label_formatter(&|v| match v.round() as i32 {
+            0 => "flight".into(),
+            1 => "stance".into(),
+            _ => String::new(),
+        })
+        .x_desc(p.x_desc())
+        .draw()
+        .map_err(pe)?;
+    // A step line: each report holds until the next.
+    let mut pts = Vec::with_capacity(2 * d.contact.len());
+    let mut last_v = None;
+    for (t, m) in &d.contact {
+        let v = if plan::in_stance(m) { 1.0 } else { 0.0 };
+        if let Some(p) = last_v {
+            pts.push((*t, p));
+        }
+        pts.push((*t, v));
+        last_v = Some(v);
+    }
+    let color = RGBColor(0, 128, 128);
+    c.draw_series(LineSeries::new(pts, color.stroke_width(2)))
+        .map_err(pe)?;
+    c.draw_series(p.cursor_line(-0.2, 1.2)).map_err(pe)?;
+    Ok(vec![Mark::Line(color)])
+}
+
+/// The gait in force.
+fn gait_panel(p: &PanelArea<'_, '_>, d: &FootData<'_>) -> Result<Vec<Mark>, ReportError> {
+    let pts: Vec<(f64, f64)> = d
+        .gait
+        .iter()
+        .filter_map(|(t, m)| Some((*t, m.json["ActiveGait"].as_f64()?)))
+        .collect();
+    let hi = pts.iter().map(|p| p.1).fold(3.0, f64::max) + 0.5;
+    let mut c = time_chart(p.area, p.span, 0.5f64..hi, p.x_area)?;
+    c.configure_mesh()
+        .y_labels((hi - 0.5) as usize)
+        .y_label_formatter(&|v| format!("G{}", v.round()))
+        .x_desc(p.x_desc())
+        .draw()
+        .map_err(pe)?;
+    c.draw_series(LineSeries::new(pts, BLUE.stroke_width(2)))
+        .map_err(pe)?;
+    c.draw_series(p.cursor_line(0.5, hi)).map_err(pe)?;
+    Ok(vec![Mark::Line(BLUE)])
+}
+
+/// The simulator's true speed.
+fn speed_panel(p: &PanelArea<'_, '_>, d: &FootData<'_>) -> Result<Vec<Mark>, ReportError> {
+    let pts: Vec<(f64, f64)> = d
+        .truth
+        .iter()
+        .filter_map(|(t, m)| Some((*t, m.json["SpeedMps"].as_f64()?)))
+        .collect();
+    let vmax = pts.iter().map(|p| p.1).fold(0.5, f64::max) * 1.1;
+    let mut c = time_chart(p.area, p.span, 0f64..vmax, p.x_area)?;
+    c.configure_mesh().x_desc(p.x_desc()).draw().map_err(pe)?;
+    let green = RGBColor(0, 150, 0);
+    c.draw_series(LineSeries::new(pts, green.stroke_width(2)))
+        .map_err(pe)?;
+    c.draw_series(p.cursor_line(0.0, vmax)).map_err(pe)?;
+    Ok(vec![Mark::Line(green)])
 }
 
 /// A panel's chart: time from 0 to `span` s against `y`, labels as every panel has them.
