@@ -24,10 +24,14 @@ pub struct TrainArgs {
     /// Skip unreadable files (counted) instead of stopping.
     #[arg(long)]
     pub skip_bad: bool,
+    /// List every candidate of the unknown-ground choice, not only the kept one and the best
+    /// single option.
+    #[arg(long)]
+    pub verbose: bool,
     /// Calibrate the unknown-terrain rejection on this dataset (DIR/<terrain>/<images>: another
     /// run of terrains the model knows, e.g. a second `presrs capture`). Without it, a --data
     /// folder whose manifest names two or more runs of a terrain calibrates on its last run;
-    /// else on the training run's unused images, with a measured margin.
+    /// else on the session itself, in time blocks, with a margin measured on its last quarter.
     #[arg(long, value_name = "DIR")]
     pub calibrate: Option<PathBuf>,
     #[command(flatten)]
@@ -60,7 +64,12 @@ pub fn train(a: &TrainArgs) -> Result<ExitCode> {
     trained.model.save(out)?;
     print!(
         "{}",
-        trained.report(opts.unknown_rate, took, &out.display().to_string())
+        trained.report(
+            opts.unknown_rate,
+            took,
+            &out.display().to_string(),
+            a.verbose
+        )
     );
     Ok(ExitCode::SUCCESS)
 }

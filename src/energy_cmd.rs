@@ -1,5 +1,5 @@
 //! `presrs energy`: fits a model's energy check on the robot's closed-loop runs on known
-//! ground. The work is [`node::energy_fit`]; this module reads the arguments and the logs and
+//! ground. The work is [`node::unknown::energy_fit`]; this module reads the arguments and the logs and
 //! prints what was fitted.
 
 use std::path::PathBuf;
@@ -8,7 +8,7 @@ use std::process::ExitCode;
 use anyhow::{Context, Result, bail};
 use node::capture::Labelling;
 use node::classifier::Model;
-use node::energy_fit::{EnergyRun, describe, fit_energy};
+use node::unknown::energy_fit::{EnergyRun, describe, fit_energy};
 
 #[derive(clap::Args)]
 pub struct EnergyArgs {
@@ -100,7 +100,7 @@ pub fn run(a: EnergyArgs) -> Result<ExitCode> {
     if a.json {
         println!(
             "{}",
-            serde_json::json!({ "out": a.out, "report": rep, "maps": model.energy })
+            serde_json::json!({ "out": a.out, "report": rep, "maps": model.unknown.energy })
         );
     } else {
         for l in describe(&model, &rep) {

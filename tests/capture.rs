@@ -1,4 +1,4 @@
-//! Issue 17 §1 and §4: `presrs capture` builds a training set from the robot's own logs, and
+//! `presrs capture` builds a training set from the robot's own logs, and
 //! the whole path a lab walks (record per terrain, capture, train, deploy, classify a fresh
 //! mixed run) works from the CLI. The simulator stands in for the robot (`presrs sim --log`);
 //! the vcan suite walks the same path over real SocketCAN with candump.
@@ -93,11 +93,25 @@ fn a_lab_records_captures_trains_and_classifies_a_fresh_run() {
     for r in &rows {
         let f: Vec<&str> = r.split(',').collect();
         // `presrs sim --log` is the foot's traffic only: no controller, no GaitStatus, no gait.
-        assert_eq!((f.len(), f[9]), (10, ""), "{r}");
+        assert_eq!((f.len(), f[9]), (12, ""), "{r}");
+        // The flights beside the stance (the foot switch's), empty where the log has none.
+        for flight in &f[10..12] {
+            assert!(
+                flight.is_empty() || (0.0..2.0).contains(&flight.parse::<f64>().unwrap()),
+                "flight: {r}"
+            );
+        }
         assert!(f[0].starts_with(&format!("{}/", f[1])), "{r}");
         assert!(set.join(f[0]).is_file(), "{r}");
         assert!(f[6].parse::<u64>().unwrap() > 0, "load sum: {r}");
     }
+    // Every step but a run's last has the flight after it (the next touchdown ends it).
+    let with_flight = rows.iter().filter(|r| !r.ends_with(',')).count();
+    assert!(
+        with_flight + terrains.len() >= rows.len(),
+        "{with_flight} of {}",
+        rows.len()
+    );
     // Capturing the same log again adds nothing.
     let (wood_log, _) = &first["wood"];
     let again = json(&common::output_ok(

@@ -121,7 +121,7 @@ fn train_eval_classify_features_repair() {
     let (ok, out, _) = classify(&img);
     assert!(ok && out.contains("\tgrass\t"), "{out}");
 
-    // Issue 16: a blank frame is no terrain (it was one at confidence 1.000), and a 16-bit
+    // A blank frame is no terrain (it was one at confidence 1.000), and a 16-bit
     // image (maxval 65535) on a model of 8-bit images is refused with the fix.
     let flat = |name: &str, maxval: u32, value: u32| {
         let path = dir.join(name);
@@ -215,7 +215,7 @@ fn train_eval_classify_features_repair() {
     assert!(!ok && err.contains("invalid value 'tables'"), "{err}");
 }
 
-/// Issue 25: `train --calibrate DIR` calibrates the unknown-terrain rejection on another run,
+/// `train --calibrate DIR` calibrates the unknown-terrain rejection on another run,
 /// refuses a run of terrains the model does not know and an empty one (naming the run and the
 /// fix), and `classify --json` gives each image's novelty and the threshold it was held to.
 #[test]
@@ -242,7 +242,7 @@ fn calibration_runs_and_classify_json() {
     let (ok, out, err) = train(&model, None);
     assert!(ok, "{err}");
     assert!(
-        out.contains("margin") && out.contains("second one"),
+        out.contains("margin") && out.contains("record a second session"),
         "{out}"
     );
     let (ok, out, err) = train(&model, Some(&run2));
@@ -253,8 +253,11 @@ fn calibration_runs_and_classify_json() {
     );
     let m: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&model).unwrap()).unwrap();
-    assert_eq!(m["novelty"]["calibration"]["source"], "held-out-runs");
-    assert_eq!(m["novelty"]["score"], "knn-residual");
+    assert_eq!(
+        m["unknown"]["novelty"]["calibration"]["source"],
+        "held-out-runs"
+    );
+    assert_eq!(m["unknown"]["novelty"]["score"], "knn-residual");
     // A run with a terrain the model does not know (sand: in the catalog, not in the model).
     std::fs::rename(run2.join("grass"), run2.join("sand")).unwrap();
     let refused = dir.join("x.json");

@@ -20,7 +20,7 @@ fn demo_runs_the_loop_and_reports_json() {
     for k in ["accuracy", "switches", "steps_to_switch_max"] {
         assert!(j.get(k).is_some(), "missing {k}: {j}");
     }
-    // The default track changes terrain (wood, grass, clay, carpet): issue 6's loop adopts
+    // The default track changes terrain (wood, grass, clay, carpet): the loop adopts
     // each terrain's gait within 3 steps, the hopper stays up, and the node is right on
     // nearly every step.
     assert!(j["switches"].as_u64().unwrap() >= 3, "{j}");
@@ -103,7 +103,7 @@ fn realtime_and_fixed_gait(dir: &std::path::Path) {
     assert!(gaits.iter().all(|&g| g == 3), "{gaits:?}");
 }
 
-/// Issue 17 §2 and issue 25 §5: sand on the track, which the demo model was not trained on and
+/// Sand on the track, which the demo model was not trained on and
 /// whose texture is clay's. The energy check (on by default: the demo model's is fitted on a
 /// closed-loop run of the default track) calls most sand steps unknown, the controller puts
 /// the hopper in the safe gait within 3 steps of each time it comes onto sand, and at most 3%
@@ -162,7 +162,7 @@ fn sand_the_model_never_saw_is_unknown_and_gets_the_safe_gait() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// Issue 27: the closed loop through each motor protocol (the simulated leg answering as two
+/// The closed loop through each motor protocol (the simulated leg answering as two
 /// motors, a leg bridge between the controller and them) hops as the direct leg does: no fall,
 /// accuracy within 2 points and gait switching within 1 step of the direct leg on the same
 /// seed, and the bridge's LegState (from the encoders) within 0.01 rad and 2 mm of the truth.
@@ -239,7 +239,7 @@ fn demo_candump_where_no_file_can_be_made_names_it() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// Issue 25 §5, the lab's path: a closed-loop run recorded with its truth (`presrs demo
+/// The lab's path: a closed-loop run recorded with its truth (`presrs demo
 /// --candump --truth`), `presrs energy` fits a model's energy check on it, and that model meets
 /// sand. Bad inputs are refused naming the input: labels for another number of logs, a label
 /// the model does not know, a model file whose energy check is broken.
@@ -403,7 +403,7 @@ fn energy_is_fitted_from_a_recorded_run_and_bad_inputs_are_named() {
     assert!(!dir.join("x.json").exists(), "nothing written on a refusal");
     let mut broken: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&fitted).unwrap()).unwrap();
-    broken["energy"][0]["residual_s"] = serde_json::json!([0.01, -0.01]);
+    broken["unknown"]["energy"][0]["residual_s"] = serde_json::json!([0.01, -0.01]);
     let bad = dir.join("broken.json");
     std::fs::write(&bad, broken.to_string()).unwrap();
     let e = fails(&["demo", "--steps", "5", "--model", &s(&bad)]);

@@ -1,4 +1,4 @@
-//! The leg bridge's motor frames against the drivers' own Python packages (issue 27): mjbots'
+//! The leg bridge's motor frames against the drivers' own Python packages: mjbots'
 //! `moteus`, cantools reading the CANSimple DBC shipped in `odrive-can`, and
 //! `mini-cheetah-motor-driver-socketcan` (`tests/interop/drivers_check.py`). Each direction: their
 //! decoder reads what our bridge and our simulated drivers send, and our decoders read what
@@ -624,7 +624,7 @@ fn their_row(r: &Value) -> Row {
     }
 }
 
-/// Issue 27 §3 on a bus: the closed loop through each protocol's motors (`presrs demo --leg P
+/// On a bus: the closed loop through each protocol's motors (`presrs demo --leg P
 /// --candump LOG`); python-can reads the log and the protocol's own package decodes every motor
 /// frame in it (mjbots' `moteus`; cantools with the CANSimple DBC shipped in `odrive-can`;
 /// `mini-cheetah-motor-driver-socketcan`'s unpacking and model ranges). They read what our

@@ -3,6 +3,9 @@
 //! client: Python's `mcap` package (`tests/interop/mcap_check.py`) and a plain WebSocket
 //! client speaking the Foxglove protocol (`tests/interop/foxglove_client.py`).
 
+// Without `--features interop` the tests that need Python's packages are left out, and the
+// helpers only they use with them.
+#![cfg_attr(not(feature = "interop"), allow(unused_imports, dead_code))]
 mod common;
 
 use std::collections::BTreeMap;
@@ -28,6 +31,7 @@ fn tempdir(name: &str) -> PathBuf {
 }
 
 /// `mcap_check.py FILE [--stream]`, parsed.
+#[cfg(feature = "interop")]
 fn read_mcap(path: &Path, stream: bool) -> Value {
     let mut cmd = Command::new("python3");
     cmd.arg(common::root().join("tests/interop/mcap_check.py"))
@@ -91,6 +95,7 @@ fn robot_with_node(model: &Path, seconds: u64) -> Vec<Stamped> {
 }
 
 #[test]
+#[cfg(feature = "interop")]
 fn a_candump_log_becomes_mcap_that_an_independent_reader_takes_whole() {
     let dir = tempdir("log");
     let model = common::small_model(&dir);
@@ -326,6 +331,7 @@ fn wait(child: &mut Child, within: Duration) -> std::process::ExitStatus {
 }
 
 #[test]
+#[cfg(feature = "interop")]
 fn live_view_serves_images_and_terrain_and_a_killed_recording_keeps_its_chunks() {
     let dir = tempdir("live");
     // Paced to real time by --foxglove: 300 steps is two minutes, longer than the test.

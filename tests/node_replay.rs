@@ -68,7 +68,7 @@ fn replay_prints_the_pipelines_decisions_with_the_logs_timestamps() {
         assert_eq!(g["step"], tc.step);
         assert_eq!(g["terrain_id"], tc.terrain);
         assert_eq!(g["flags"], tc.flags);
-        // Issue 16: the printed latency is the value the CAN field carries (saturated, and 0
+        // The printed latency is the value the CAN field carries (saturated, and 0
         // for a step without a sampled frame).
         let ids = protocol::IdConfig::default();
         let frame = protocol::Message::TerrainClass(*tc)
@@ -175,7 +175,7 @@ fn the_example_configs_parse_and_equal_the_defaults() {
     assert_eq!(c, controller::ControllerConfig::default());
 }
 
-/// Issue 17 §3: the firmware example (the `no_std` foot sender over an `embedded_can` driver)
+/// The firmware example (the `no_std` foot sender over an `embedded_can` driver)
 /// writes a candump log; the node replays it and decides every stance from an image sampled
 /// about 70 ms after its touchdown, by the foot's clock.
 #[test]

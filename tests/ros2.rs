@@ -2,7 +2,8 @@
 //! through a Zenoh router by rmw_zenoh's key expressions and liveliness tokens; `rosbags`
 //! deserialises every payload (CDR) with `ros2/presrs_msgs` and the standard definitions,
 //! recomputes every RIHS01 hash and reads the rosbag2 directories; cantools decodes the same
-//! candump log (`tests/interop/ros2_check.py`).
+//! candump log (`tests/interop/ros2_check.py`). Needs those Python packages: `--features interop`.
+#![cfg(feature = "interop")]
 
 mod common;
 

@@ -1,3 +1,4 @@
+#![forbid(unsafe_code)]
 #![warn(missing_docs)]
 //! # presrs-controller: the hopper's control laws and per-terrain gait switching
 //!

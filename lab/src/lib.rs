@@ -84,7 +84,7 @@ pub enum LabError {
     Capture(#[from] node::capture::CaptureError),
     /// Fitting a model's energy check.
     #[error("fitting the energy check: {0}")]
-    Energy(#[from] node::energy_fit::EnergyFitError),
+    Energy(#[from] node::unknown::energy_fit::EnergyFitError),
     /// A thread could not be started.
     #[error("starting a thread: {0}")]
     Thread(std::io::Error),

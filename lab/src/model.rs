@@ -62,7 +62,8 @@ pub fn sim_model(seed: u64) -> Result<Model, LabError> {
             bottom: 3,
             left: 6,
             right: 0,
-        },
+        }
+        .into(),
         seed,
         ..Default::default()
     };
@@ -90,7 +91,7 @@ pub fn fit_energy_on_sim(
     seed: u64,
     steps: usize,
     leg: Option<leg::LegConfig>,
-) -> Result<node::energy_fit::EnergyFitReport, LabError> {
+) -> Result<node::unknown::energy_fit::EnergyFitReport, LabError> {
     let track = sim::runner::Track::default();
     let ctrl = controller::ControllerConfig::default();
     let mut p = crate::LoopParams::with_controller(&ctrl, steps, seed);
@@ -125,12 +126,12 @@ pub fn fit_energy_on_sim(
     )?);
     let label = |foot: u8, t0: u64, t1: u64| labelling.label(foot, t0, t1);
     let mut records = records.into_iter();
-    let mut runs = [node::energy_fit::EnergyRun {
+    let mut runs = [node::unknown::energy_fit::EnergyRun {
         name: format!("closed-loop simulator run, seed {seed}"),
         records: &mut records,
         label: &label,
     }];
-    Ok(node::energy_fit::fit_energy(
+    Ok(node::unknown::energy_fit::fit_energy(
         &NodeConfig::default(),
         m,
         &mut runs,

@@ -393,6 +393,7 @@ pub fn leave_one_class_out(src: &OpenSetSource) -> Result<Vec<OpenSetRow>, LabEr
         let checks = trained.choice.candidate.to_string();
         let (model, split) = (trained.model, trained.split);
         let calibration_unknown = model
+            .unknown
             .novelty
             .as_ref()
             .map_or(f64::NAN, |n| n.calibration.called_unknown);
@@ -458,7 +459,7 @@ pub fn leave_one_class_out(src: &OpenSetSource) -> Result<Vec<OpenSetRow>, LabEr
 }
 
 /// The single options the default (`train` choosing its checks) is compared with: the plain
-/// model of issue 25 and each option alone on top of it.
+/// model and each option alone on top of it.
 pub const SINGLE_OPTIONS: [Candidate; 6] = {
     let p = Candidate::PLAIN;
     [
@@ -514,10 +515,7 @@ struct Judge {
 
 impl Judge {
     fn new(model: Model) -> Self {
-        let density_thresholds = model
-            .unknown_thresholds
-            .clone()
-            .unwrap_or_else(|| vec![model.unknown_threshold; model.classes.len()]);
+        let density_thresholds = model.unknown.density_thresholds.clone();
         Self {
             density_thresholds,
             cls: Classifier::new(model),
@@ -669,7 +667,7 @@ mod tests {
             calibration: Some(dataset_on(Kind::Static, 20, g2.clone(), 42, 2)),
             fresh: Some(dataset_on(Kind::Static, 20, g2, 43, 3)),
             opts: TrainOptions {
-                crop,
+                crop: crop.into(),
                 ..Default::default()
             },
         };

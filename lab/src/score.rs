@@ -302,10 +302,11 @@ impl Summary {
     }
 }
 
-/// The value at quantile `q` of sorted values (nearest rank); `None` when empty.
-pub fn percentile(sorted: &[f64], q: f64) -> Option<f64> {
-    let i = ((sorted.len().checked_sub(1)?) as f64 * q).round() as usize;
-    sorted.get(i).copied()
+/// The value at quantile `q` of `values` by the node's one rule, the nearest rank at or above
+/// ([`node::stats::upper_quantile`]); `None` when empty.
+pub fn percentile(values: &[f64], q: f64) -> Option<f64> {
+    let mut v = values.to_vec();
+    Some(node::stats::upper_quantile(&mut v, q)).filter(|x| !x.is_nan())
 }
 
 #[cfg(test)]

@@ -35,6 +35,8 @@ pub fn training_set(samples: Vec<Sample>, terrains: &[Terrain]) -> TrainingSet {
         labels,
         runs,
         gaits,
+        flights: Vec::new(),
+        frames: Vec::new(),
     }
 }
 
@@ -122,16 +124,29 @@ mod tests {
                     bottom: 2,
                     left: 2,
                     right: 2,
-                },
+                }
+                .into(),
                 ..Default::default()
             };
             let t = train_run
                 .train_calibrated(&opts, Some((&cal, &names)))
                 .unwrap();
-            let c = t.model.novelty.as_ref().unwrap().calibration.clone();
+            let c = t
+                .model
+                .unknown
+                .novelty
+                .as_ref()
+                .unwrap()
+                .calibration
+                .clone();
             (
                 c,
-                t.report(opts.unknown_rate, std::time::Duration::ZERO, "m.json"),
+                t.report(
+                    opts.unknown_rate,
+                    std::time::Duration::ZERO,
+                    "m.json",
+                    false,
+                ),
             )
         };
         let note = no_training_run_images_note();
@@ -159,14 +174,14 @@ mod tests {
             right: 2,
         };
         let opts = TrainOptions {
-            crop,
+            crop: crop.into(),
             check_texture: true,
             ..Default::default()
         };
         let t = train_run
             .train_calibrated(&opts, Some((&cal, &["run2.log".to_string()])))
             .unwrap();
-        let bands = t.model.texture_ranges.clone().unwrap();
+        let bands = t.model.unknown.texture_bands.clone().unwrap();
         for set in [&train_run, &cal] {
             for (img, &l) in set.images.iter().zip(&set.labels) {
                 let w = img.crop(&crop).unwrap();
@@ -175,7 +190,12 @@ mod tests {
                 assert!((lo..=hi).contains(&r), "{r} outside {lo}-{hi}");
             }
         }
-        let report = t.report(opts.unknown_rate, std::time::Duration::ZERO, "m.json");
+        let report = t.report(
+            opts.unknown_rate,
+            std::time::Duration::ZERO,
+            "m.json",
+            false,
+        );
         let line = report
             .lines()
             .find(|l| l.starts_with("texture check:"))
@@ -187,7 +207,7 @@ mod tests {
         let plain = train_run
             .train_calibrated(
                 &TrainOptions {
-                    crop,
+                    crop: crop.into(),
                     unknown_checks: node::classifier::options::UnknownChecks::Fixed(
                         node::classifier::options::Candidate::PLAIN,
                     ),
@@ -196,10 +216,10 @@ mod tests {
                 None,
             )
             .unwrap();
-        assert!(plain.model.texture_ranges.is_none());
+        assert!(plain.model.unknown.texture_bands.is_none());
         assert!(
             !plain
-                .report(0.02, std::time::Duration::ZERO, "m.json")
+                .report(0.02, std::time::Duration::ZERO, "m.json", false)
                 .lines()
                 .any(|l| l.starts_with("texture check:"))
         );

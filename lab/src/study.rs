@@ -67,7 +67,7 @@ pub fn train_on(
     normalize_load: bool,
 ) -> Result<(Model, Vec<usize>), LabError> {
     let opts = TrainOptions {
-        crop,
+        crop: crop.into(),
         downsample,
         seed,
         normalize_load,
@@ -311,7 +311,7 @@ mod tests {
         assert!(m_per_step > 0.05, "{m_per_step} m per step");
     }
 
-    /// Section 5's shape on the simulator (issue 29), on seeds the experiment does not print:
+    /// Section 5's shape on the simulator, on seeds the experiment does not print:
     /// similar textures lose at least 20 points at 10x10 and at least 3 times what dissimilar
     /// ones lose; full-resolution sandpaper within 5 points of the paper's 96.7%.
     #[test]

@@ -1,4 +1,4 @@
-//! Issue 28: faults in the closed loop cost no fall. A controller killed in mid-hop and
+//! Faults in the closed loop cost no fall. A controller killed in mid-hop and
 //! restarted takes the leg over from what the bus says (bumpless), on every gait; a node killed
 //! and restarted; the bus silent for 0.3-2 s while the leg's own laws run it. A leg of motors,
 //! which has no laws of its own: its bridge stalled, the bus silent briefly, the controller

@@ -16,6 +16,7 @@
 //! - [`bridge`]: [`LegService`], the component: impedance at `rate_hz`, the damped stop on a
 //!   stale command or a driver fault, LegState and LegStatus;
 //! - [`simulated`]: a simulated leg's two motors, for `presrs sim --leg`.
+#![forbid(unsafe_code)]
 
 pub mod bridge;
 pub mod config;

@@ -37,7 +37,6 @@
 pub mod capture;
 pub mod classifier;
 pub mod config;
-pub mod energy_fit;
 pub mod gait;
 pub mod health;
 pub mod replay;

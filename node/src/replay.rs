@@ -40,22 +40,7 @@ pub struct ReplaySummary {
     pub model_gaits: Option<Vec<u8>>,
 }
 
-/// One terrain's stances against its return map over a replay.
-///
-/// On a run over ground known to be the model's terrains, a terrain with more stances outside
-/// than the model's unknown rate has a map that no longer fits the robot: fit the maps again
-/// (`presrs energy`). What moved them on the simulator: a payload put clay's stances outside
-/// and left the others' in (docs/real-robot.md), as sand does; so a run over unknown ground
-/// cannot tell the two apart.
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
-pub struct EnergyTally {
-    /// The terrain's name.
-    pub terrain: String,
-    /// Stances the texture gave this terrain with both flights hops (judged against the map).
-    pub judged: u32,
-    /// Of them, those whose flight after lay outside the map's band.
-    pub outside: u32,
-}
+pub use crate::unknown::energy::EnergyTally;
 
 impl fmt::Display for ReplaySummary {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {

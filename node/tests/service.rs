@@ -762,7 +762,7 @@ fn a_classic_foot_at_the_spec_worst_case_is_classified_with_the_default_timeout(
     );
 }
 
-/// Property test of stance tracking (issue 16): random feet — steps of random length, switch
+/// Property test of stance tracking: random feet — steps of random length, switch
 /// bounce at both edges, images on a 10 ms grid with random loss, a sender clock that wraps
 /// mid-run, malformed frames on our identifiers mixed in — replayed through the node. Images
 /// inside each stance show wood; images in flight, including those sampled right after the
@@ -1001,7 +1001,7 @@ fn a_tap_gets_each_frame_in_and_out_once_and_its_drops_are_counted() {
     }
 }
 
-/// Issue 28: NodeStatus carries the low 8 bits of each running total (docs/protocol.md), so a
+/// NodeStatus carries the low 8 bits of each running total (docs/protocol.md), so a
 /// monitor that takes differences mod 256 sees every loss; saturating at 255 hid them all.
 #[test]
 fn status_counters_wrap_mod_256_instead_of_pinning_at_255() {
@@ -1040,7 +1040,7 @@ fn status_counters_wrap_mod_256_instead_of_pinning_at_255() {
     assert_eq!(s.crc_failures, (n % 256) as u8, "{s:?}");
 }
 
-/// Issue 28: LatencyUs runs from the sampled frame's receipt to the decision on the node's
+/// LatencyUs runs from the sampled frame's receipt to the decision on the node's
 /// clock, so a node that takes its frames late (stopped, behind) says how late, saturating at
 /// the field's 65535 µs; in lock-step without a clock it is the driver's time (0 here: the
 /// frame that completes the image decides it).
@@ -1077,7 +1077,7 @@ fn latency_shows_how_late_the_node_decided() {
     assert_eq!(run(Some(3_000_000)), messages::LATENCY_MAX_US);
 }
 
-/// Issue 28: error frames reach the node's NodeStatus: bus-off and error-passive are its state
+/// Error frames reach the node's NodeStatus: bus-off and error-passive are its state
 /// until the controller restarts, and each error frame counts in BusErrors.
 #[test]
 fn error_frames_set_the_node_state_until_the_controller_restarts() {
@@ -1124,7 +1124,7 @@ fn error_frames_set_the_node_state_until_the_controller_restarts() {
     assert_eq!(stats.bus_errors, 3, "{stats:?}");
 }
 
-/// Issue 25 §5: the energy check. A stance whose flight after is not what its class's return
+/// The energy check. A stance whose flight after is not what its class's return
 /// map gives for its flight before makes the next stance of that class unknown (flag ENERGY);
 /// a stance of another class, or one after a stance the map allows, is the texture's.
 #[test]
@@ -1138,7 +1138,7 @@ fn a_stance_that_took_energy_its_terrain_does_not_makes_the_next_of_its_kind_unk
         residual_s: [-0.010, 0.010],
         stances: 50,
     };
-    m.energy = Some(vec![Some(wood), None, None]);
+    m.unknown.energy = Some(vec![Some(wood), None, None]);
     let run = |m: Model| {
         let mut node = NodeService::new(NodeConfig::default(), m).unwrap();
         let mut foot = FakeFoot::new();
@@ -1182,12 +1182,12 @@ fn a_stance_that_took_energy_its_terrain_does_not_makes_the_next_of_its_kind_unk
     let want_s: Vec<(String, bool)> = want.iter().map(|(n, e)| (n.to_string(), *e)).collect();
     assert_eq!(got_s, want_s);
     // Without the energy check the texture decides every stance.
-    m.energy = None;
+    m.unknown.energy = None;
     let plain = run(m);
     assert!(plain.iter().all(|(n, e)| n != "unknown" && !e), "{plain:?}");
     // A model file whose map list does not match its classes is refused, naming the key.
     let mut bad = model();
-    bad.energy = Some(vec![Some(wood)]);
+    bad.unknown.energy = Some(vec![Some(wood)]);
     let e = bad.validate().err().map(|e| e.to_string());
     assert!(e.as_deref().is_some_and(|e| e.contains("energy")), "{e:?}");
 }
@@ -1200,7 +1200,7 @@ fn unknowns_are_counted_in_the_gait_each_step_was_decided_in() {
     use protocol::messages::{GaitReason, GaitStatus};
     let mut m = model();
     // Wood's return map makes the fourth stance unknown (as the test above shows).
-    m.energy = Some(vec![
+    m.unknown.energy = Some(vec![
         Some(ReturnMap {
             intercept_s: 0.0,
             slope: 1.0,
@@ -1313,10 +1313,7 @@ fn model_of(known: &[usize]) -> Model {
         .collect();
     let data: Vec<Labelled> = imgs
         .iter()
-        .map(|(image, class)| Labelled {
-            image,
-            class: *class,
-        })
+        .map(|(image, class)| Labelled::new(image, *class))
         .collect();
     let classes: Vec<ClassInfo> = known
         .iter()
@@ -1326,13 +1323,13 @@ fn model_of(known: &[usize]) -> Model {
         })
         .collect();
     let opts = TrainOptions {
-        crop: "2,2,2,2".parse::<Crop>().unwrap(),
+        crop: "2,2,2,2".parse::<Crop>().unwrap().into(),
         ..TrainOptions::default()
     };
     train(&data, &classes, &opts).unwrap().0
 }
 
-/// Issue 47: the multi-frame path calls a terrain the model never saw unknown as often as the
+/// The multi-frame path calls a terrain the model never saw unknown as often as the
 /// single-frame path (it used to take the summed posterior's terrain, never unknown), and
 /// says why on the bus; known ground stays known in both.
 #[test]
@@ -1393,6 +1390,41 @@ fn multi_frame_calls_ground_the_model_never_saw_unknown_as_single_frame_does() {
             single_known <= 2 && multi_known <= 2,
             "left out {name}: known steps called unknown {single_known} / {multi_known} of 20"
         );
+    }
+}
+
+/// The multi-frame rule reports the class its frames' summed posterior decides, and judges that
+/// class at the sample-time frame: a stance whose frames are wood but whose 65 ms frame is
+/// grass is not called wood on grass's verdict (its reason and its terrain agree).
+#[test]
+fn multi_frame_judges_the_class_its_frames_decided() {
+    let cfg = NodeConfig {
+        multi_frame: true,
+        ..NodeConfig::default()
+    };
+    let mut node = NodeService::new(cfg, model()).unwrap();
+    let mut foot = FakeFoot::new();
+    let mut frames = Vec::new();
+    for i in 0..6u64 {
+        // Stances 1, 3, 5: every frame wood but the one nearest 70 ms (65 ms), grass.
+        let odd = i % 2 == 1;
+        frames.extend(foot.step(1_000_000 + i * 400_000, 200, |ms, rng| {
+            let t = if odd && ms == 65 { 2 } else { 0 };
+            (ms < 200).then(|| texture(rng, PERIODS[t]))
+        }));
+    }
+    let said = classes(&lock_step(&mut node, &frames, 1_000_000 + 7 * 400_000));
+    assert_eq!(said.len(), 6);
+    let catalog = TerrainCatalog::paper();
+    for (i, (_, tc)) in said.iter().enumerate() {
+        assert_ne!(tc.flags & flags::MULTI_FRAME, 0);
+        if i % 2 == 0 {
+            assert_eq!(catalog.describe(tc.terrain), "wood", "stance {i}: {tc:?}");
+        } else {
+            // Five wood frames decide wood; judged as wood, the grass frame is new ground.
+            assert_eq!(tc.terrain, messages::TERRAIN_UNKNOWN, "stance {i}: {tc:?}");
+            assert_eq!(tc.unknown_reason(), Some(messages::UnknownReason::Novelty));
+        }
     }
 }
 

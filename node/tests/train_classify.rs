@@ -41,7 +41,7 @@ fn dataset(seed: u64, n: usize) -> (Vec<PressureImage>, Vec<usize>) {
 fn labelled<'a>(imgs: &'a [PressureImage], labels: &[usize]) -> Vec<Labelled<'a>> {
     imgs.iter()
         .zip(labels)
-        .map(|(image, &class)| Labelled { image, class })
+        .map(|(image, &class)| Labelled::new(image, class))
         .collect()
 }
 
@@ -59,7 +59,7 @@ fn trained() -> (Model, Vec<PressureImage>, Vec<usize>, Vec<usize>) {
     let (imgs, labels) = dataset(1, 40);
     let data = labelled(&imgs, &labels);
     let opts = TrainOptions {
-        crop: "2,2,2,2".parse::<Crop>().unwrap(),
+        crop: "2,2,2,2".parse::<Crop>().unwrap().into(),
         ..TrainOptions::default()
     };
     let (model, split) = train(&data, &classes(), &opts).unwrap();
@@ -78,7 +78,7 @@ fn trains_with_the_paper_split_and_classifies_held_out_images() {
     assert_eq!(model.val_hashes.len(), 21);
     assert_eq!(model.n_fft, 2048);
     assert!(model.h <= 52 && model.h >= 50, "h = {}", model.h);
-    assert_eq!(model.unknown_rate, Some(0.02));
+    assert_eq!(model.unknown.rate, 0.02);
     let mut c = Classifier::new(model);
     let (mut correct, mut unknown) = (0, 0);
     for &i in &test {
@@ -99,7 +99,7 @@ fn trains_with_the_paper_split_and_classifies_held_out_images() {
     );
 }
 
-/// Issue 17 §2: a model trained on two textures calls the third unknown, nearly always, and
+/// A model trained on two textures calls the third unknown, nearly always, and
 /// few of the known ones; `--unknown-rate 0` (each class's least typical image less 10 nats)
 /// calls no known image unknown and less of the novel one.
 #[test]
@@ -109,7 +109,7 @@ fn a_texture_the_model_never_saw_is_unknown() {
         .iter()
         .zip(&labels)
         .filter(|(_, l)| **l < 2)
-        .map(|(image, &class)| Labelled { image, class })
+        .map(|(image, &class)| Labelled::new(image, class))
         .collect();
     let novel: Vec<&PressureImage> = imgs
         .iter()
@@ -119,14 +119,14 @@ fn a_texture_the_model_never_saw_is_unknown() {
         .collect();
     let shares = |rate: f64| {
         let opts = TrainOptions {
-            crop: "2,2,2,2".parse::<Crop>().unwrap(),
+            crop: "2,2,2,2".parse::<Crop>().unwrap().into(),
             unknown_rate: rate,
             ..TrainOptions::default()
         };
         let (model, split) = train(&known, &classes()[..2], &opts).unwrap();
-        let thresholds = model.unknown_thresholds.clone().unwrap();
+        let thresholds = model.unknown.density_thresholds.clone();
         assert_eq!(thresholds.len(), 2);
-        assert!(thresholds.iter().all(|t| *t >= model.unknown_threshold));
+        assert!(thresholds.iter().all(|t| t.is_finite()));
         let mut c = Classifier::new(model);
         let mut unknown = |img: &PressureImage| {
             c.classify(&img.pixels, 44, 44, false)
@@ -347,12 +347,12 @@ fn model_file_round_trips_and_guards_its_version() {
         assert!(e.to_string().contains(key), "{key}: {e}");
     }
     let mut nan = model.clone();
-    nan.unknown_threshold = f64::NAN;
+    nan.unknown.density_thresholds[0] = f64::NAN;
     assert!(
         nan.validate()
             .unwrap_err()
             .to_string()
-            .contains("unknown_threshold")
+            .contains("unknown.density_thresholds")
     );
     let mut w = v.clone();
     w["classes"][0]["terrain_id"] = 255.into();
@@ -436,6 +436,7 @@ fn novelty_parts_match_a_direct_computation() {
     use presrs_node::classifier::features::FeatureExtractor;
     let (model, imgs, ..) = trained();
     let nv = model
+        .unknown
         .novelty
         .clone()
         .expect("a model trained with a rate has a novelty score");
@@ -500,11 +501,11 @@ fn novelty_parts_match_a_direct_computation() {
 #[test]
 fn a_model_without_a_novelty_score_decides_by_density_as_before() {
     let (mut model, imgs, ..) = trained();
-    model.novelty = None;
+    model.unknown.novelty = None;
     let text = serde_json::to_string(&model).unwrap();
     assert!(!text.contains("novelty"));
     let model = Model::from_json(&text, "old.json").unwrap();
-    let t = model.unknown_thresholds.clone().unwrap();
+    let t = model.unknown.density_thresholds.clone();
     let mut c = Classifier::new(model);
     for img in &imgs {
         let d = c.classify(&img.pixels, 44, 44, false).unwrap();
@@ -542,12 +543,17 @@ fn calibration_on_another_run_and_its_bad_inputs() {
     use presrs_node::classifier::train::{CalibrateError, calibrate_on_runs};
     use presrs_node::unknown::novelty::CalibrationSource;
     let (mut model, ..) = trained();
-    let same = model.novelty.clone().unwrap();
-    assert_eq!(same.calibration.source, CalibrationSource::SameRun);
-    assert_eq!(same.calibration.margin, 1.15);
+    let same = model.unknown.novelty.clone().unwrap();
+    // One session: calibrated in its own time blocks, at a margin chosen on its last quarter.
+    assert_eq!(same.calibration.source, CalibrationSource::TimeBlocks);
+    assert!(
+        [1.5, 1.3, 1.15, 1.0].contains(&same.calibration.margin),
+        "{}",
+        same.calibration.margin
+    );
     // Another run of the same three textures.
     let (imgs, check) = calibrate_on_another_run(&mut model, 9, 30, "run2.log");
-    let nv = model.novelty.clone().unwrap();
+    let nv = model.unknown.novelty.clone().unwrap();
     assert_eq!(nv.calibration.source, CalibrationSource::HeldOutRuns);
     assert_eq!(nv.calibration.runs, vec!["run2.log".to_string()]);
     assert_eq!(nv.calibration.margin, 1.0);
@@ -584,7 +590,7 @@ fn calibration_on_another_run_and_its_bad_inputs() {
     // The references and nuisance directions make the held-out run's own images less novel
     // than they scored when the thresholds were set (where they were measured as new).
     let mut without = model.clone();
-    if let Some(n) = without.novelty.as_mut() {
+    if let Some(n) = without.unknown.novelty.as_mut() {
         n.reference.clear();
         n.reference_classes.clear();
         n.nuisance.clear();
@@ -638,7 +644,7 @@ fn calibration_on_another_run_and_its_bad_inputs() {
         },
     ] {
         let mut bad = model.clone();
-        edit(bad.novelty.as_mut().unwrap());
+        edit(bad.unknown.novelty.as_mut().unwrap());
         let e = Model::from_json(&serde_json::to_string(&bad).unwrap(), "bad.json")
             .unwrap_err()
             .to_string();
@@ -647,7 +653,7 @@ fn calibration_on_another_run_and_its_bad_inputs() {
     // A file from before the references (no `reference`, `nuisance`, `held_out_images`) loads
     // and scores as it did.
     let mut old: serde_json::Value = serde_json::to_value(&model).unwrap();
-    let o = old["novelty"].as_object_mut().unwrap();
+    let o = old["unknown"]["novelty"].as_object_mut().unwrap();
     for key in ["reference", "reference_classes", "nuisance"] {
         assert!(o.remove(key).is_some());
     }
@@ -656,7 +662,7 @@ fn calibration_on_another_run_and_its_bad_inputs() {
         .unwrap()
         .remove("held_out_images");
     let old = Model::from_json(&old.to_string(), "old.json").unwrap();
-    let nv = old.novelty.as_ref().unwrap();
+    let nv = old.unknown.novelty.as_ref().unwrap();
     assert!(nv.reference.is_empty() && nv.nuisance.is_empty());
     assert_eq!(nv.calibration.held_out_images, 0);
 }
@@ -672,7 +678,10 @@ fn a_refit_recalibrates_the_novelty() {
     dead_rows[10] = true;
     dead_rows[25] = true;
     let m = refit(&model, &dead_rows, &dead_cols).unwrap();
-    let (a, b) = (model.novelty.as_ref().unwrap(), m.novelty.as_ref().unwrap());
+    let (a, b) = (
+        model.unknown.novelty.as_ref().unwrap(),
+        m.unknown.novelty.as_ref().unwrap(),
+    );
     assert_ne!(a.thresholds, b.thresholds);
     assert_eq!(a.calibration.pixels, b.calibration.pixels);
     assert_eq!(a.calibration.margin, b.calibration.margin);
@@ -683,7 +692,10 @@ fn a_refit_recalibrates_the_novelty() {
     let mut model = model;
     calibrate_on_another_run(&mut model, 9, 20, "r2");
     let m = refit(&model, &dead_rows, &dead_cols).unwrap();
-    let (a, b) = (model.novelty.as_ref().unwrap(), m.novelty.as_ref().unwrap());
+    let (a, b) = (
+        model.unknown.novelty.as_ref().unwrap(),
+        m.unknown.novelty.as_ref().unwrap(),
+    );
     assert_eq!(b.calibration.held_out_images, 60);
     assert!(
         !b.reference_classes.is_empty() && b.reference.len() == b.reference_classes.len() * m.h
@@ -700,12 +712,12 @@ fn the_texture_check_holds_each_image_to_its_best_classs_band() {
     let (imgs, labels) = dataset(1, 40);
     let data = labelled(&imgs, &labels);
     let opts = TrainOptions {
-        crop: "2,2,2,2".parse::<Crop>().unwrap(),
+        crop: "2,2,2,2".parse::<Crop>().unwrap().into(),
         check_texture: true,
         ..TrainOptions::default()
     };
     let (model, split) = train(&data, &classes(), &opts).unwrap();
-    let bands = model.texture_ranges.clone().unwrap();
+    let bands = model.unknown.texture_bands.clone().unwrap();
     assert_eq!(bands.len(), 3);
     assert!(
         bands.iter().all(|[lo, hi]| lo.is_finite() && lo < hi),
@@ -721,12 +733,12 @@ fn the_texture_check_holds_each_image_to_its_best_classs_band() {
     };
     // Known images of the training textures pass their class's band as they passed without it.
     let mut without = model.clone();
-    without.texture_ranges = None;
+    without.unknown.texture_bands = None;
     assert_eq!(known(&model), known(&without));
     assert!(known(&model) * 10 >= split.test.len() * 9);
     // A band no image reaches: every one unknown.
     let mut none_fit = model.clone();
-    none_fit.texture_ranges = Some(vec![[1e9, 2e9]; 3]);
+    none_fit.unknown.texture_bands = Some(vec![[1e9, 2e9]; 3]);
     assert_eq!(known(&none_fit), 0);
     // A refit to dead lines goes without it (its bands were drawn on a whole sensor).
     let mut dead_rows = vec![false; 40];
@@ -734,39 +746,92 @@ fn the_texture_check_holds_each_image_to_its_best_classs_band() {
     assert!(
         refit(&model, &dead_rows, &[false; 40])
             .unwrap()
-            .texture_ranges
+            .unknown
+            .texture_bands
             .is_none()
     );
     // A file whose bands do not fit its classes is refused, naming the key and the file.
     for bad in [vec![[0.0, 1.0]; 2], vec![[1.0, 0.0]; 3]] {
         let mut m = model.clone();
-        m.texture_ranges = Some(bad);
+        m.unknown.texture_bands = Some(bad);
         let e = Model::from_json(&serde_json::to_string(&m).unwrap(), "bad.json")
             .unwrap_err()
             .to_string();
-        assert!(
-            e.contains("texture_ranges") && e.contains("bad.json"),
-            "{e}"
-        );
+        assert!(e.contains("texture_bands") && e.contains("bad.json"), "{e}");
     }
 }
 
-/// Issue 47: a model file of format version 1, written by `presrs train` before version 2 (the
-/// build at 27d1bca: `presrs dataset static --n 16 --seed 3`, `presrs train --crop 2,2,2,2
-/// --downsample 4 --per-class 10 --train 6`), loads and decides every image as that build did
+/// A model file of format version 1, written by `presrs train` before version 2 (the build at
+/// 27d1bca: `presrs dataset static --n 16 --seed 3`, `presrs train --crop 2,2,2,2 --downsample 4
+/// --per-class 10 --train 6`), loads and decides every image as that build did
 /// (`decisions.jsonl` is its `presrs classify --json`): the same terrain, unknown where it was,
-/// the same novelty and threshold. New files are version 2, which that build refuses.
+/// the same novelty and threshold.
 #[test]
 fn a_version_1_model_file_decides_as_the_build_that_wrote_it() {
+    let unknown = decides_as_written("model-v1", 1);
+    assert_eq!(unknown, [("novelty".to_string(), 4)].into());
+}
+
+/// A model file of format version 2 (every check in its own top-level key), written by the
+/// format-2 build from the demo's runs: `presrs capture` of two 160-step demos (seeds 3 and 4,
+/// `--candump --truth`), `presrs train --crop 0,3,6,0 --downsample 4 --unknown-checks
+/// knn-residual,load,texture` (calibrated on the second run: references and nuisance
+/// directions), `presrs energy` on both runs; the images are the second run's and a sand run's
+/// stances. It loads into format 3's `unknown` section and decides every image as it did, its
+/// energy maps kept.
+#[test]
+fn a_version_2_model_file_decides_as_the_build_that_wrote_it() {
+    let unknown = decides_as_written("model-v2", 2);
+    assert_eq!(unknown, [("load".to_string(), 1)].into());
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/model-v2");
+    let text = std::fs::read_to_string(dir.join("model.json")).unwrap();
+    let v2: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let m = Model::from_json(&text, "model.json").unwrap();
+    let maps: Vec<Option<presrs_node::unknown::energy::ReturnMap>> =
+        serde_json::from_value(v2["energy"].clone()).unwrap();
+    assert_eq!(m.unknown.energy.as_ref(), Some(&maps));
+    assert!(maps.iter().any(Option::is_some));
+    for (old, new) in [
+        (
+            "load_ranges",
+            serde_json::to_value(&m.unknown.load_bands).unwrap(),
+        ),
+        (
+            "texture_ranges",
+            serde_json::to_value(&m.unknown.texture_bands).unwrap(),
+        ),
+        (
+            "unknown_thresholds",
+            serde_json::to_value(&m.unknown.density_thresholds).unwrap(),
+        ),
+        (
+            "unknown_choice",
+            serde_json::to_value(&m.unknown.choice).unwrap(),
+        ),
+    ] {
+        assert_eq!(v2[old], new, "{old}");
+    }
+    // Saved again it is a format 3 file, which reads back the same.
+    assert_eq!(m.version, presrs_node::classifier::model::MODEL_VERSION);
+    let again = Model::from_json(&serde_json::to_string(&m).unwrap(), "again.json").unwrap();
+    assert_eq!(again, m);
+}
+
+/// Loads `tests/fixtures/NAME/model.json` (format `version`) and classifies each image of its
+/// `decisions.jsonl` as the build that wrote it did; returns the unknown images per reason.
+fn decides_as_written(name: &str, version: u64) -> std::collections::BTreeMap<String, usize> {
     use presrs_node::classifier::dataset::read_image;
-    use presrs_node::classifier::{Classifier, Model};
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/model-v1");
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures")
+        .join(name);
+    let text = std::fs::read_to_string(dir.join("model.json")).unwrap();
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(v["version"], version);
     let model = Model::load(&dir.join("model.json")).unwrap();
-    assert_eq!(model.version, 1);
     let names: Vec<String> = model.classes.iter().map(|c| c.name.clone()).collect();
     let mut cls = Classifier::new(model);
     let text = std::fs::read_to_string(dir.join("decisions.jsonl")).unwrap();
-    let mut unknown = 0;
+    let mut unknown = std::collections::BTreeMap::new();
     for line in text.lines() {
         let then: serde_json::Value = serde_json::from_str(line).unwrap();
         let file = then["file"].as_str().unwrap();
@@ -775,7 +840,13 @@ fn a_version_1_model_file_decides_as_the_build_that_wrote_it() {
         let now = d.to_json(file, &names);
         assert_eq!(now["terrain"], then["terrain"], "{file}");
         assert_eq!(now["best"], then["best"], "{file}");
-        // The same to rounding: the file was written on x86-64 with the AVX2 kernels; the
+        // Format 1's build printed no reason (every unknown was the novelty's).
+        let reason = then.get("reason").map_or_else(
+            || (then["terrain"] == "unknown").then_some("novelty").into(),
+            Clone::clone,
+        );
+        assert_eq!(now["reason"], reason, "{file}");
+        // The same to rounding: the files were written on x86-64 with the AVX2 kernels; the
         // portable ones (aarch64 under qemu) round differently (measured: 0.7120 against
         // 0.7127); the decision is the same.
         let native = presrs_node::classifier::Kernels::Native.describe();
@@ -791,11 +862,9 @@ fn a_version_1_model_file_decides_as_the_build_that_wrote_it() {
                 "{file} {key}: {a} {b}"
             );
         }
-        if then["terrain"] == "unknown" {
-            unknown += 1;
-            assert_eq!(now["reason"], "novelty", "{file}");
+        if let Some(r) = reason.as_str() {
+            *unknown.entry(r.to_string()).or_default() += 1;
         }
     }
-    assert_eq!(unknown, 4, "the fixture's new ground");
-    assert_eq!(presrs_node::classifier::model::MODEL_VERSION, 2);
+    unknown
 }

@@ -1,3 +1,4 @@
+#![forbid(unsafe_code)]
 #![warn(missing_docs)]
 //! # presrs-ros2: the robot in ROS 2, without ROS on the robot
 //!

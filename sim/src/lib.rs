@@ -1,3 +1,4 @@
+#![forbid(unsafe_code)]
 #![warn(missing_docs)]
 //! # presrs-sim: the simulated hopper and foot
 pub mod dataset;
@@ -12,7 +13,7 @@ pub mod terrain;
 
 /// Changes whenever the simulator's output for a given seed changes (hopper parameters, terrain
 /// textures, skin), so that models trained and cached from simulated data can tell they are stale.
-/// 5: the sandpapers' cloth backing (issue 29).
+/// 5: the sandpapers' cloth backing.
 pub const SIM_VERSION: u32 = 5;
 
 /// The serial number of the simulated foot sensor when none is given: datasets and simulated

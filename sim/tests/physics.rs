@@ -187,7 +187,7 @@ fn hash_samples(samples: &[presrs_sim::dataset::Sample]) -> u64 {
     h
 }
 
-/// Issue 29 changed the sandpaper (its cloth backing) and nothing else: every other surface's
+/// The cloth backing changed the sandpaper and nothing else: every other surface's
 /// images and a whole candump log of the default track are what they were before it, to the
 /// bit. The hashes were taken at f062cee, before the change; a deliberate change of another
 /// surface or of the skin updates them and says so in docs/results.md.

@@ -306,7 +306,8 @@ pub fn small_model(dir: &std::path::Path) -> std::path::PathBuf {
             bottom: 3,
             left: 6,
             right: 0,
-        },
+        }
+        .into(),
         ..Default::default()
     };
     let (model, _) = node::classifier::train::train(&set.labelled(), &set.classes, &opts).unwrap();

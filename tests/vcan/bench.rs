@@ -2,7 +2,7 @@
 
 use super::*;
 
-/// Issue 5's speed figures on a real SocketCAN interface: `presrs bench-node` plays 6 feet at
+/// The speed figures on a real SocketCAN interface: `presrs bench-node` plays 6 feet at
 /// 100 Hz to `presrs node` as a separate process. The report is printed for the note (labelled
 /// emulated when run.sh runs it in the VM); the test asserts that the node answered the steps,
 /// not a timing: the figures belong to the benchmark.

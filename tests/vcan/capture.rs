@@ -3,7 +3,7 @@
 
 use super::*;
 
-/// Issue 17 §4 and §2 over real SocketCAN, the path of docs/real-robot.md with the simulator
+/// Over real SocketCAN, the path of docs/real-robot.md with the simulator
 /// standing in for the robot: `presrs sim` on one terrain at a time while candump records,
 /// `presrs capture` builds the set from the logs, `presrs train`, and the node with that model
 /// classifies a fresh run over all four terrains as a process on the bus (>= 95% of steps).
@@ -76,7 +76,7 @@ fn capture_path_over_socketcan_from_candump_logs_to_a_deployed_model() {
     let (correct, n) = accuracy(&r);
     eprintln!("fresh mixed run on vcan, model from captured logs: {correct}/{n} steps right");
     assert!(n >= 35, "{n} steps");
-    // Issue 17's 95% per step, judged as a sample can judge it. Each VM run is another
+    // 95% per step, judged as a sample can judge it. Each VM run is another
     // trajectory (the simulator's chunks follow the wall clock): 20 s runs scored 57, 59, 59,
     // 59, 60, 60, 61, 61 of 61 in the CI runs logged (97.5% in all), so `>= 95%` of one run
     // failed about one run in ten with nothing wrong (the 57, CI of 2026-11-24, under a loaded

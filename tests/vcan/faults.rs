@@ -387,7 +387,7 @@ fn sim_node_and_controller_as_processes_classify_steps_and_survive_bus_and_proce
         commands_after_controller_restart > 0,
         "the restarted controller never commanded"
     );
-    // Issue 6 and 28: no fall, through the faults and the controller's restart included.
+    // No fall, through the faults and the controller's restart included.
     assert_eq!(falls, 0, "the hopper fell {falls} times");
     assert!(
         delays.len() >= 3,

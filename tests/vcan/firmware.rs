@@ -15,7 +15,7 @@ fn wait_for_heartbeat(watch: &mut SocketCanBus, ids: &IdConfig, limit: Duration)
     false
 }
 
-/// Issue 17 §3: the firmware example sends a foot's switch and images through socketcan's
+/// The firmware example sends a foot's switch and images through socketcan's
 /// `embedded_can::blocking::Can` driver; the node on the bus decides every stance.
 #[test]
 #[ignore = "needs vcan interfaces: tests/vcan/run.sh runs it"]

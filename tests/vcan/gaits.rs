@@ -18,7 +18,7 @@ fn sim_run(iface: &str, gait: &str, damage: f64, seed: u64, sim_s: f64) -> serde
     )
 }
 
-/// Issue 5's system test: simulator and node as separate processes, the node's model trained
+/// The system test: simulator and node as separate processes, the node's model trained
 /// on G2 only, the hopper on G1, G2 and G3, the G2 run with cangen flooding the bus with other
 /// traffic and garbage frames on the node's own identifiers; then 50% sensor damage.
 ///

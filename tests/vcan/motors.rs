@@ -41,7 +41,7 @@ fn first_gains(proto: &str, frames: &[protocol::CanFrame]) -> [Option<(f64, f64)
     out
 }
 
-/// Issue 27 on real SocketCAN, per motor protocol: `presrs sim --leg P` (the hopper's leg as two
+/// On real SocketCAN, per motor protocol: `presrs sim --leg P` (the hopper's leg as two
 /// motors of that protocol), `presrs leg` (the bridge), the node and the controller as
 /// processes. The hopper hops with no fall and the gait adapts per terrain within 3 steps; the
 /// bridge's LegState (from the encoders) agrees with the truth within 0.01 rad and 2 mm (95th

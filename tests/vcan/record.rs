@@ -2,7 +2,7 @@
 
 use super::*;
 
-/// Issue 18 on real SocketCAN: `presrs node --mcap --foxglove` records and serves the robot's
+/// On real SocketCAN: `presrs node --mcap --foxglove` records and serves the robot's
 /// traffic while it classifies, and `presrs sim --mcap` records the same run with its truth.
 /// An independent WebSocket client receives an image and a TerrainClass live; after SIGTERM
 /// Python's `mcap` reads both files whole: a schema on every channel, time going forward, one

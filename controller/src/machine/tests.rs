@@ -48,7 +48,7 @@ fn switches_in_flight_after_two_confident_steps() {
     assert_eq!(c.gait().id, 3);
 }
 
-/// Issue 17: unknown is confirmed like a terrain (two in a row put the safe gait), and one
+/// Unknown is confirmed like a terrain (two in a row put the safe gait), and one
 /// unknown step in a terrain's run neither switches nor restarts that terrain's count.
 #[test]
 fn an_unknown_step_is_confirmed_before_the_safe_gait() {
@@ -142,7 +142,7 @@ fn a_lab_terrain_from_the_catalog_gets_its_gait() {
     assert_eq!(c.reason(), GaitReason::Terrain);
 }
 
-/// Issue 28: a controller started in mid-hop listens to one step, then runs the gait whose
+/// A controller started in mid-hop listens to one step, then runs the gait whose
 /// eq. (5) explains it, from the angle the leg came down at; another controller's
 /// GaitStatus names the gait outright; nothing heard in `takeover_ms` is a fresh start.
 #[test]

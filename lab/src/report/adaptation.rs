@@ -119,7 +119,7 @@ pub(super) fn adaptation(ctx: &Report, model: Model) -> Result<String, ReportErr
         md,
         "`presrs demo --steps {steps}`'s loop (simulator, node and controller on the in-process \
          bus; the demo's model, trained on G1-G3 stances): {} of {} steps classified correctly \
-         ({}), {switches} gait switches. The controller starts bumplessly (issue 28: it listens \
+         ({}), {switches} gait switches. The controller starts bumplessly (it listens \
          to the leg's first step, which the simulator's own G2 laws run, and takes over at the \
          next touchdown); commanding from t = 0, the same run had 117 of 120 at commit bcbb78f.\n\n\
          ![Adaptation](figures/adaptation.png)\n",

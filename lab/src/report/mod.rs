@@ -42,7 +42,7 @@ pub enum Experiment {
     Lifespan,
     /// Gait adaptation on the default track (the demo's closed loop).
     Adaptation,
-    /// Unknown terrain: leave-one-terrain-out with the calibrated rejection (issue 17).
+    /// Unknown terrain: leave-one-terrain-out with the calibrated rejection.
     OpenSet,
 }
 

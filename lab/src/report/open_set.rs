@@ -14,7 +14,7 @@ pub(super) fn open_set_sources(ctx: &Report, seed: u64) -> Vec<crate::open_set::
     let n = open_set_images(ctx);
     let models = ctx.open_set_models.options();
     let opts = |crop: Crop, normalize_load: bool| TrainOptions {
-        crop,
+        crop: crop.into(),
         normalize_load,
         seed,
         ..models.clone()
@@ -138,7 +138,7 @@ pub(super) fn open_set(ctx: &Report) -> Result<String, ReportError> {
          between the next two columns). *Known right*: fresh known images \
          classified right with the rejection on and off (target: within 2 points). \
          *Calibration check*: the share of the calibration run's images called unknown.\n\n\
-         The simulated sandpaper has lain on a cloth backing since issue 29 (see Resolution): \
+         The simulated sandpaper has lain on a cloth backing (see Resolution): \
          the backing's pattern is the same under every grit, so the two finest grits, 220 and \
          150, now pass for each other as they do in the paper's 10x10 images, and a left-out \
          fine grit is taken for its neighbour (their nearest-neighbour AUROC below is the \

@@ -130,6 +130,13 @@ impl Moteus {
         if f.raw_id() != self.reply_id() || f.is_remote() {
             return None;
         }
+        if !parser_safe(f.data()) {
+            return Some(Err(ReplyError::Value {
+                driver: NAME,
+                message: "reply",
+                what: "malformed subframes (a register number or length past the protocol's)",
+            }));
+        }
         // The registers read here, from the vendor's subframe parser. Not QueryResult::parse:
         // it debug-asserts on a reply with more than 16 other registers, which a malformed
         // frame has (found by the garbage test below).
@@ -248,6 +255,13 @@ impl Server {
             return None;
         }
         let source = ((id >> 8) & 0x7F) as u8;
+        if !parser_safe(f.data()) {
+            return Some(Err(ReplyError::Value {
+                driver: NAME,
+                message: "command",
+                what: "malformed subframes (a register number or length past the protocol's)",
+            }));
+        }
         let mut mode = None;
         let mut c = JointCommand {
             kp: self.kp_full,
@@ -343,6 +357,84 @@ impl Server {
         let id = ((self.id as u32) << 8) | source as u32;
         push(out, id, id > 0x7FF, frame.payload(), true);
     }
+}
+
+/// Whether moteus-protocol's `parse_frame` walks `data` without an integer overflow. Its
+/// varuint reader (0.5.5) shifts a `u16` by 7 per byte, and a register block adds its count
+/// to its first register in `u16`: a varuint of four or more bytes, or a block running past
+/// register 0xFFFF, overflows (a panic wherever overflow checks are on, as in a lab's debug
+/// build that links this crate). This walks the frame as that parser does, and accepts only
+/// varuints of at most two bytes (every moteus register is below 0x4000) and blocks that end
+/// below 0xFFFF; what it stops at, the parser stops at too. Written here because the fix is
+/// upstream's to make (reported there); the guard stays until a fixed release is the floor.
+fn parser_safe(data: &[u8]) -> bool {
+    // A varuint at `at` of at most two bytes: its value and the next offset.
+    fn varuint(data: &[u8], at: usize) -> Option<(u32, usize)> {
+        let (mut v, mut i) = (0u32, at);
+        for k in 0..2 {
+            let Some(&b) = data.get(i) else {
+                return Some((v, i));
+            };
+            v |= u32::from(b & 0x7f) << (7 * k);
+            i += 1;
+            if b & 0x80 == 0 {
+                return Some((v, i));
+            }
+        }
+        // A third byte would follow: past any register, and the one a fourth would overflow.
+        None
+    }
+    let mut i = 0;
+    while let Some(&cmd) = data.get(i) {
+        i += 1;
+        match cmd {
+            0x50 => {}
+            0x00..=0x2f => {
+                let mut count = u32::from(cmd & 0x03);
+                if count == 0 {
+                    let Some(&c) = data.get(i) else { return true };
+                    i += 1;
+                    count = u32::from(c);
+                    if count == 0 {
+                        continue;
+                    }
+                }
+                let Some((register, next)) = varuint(data, i) else {
+                    return false;
+                };
+                if register + count > 0xFFFF {
+                    return false;
+                }
+                i = next;
+                if cmd & 0xf0 != 0x10 {
+                    let size = [1, 2, 4, 4][usize::from((cmd >> 2) & 0x03)];
+                    i += size * count as usize;
+                }
+            }
+            0x30 | 0x31 => {
+                for _ in 0..2 {
+                    match varuint(data, i) {
+                        Some((_, next)) => i = next,
+                        None => return false,
+                    }
+                }
+            }
+            0x40..=0x44 => {
+                let Some((_, next)) = varuint(data, i) else {
+                    return false;
+                };
+                i = next + usize::from(cmd >= 0x43);
+                let Some((size, next)) = varuint(data, i) else {
+                    return false;
+                };
+                i = next + if cmd == 0x44 { 0 } else { size as usize };
+            }
+            // The parser skips the error family's other codes, and stops at anything else.
+            0x32..=0x3f => {}
+            _ => return true,
+        }
+    }
+    true
 }
 
 #[cfg(test)]
@@ -467,5 +559,42 @@ mod tests {
         let id = protocol::frame::make_id(0x100, false).unwrap();
         let f = CanFrame::fd(id, &[0x50; 8], true).unwrap();
         assert!(matches!(m.decode(&f), Some(Err(_))));
+    }
+
+    /// The replies that overflow moteus-protocol 0.5.5's parser (a varuint of four bytes; a
+    /// block past register 0xFFFF) are refused before it: this crate's tests build it with
+    /// overflow checks on (no profile setting turns them off), as a lab's debug build does.
+    #[test]
+    fn replies_that_overflow_the_vendor_parser_are_refused_before_it() {
+        let m = Moteus::new(1, 0, 20.0, 2.0, 0.05);
+        let s = Server::new(1, 20.0, 2.0);
+        let id = protocol::frame::make_id(0x100, false).unwrap();
+        for d in [
+            &[0x21, 0xff, 0xff, 0xff, 0x7f, 0x01][..],
+            &[0x23, 0xfe, 0xff, 0x03, 1, 2, 3][..],
+            &[0x31, 0x80, 0x80, 0x80, 0x01, 0x00][..],
+            &[0x41, 0xff, 0xff, 0xff, 0x01, 0x00][..],
+            &[0x2c, 0x01, 0x00, 0, 0, 0, 0, 0x21, 0xff, 0xff, 0xff, 0x0f][..],
+        ] {
+            let f = CanFrame::fd(id, d, true).unwrap();
+            assert!(matches!(m.decode(&f), Some(Err(_))), "{d:x?}");
+            assert!(!parser_safe(d), "{d:x?}");
+        }
+        // A well-formed reply passes the guard.
+        assert!(parser_safe(&[
+            0x21, 0x00, 0x0a, 0x2c, 0x01, 0x00, 0, 0, 0, 0
+        ]));
+        // Every subframe command with every second byte, then continuation bytes (what makes
+        // a long varuint), through both parse sites: an error or a value, never a panic.
+        let cmd_id = protocol::frame::make_id(0x8001, true).unwrap();
+        for cmd in 0..=0xffu8 {
+            for b in 0..=0xffu8 {
+                for tail in [0x00u8, 0x7f, 0x80, 0xff] {
+                    let d = [cmd, b, tail, tail, tail, 0x01, 0x20, 0x01];
+                    let _ = m.decode(&CanFrame::fd(id, &d, true).unwrap());
+                    let _ = s.on_frame(&CanFrame::fd(cmd_id, &d, true).unwrap());
+                }
+            }
+        }
     }
 }

@@ -11,11 +11,15 @@ pub struct ManifestEntry {
     /// The gait in force at its touchdown (`gait`, empty when the bus carried no GaitStatus,
     /// and in manifests written before the column).
     pub gait: Option<u8>,
+    /// The flights before and after its stance, µs (`flight_before_s`, `flight_after_s`; empty
+    /// where an edge was not heard, and in manifests written before the columns).
+    pub flights_us: [Option<u32>; 2],
 }
 
 /// One manifest line, parsed: `Ok(None)` for a header or blank line; `Err` says what is wrong.
-/// Lines have the 9 columns of [`MANIFEST_HEADER_V1`] or the 10 of [`MANIFEST_HEADER`]: a
-/// capture appends 10 to a manifest that began with 9, and both stay readable.
+/// Lines have the 9 columns of [`MANIFEST_HEADER_V1`], the 10 of [`MANIFEST_HEADER_V2`] or the
+/// 12 of [`MANIFEST_HEADER`]: a capture appends 12 to a manifest that began with fewer, and
+/// every line stays readable.
 pub(super) struct ManifestLine<'a> {
     file: &'a str,
     foot: u8,
@@ -27,16 +31,26 @@ pub(super) struct ManifestLine<'a> {
 pub(super) fn parse_manifest_line(l: &str) -> Result<Option<ManifestLine<'_>>, String> {
     // A manifest saved by a Windows editor ends its lines in CR LF.
     let l = l.strip_suffix('\r').unwrap_or(l);
-    if l.is_empty() || l == MANIFEST_HEADER || l == MANIFEST_HEADER_V1 {
+    if l.is_empty() || l == MANIFEST_HEADER || l == MANIFEST_HEADER_V2 || l == MANIFEST_HEADER_V1 {
         return Ok(None);
     }
     let f: Vec<&str> = l.split(',').collect();
-    if !(9..=10).contains(&f.len()) {
+    if ![9, 10, 12].contains(&f.len()) {
         return Err(format!(
-            "{} fields; want the 10 of `{MANIFEST_HEADER}` (or 9, without gait)",
+            "{} fields; want the 12 of `{MANIFEST_HEADER}` (or 10 without the flights, 9 \
+             without the gait)",
             f.len()
         ));
     }
+    let flight = |i: usize| -> Result<Option<u32>, String> {
+        match f.get(i) {
+            None | Some(&"") => Ok(None),
+            Some(s) => parse_seconds(s)
+                .and_then(|us| u32::try_from(us).ok())
+                .map(Some)
+                .ok_or_else(|| format!("flight `{s}` is not seconds or empty")),
+        }
+    };
     let gait = match f.get(9) {
         None | Some(&"") => None,
         Some(g) => Some(
@@ -54,6 +68,7 @@ pub(super) fn parse_manifest_line(l: &str) -> Result<Option<ManifestLine<'_>>, S
         entry: ManifestEntry {
             source: f[8].to_string(),
             gait,
+            flights_us: [flight(10)?, flight(11)?],
         },
     }))
 }
@@ -89,8 +104,15 @@ pub fn read_manifest(
     Ok(Some(entries))
 }
 
+/// Where a set keeps its stances' frames (`DIR/.stance/<terrain>/<image name>`).
+pub const STANCE_DIR: &str = ".stance";
+
 /// The manifest's header line.
-pub const MANIFEST_HEADER: &str =
+pub const MANIFEST_HEADER: &str = "file,terrain,foot,step,touchdown_s,sample_s,load_sum,\
+                                   damage_pct,source,gait,flight_before_s,flight_after_s";
+
+/// The header of manifests written before the flight columns; still read.
+pub const MANIFEST_HEADER_V2: &str =
     "file,terrain,foot,step,touchdown_s,sample_s,load_sum,damage_pct,source,gait";
 
 /// The header of manifests written before the `gait` column; still read.
@@ -194,8 +216,10 @@ impl CaptureSet {
             return Err(io("write", &path, e));
         }
         std::fs::rename(&tmp, &path).map_err(|e| io("write", &path, e))?;
+        self.write_frames(c, &name)?;
+        let flight = |f: Option<u32>| f.map(|us| format_seconds(us.into())).unwrap_or_default();
         let line = format!(
-            "{}/{name},{},{},{},{},{},{},{:.1},{source},{}\n",
+            "{}/{name},{},{},{},{},{},{},{:.1},{source},{},{},{}\n",
             c.terrain.name(),
             c.terrain.name(),
             c.foot,
@@ -205,6 +229,8 @@ impl CaptureSet {
             c.load_sum,
             c.damage_pct,
             c.gait.map(|g| g.to_string()).unwrap_or_default(),
+            flight(c.flights_us[0]),
+            flight(c.flights_us[1]),
         );
         self.manifest
             .write_all(line.as_bytes())
@@ -218,6 +244,34 @@ impl CaptureSet {
             .or_default() += 1;
         *self.written_per_gait.entry(c.gait).or_default() += 1;
         Ok(true)
+    }
+
+    /// The step's stance frames beside its image: `DIR/.stance/<terrain>/<name>` (hidden, so
+    /// not a class folder), one image per offset of [`crate::stance::FRAME_OFFSETS_MS`] in
+    /// one PGM file, blank where the stance had no frame.
+    fn write_frames(&self, c: &CapturedStep, name: &str) -> Result<(), CaptureError> {
+        if c.frames.iter().all(Option::is_none) {
+            return Ok(());
+        }
+        let dir = self.dir.join(STANCE_DIR).join(c.terrain.name());
+        std::fs::create_dir_all(&dir).map_err(|e| io("create the folder", &dir, e))?;
+        let blank = PressureImage::new(
+            c.image.rows,
+            c.image.cols,
+            c.image.bits,
+            vec![0; c.image.pixels.len()],
+        );
+        let path = dir.join(name);
+        let tmp = dir.join(format!(".{name}.tmp"));
+        let mut bytes = Vec::new();
+        for f in &c.frames {
+            crate::classifier::dataset::pgm_bytes(f.as_ref().unwrap_or(&blank), &mut bytes);
+        }
+        if let Err(e) = std::fs::write(&tmp, &bytes) {
+            let _ = std::fs::remove_file(&tmp);
+            return Err(io("write", &path, e));
+        }
+        std::fs::rename(&tmp, &path).map_err(|e| io("write", &path, e))
     }
 
     /// Steps the folder's manifest holds (earlier captures included).

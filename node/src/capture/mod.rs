@@ -28,7 +28,10 @@ mod manifest;
 mod service;
 
 pub use labels::{LabelRange, Labelling, parse_labels};
-pub use manifest::{CaptureSet, MANIFEST_HEADER, MANIFEST_HEADER_V1, ManifestEntry, read_manifest};
+pub use manifest::{
+    CaptureSet, MANIFEST_HEADER, MANIFEST_HEADER_V1, MANIFEST_HEADER_V2, ManifestEntry, STANCE_DIR,
+    read_manifest,
+};
 pub use service::CaptureService;
 
 /// Errors of a capture: labels, the output folder, a write.
@@ -148,6 +151,13 @@ pub struct CapturedStep {
     pub gait: Option<u8>,
     /// The image (repaired unless the config's `repair = "none"`).
     pub image: PressureImage,
+    /// The flights before and after the stance (µs, the foot's clock; `None` where its edge
+    /// was not heard): what the stance did to the hop, for the energy check `train` weighs.
+    pub flights_us: [Option<u32>; 2],
+    /// The stance's frame nearest each of [`crate::stance::FRAME_OFFSETS_MS`] (`None` where
+    /// the stance had none), repaired as the image is: the candidates for the deciding frame
+    /// `train` measures.
+    pub frames: Vec<Option<PressureImage>>,
 }
 
 /// The node's stance logic and repair filter, turning frames into labelled step images.
@@ -159,6 +169,8 @@ pub struct Capture {
     labelling: Labelling,
     counts: CaptureCounts,
     decided: Vec<u8>,
+    /// Per foot: its last step, held until the next touchdown gives the flight after it.
+    pending: Vec<Option<CapturedStep>>,
     ids: protocol::ids::IdConfig,
     gaits: crate::gait::GaitTrack,
 }
@@ -175,6 +187,7 @@ impl Capture {
             labelling,
             counts: CaptureCounts::default(),
             decided: Vec::new(),
+            pending: Vec::new(),
             gaits: crate::gait::GaitTrack::default(),
         }
     }
@@ -214,14 +227,34 @@ impl Capture {
         self.take(out);
     }
 
+    /// The steps decided since the last call, each held until the flight after it is known; a
+    /// held step whose flights came is handed out.
     fn take(&mut self, out: &mut (impl Emit<CapturedStep> + ?Sized)) {
+        for foot in 0..self.pending.len() {
+            let o = self.pipeline.energy_observation(foot as u8);
+            if let (Some(c), Some(o)) = (&mut self.pending[foot], o)
+                && o.step == c.step
+            {
+                c.flights_us = [o.flight_before_us, o.flight_after_us];
+                if let Some(c) = self.pending[foot].take() {
+                    out.emit(c);
+                }
+            }
+        }
         for i in 0..self.decided.len() {
             let foot = self.decided[i];
             self.counts.steps += 1;
             match self.step(foot) {
                 Ok(c) => {
                     self.counts.captured += 1;
-                    out.emit(c);
+                    let f = foot as usize;
+                    if self.pending.len() <= f {
+                        self.pending.resize_with(f + 1, || None);
+                    }
+                    // A step held still (its next touchdown never heard) goes as it is.
+                    if let Some(old) = self.pending[f].replace(c) {
+                        out.emit(old);
+                    }
                 }
                 Err(Skip::NoImage) => self.counts.no_image += 1,
                 Err(Skip::Blank) => self.counts.blank += 1,
@@ -230,6 +263,18 @@ impl Capture {
             }
         }
         self.decided.clear();
+    }
+
+    /// Hands out the steps still held (the run ended before their next touchdown: no flight
+    /// after them). Call it at the end of a log or a live capture.
+    pub fn finish(&mut self, out: &mut (impl Emit<CapturedStep> + ?Sized)) {
+        let decided = &mut self.decided;
+        self.pipeline
+            .decide_open(&mut |d: Decided| decided.push(d.foot));
+        self.take(out);
+        for c in self.pending.iter_mut().filter_map(Option::take) {
+            out.emit(c);
+        }
     }
 
     fn step(&mut self, foot: u8) -> Result<CapturedStep, Skip> {
@@ -256,6 +301,27 @@ impl Capture {
                 h.repair(&mut image.pixels)
             }
         };
+        // The stance's other frames, repaired as its image (the history learns from one).
+        let repair = self.repair;
+        let frames = self
+            .pipeline
+            .stance_frames(foot)
+            .map(|px| {
+                px.map(|px| {
+                    let mut f = PressureImage::new(s.rows, s.cols, s.bits, px.to_vec());
+                    match repair {
+                        RepairMode::None => {}
+                        RepairMode::PerImage => {
+                            crate::classifier::repair::repair(&mut f);
+                        }
+                        RepairMode::History => {
+                            h.repair(&mut f.pixels);
+                        }
+                    }
+                    f
+                })
+            })
+            .collect();
         Ok(CapturedStep {
             foot,
             step: s.step,
@@ -267,6 +333,8 @@ impl Capture {
             repaired_lines,
             gait: self.gaits.at(touchdown_us),
             image,
+            flights_us: [None, None],
+            frames,
         })
     }
 }
@@ -341,6 +409,7 @@ mod tests {
         let want = |source: &str, gait| ManifestEntry {
             source: source.into(),
             gait,
+            flights_us: [None, None],
         };
         assert_eq!(m[Path::new("wood/a.pgm")], want("run1", None));
         // A capture appends 10 columns to a manifest that began with 9.
@@ -350,7 +419,21 @@ mod tests {
         let m = read(&mixed.replace('\n', "\r\n")).unwrap().unwrap();
         assert_eq!(m[Path::new("wood/b.pgm")], want("run2", Some(3)));
         assert_eq!(m[Path::new("wood/c.pgm")], want("run2", None));
+        // And 12, with the flights before and after the stance (one edge not heard).
+        let v3 = format!("{mixed}wood/e.pgm,wood,0,5,5.0,5.07,5,0.0,run3,2,0.210000,\n");
+        let m = read(&v3).unwrap().unwrap();
+        assert_eq!(
+            m[Path::new("wood/e.pgm")],
+            ManifestEntry {
+                flights_us: [Some(210_000), None],
+                ..want("run3", Some(2))
+            }
+        );
         for (line, why) in [
+            (
+                "wood/d.pgm,wood,0,4,4.0,4.07,5,0.0,run2,1,-1,",
+                "flight `-1`",
+            ),
             ("wood/d.pgm,wood,0,4,4.0,4.07,5,0.0,run2,0", "gait `0`"),
             ("wood/d.pgm,wood,0,4,4.0,4.07,5,0.0,run2,G3", "gait `G3`"),
             ("wood/d.pgm,wood,0,4,4.0,4.07,5,0.0", "8 fields"),

@@ -52,6 +52,13 @@ impl CaptureService {
                 break;
             }
         }
+        self.finish();
+    }
+
+    /// Writes the steps the capture still holds (the run ended before their next touchdown).
+    pub fn finish(&mut self) {
+        let (set, source, failed) = (&mut self.set, &self.source, &mut self.failed);
+        self.capture.finish(&mut |c| keep(set, source, failed, &c));
     }
 
     /// `presrs capture --json`'s object: what was read, written and skipped, and why it
@@ -146,6 +153,10 @@ impl Component for CaptureService {
         let (set, source, failed) = (&mut self.set, &self.source, &mut self.failed);
         self.capture
             .tick(self.last_t, &mut |c| keep(set, source, failed, &c));
+    }
+
+    fn stop(&mut self, _: u64, _: &mut Outbox) {
+        self.finish();
     }
 
     fn done(&self) -> bool {

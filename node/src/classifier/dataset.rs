@@ -39,7 +39,7 @@ pub fn read_images(path: &Path) -> Result<Vec<PressureImage>, ImageError> {
         .unwrap_or("")
         .to_ascii_lowercase();
     match ext.as_str() {
-        "pgm" => Ok(vec![parse_pgm(&bytes, path)?]),
+        "pgm" => parse_pgm_sequence(&bytes, path),
         "csv" | "txt" => Ok(vec![parse_csv(&bytes, path)?]),
         "asf" => parse_asf(&bytes, path),
         _ => Err(err(
@@ -60,6 +60,26 @@ pub fn read_image(path: &Path) -> Result<PressureImage, ImageError> {
 
 /// Reads a PGM image (P2 text or P5 binary, 8 or 16 bit).
 pub fn parse_pgm(b: &[u8], path: &Path) -> Result<PressureImage, ImageError> {
+    parse_pgm_at(b, path).map(|(img, _)| img)
+}
+
+/// Every image of a PGM file: P5 images one after another (netpbm's image sequence, as
+/// `presrs capture` keeps a stance's frames), or one P2 image.
+pub fn parse_pgm_sequence(b: &[u8], path: &Path) -> Result<Vec<PressureImage>, ImageError> {
+    let mut out = Vec::new();
+    let mut pos = 0;
+    loop {
+        let (img, used) = parse_pgm_at(&b[pos..], path)?;
+        out.push(img);
+        pos += used;
+        if b[pos..].iter().all(|c| c.is_ascii_whitespace()) {
+            return Ok(out);
+        }
+    }
+}
+
+/// One PGM image at the start of `b`, and the bytes it takes (all of them for P2).
+fn parse_pgm_at(b: &[u8], path: &Path) -> Result<(PressureImage, usize), ImageError> {
     // Header tokens: magic, width, height, maxval; '#' comments to end of line.
     let mut pos = 0;
     let mut line = 1;
@@ -152,6 +172,10 @@ pub fn parse_pgm(b: &[u8], path: &Path) -> Result<PressureImage, ImageError> {
                 data[i] as u16
             });
         }
+        return Ok((
+            PressureImage::new(h, w, bits_for(maxval), px),
+            pos + n * bpp,
+        ));
     } else {
         let text = String::from_utf8_lossy(&b[pos..]);
         for (ln, l) in text.lines().enumerate() {
@@ -178,7 +202,7 @@ pub fn parse_pgm(b: &[u8], path: &Path) -> Result<PressureImage, ImageError> {
             ));
         }
     }
-    Ok(PressureImage::new(h, w, bits_for(maxval), px))
+    Ok((PressureImage::new(h, w, bits_for(maxval), px), b.len()))
 }
 
 /// Reads a CSV image: one sensel row per line, comma separated.
@@ -336,9 +360,17 @@ pub fn parse_asf(b: &[u8], path: &Path) -> Result<Vec<PressureImage>, ImageError
 
 /// Writes a binary PGM (P5), 8-bit when `img.bits` is 8 and every pixel fits, else 16-bit.
 pub fn write_pgm(img: &PressureImage, path: &Path) -> std::io::Result<()> {
+    let mut b = Vec::new();
+    pgm_bytes(img, &mut b);
+    std::fs::write(path, b)
+}
+
+/// Appends `img` as one binary PGM (`P5`; 16-bit for a 16-bit image or values past 255) to
+/// `b`: several in a row are a multi-image file, as [`read_images`] reads it.
+pub fn pgm_bytes(img: &PressureImage, b: &mut Vec<u8>) {
     let wide = img.bits > 8 || img.pixels.iter().any(|&p| p > 255);
     let maxval = if wide { 65535 } else { 255 };
-    let mut b = format!("P5\n{} {}\n{}\n", img.cols, img.rows, maxval).into_bytes();
+    b.extend_from_slice(format!("P5\n{} {}\n{}\n", img.cols, img.rows, maxval).as_bytes());
     for &p in &img.pixels {
         if wide {
             b.extend_from_slice(&p.to_be_bytes());
@@ -346,7 +378,6 @@ pub fn write_pgm(img: &PressureImage, path: &Path) -> std::io::Result<()> {
             b.push(p as u8);
         }
     }
-    std::fs::write(path, b)
 }
 
 /// One image of a dataset.
@@ -390,7 +421,15 @@ pub fn load_dataset(dir: &Path, skip_bad: bool) -> Result<Dataset, ImageError> {
         root: dir.to_path_buf(),
         ..Dataset::default()
     };
-    for class_dir in read_dir(dir)?.into_iter().filter(|p| p.is_dir()) {
+    // Hidden folders are not classes (a capture's `.stance` frames, a `.git`).
+    let hidden = |p: &PathBuf| {
+        p.file_name()
+            .is_some_and(|n| n.to_string_lossy().starts_with('.'))
+    };
+    for class_dir in read_dir(dir)?
+        .into_iter()
+        .filter(|p| p.is_dir() && !hidden(p))
+    {
         let k = ds.classes.len();
         ds.classes.push(
             class_dir

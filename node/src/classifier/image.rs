@@ -19,7 +19,7 @@ pub struct Crop {
 
 /// A crop that is not four whole numbers.
 #[derive(Debug, thiserror::Error, Clone, PartialEq, Eq)]
-#[error("crop `{0}`: expected four whole numbers T,B,L,R such as 2,2,2,2")]
+#[error("crop `{0}`: expected four whole numbers T,B,L,R such as 2,2,2,2 (or `auto`)")]
 pub struct ParseCropError(pub String);
 
 impl std::str::FromStr for Crop {
@@ -40,6 +40,45 @@ impl std::str::FromStr for Crop {
             }),
             _ => Err(ParseCropError(s.to_string())),
         }
+    }
+}
+
+/// The crop `train` is asked for: measured from the lab's own footprint, or given.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum CropSpec {
+    /// The rows and columns that carry the stances' load ([`crate::training::footprint`]).
+    #[default]
+    Auto,
+    /// This crop.
+    Fixed(Crop),
+}
+
+impl From<Crop> for CropSpec {
+    fn from(c: Crop) -> Self {
+        CropSpec::Fixed(c)
+    }
+}
+
+impl std::str::FromStr for CropSpec {
+    type Err = ParseCropError;
+    /// `auto`, or `T,B,L,R`.
+    fn from_str(s: &str) -> Result<Self, ParseCropError> {
+        if s.trim() == "auto" {
+            return Ok(CropSpec::Auto);
+        }
+        s.parse::<Crop>()
+            .map(CropSpec::Fixed)
+            .map_err(|_| ParseCropError(s.to_string()))
+    }
+}
+
+impl std::fmt::Display for Crop {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{},{},{},{}",
+            self.top, self.bottom, self.left, self.right
+        )
     }
 }
 

@@ -18,7 +18,7 @@ pub mod repair;
 pub mod texture;
 pub mod train;
 
-pub use image::{Crop, PressureImage};
+pub use image::{Crop, CropSpec, PressureImage};
 pub use model::{ClassInfo, Model};
 pub use pwe::{Classifier, Decision};
 

@@ -2,7 +2,7 @@
 //! unknown-ground checks are chosen ([`UnknownChecks`]: measured on the lab's runs by
 //! `crate::training::choice`, or an expert's list).
 
-use super::image::Crop;
+use super::image::CropSpec;
 use super::model::{MAX_DOWNSAMPLE, MAX_UNKNOWN_RATE};
 use super::train::TrainError;
 use crate::unknown::novelty::NoveltyScore;
@@ -18,10 +18,15 @@ pub struct TrainOptions {
     /// Of those, images to train on; the rest validate the kernel width (13 of 20).
     #[cfg_attr(feature = "clap", arg(long, default_value_t = 13))]
     pub train: usize,
-    /// Rows/columns removed before the features: top,bottom,left,right (the paper: 2,2,2,2 on
-    /// the static platform; 0,3,6,0 on the foot).
-    #[cfg_attr(feature = "clap", arg(long, default_value = "0,0,0,0"))]
-    pub crop: Crop,
+    /// Rows/columns removed before the features: `auto` keeps the rows and columns that carry
+    /// your stances' load (each at least 0.25% of it; on the simulator's foot that is the
+    /// paper's 0,3,6,0), or top,bottom,left,right (the paper: 2,2,2,2 on the static platform;
+    /// 0,3,6,0 on its foot): a given crop that cuts loaded lines is warned about.
+    #[cfg_attr(
+        feature = "clap",
+        arg(long, default_value = "auto", value_name = "auto|T,B,L,R")
+    )]
+    pub crop: CropSpec,
     /// Keep every k-th row and column after the crop (1 = full resolution, at most 8).
     #[cfg_attr(feature = "clap", arg(long, default_value_t = 1, value_parser = parse_downsample))]
     pub downsample: usize,
@@ -60,8 +65,9 @@ pub struct TrainOptions {
     /// extra checks on the calibration run, keeps the one that finds the most left-out ground
     /// at --unknown-rate, and prints the table it chose from. Or an expert's list, e.g.
     /// `knn,normalize-load,texture`: a score (`knn-residual` or `knn`), then any of
-    /// `normalize-load`, `dims-max`, `load`, `texture` (what is not named is off). The flags
-    /// above pin their part in either case.
+    /// `normalize-load`, `dims-max`, `load`, `texture`, `energy` (the return map of the
+    /// sessions' flights) and, with one session, `margin-F` (what is not named is off). The
+    /// flags above pin their part in either case.
     #[cfg_attr(
         feature = "clap",
         arg(long, default_value = "auto", value_name = "LIST")
@@ -100,7 +106,7 @@ impl Default for TrainOptions {
         Self {
             per_class: 20,
             train: 13,
-            crop: Crop::default(),
+            crop: CropSpec::Auto,
             downsample: 1,
             normalize_load: false,
             h: None,
@@ -157,6 +163,33 @@ pub struct Candidate {
     pub load: bool,
     /// The texture check.
     pub texture: bool,
+    /// The energy check: a stance whose flight after is not what its terrain's return map
+    /// gives for the flight before it is unknown (fitted on the sessions' flights).
+    pub energy: bool,
+    /// With one session, the factor on the thresholds its own time blocks set, in hundredths
+    /// (115: x1.15); [`Margin::MEASURED`] for thresholds set on another session.
+    pub margin: Margin,
+}
+
+/// A factor on a model's novelty thresholds, in hundredths: how far past what one session
+/// measured of itself the next session's known ground may lie and still be known
+/// (docs/decisions/unknown-one-session.md).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct Margin(pub u16);
+
+impl Margin {
+    /// The thresholds as calibrated: another session measured them.
+    pub const MEASURED: Margin = Margin(100);
+    /// One session, when nothing chose another: the factor the project measured before the
+    /// session's time blocks calibrated it (`SAME_RUN_MARGIN`).
+    pub const ONE_SESSION: Margin = Margin(115);
+    /// The factors `train` weighs with one session, largest first (a tie goes to the larger).
+    pub const ONE_SESSION_GRID: [Margin; 4] = [Margin(150), Margin(130), Margin(115), Margin(100)];
+
+    /// The factor.
+    pub fn factor(self) -> f64 {
+        self.0 as f64 / 100.0
+    }
 }
 
 impl Candidate {
@@ -168,11 +201,13 @@ impl Candidate {
         dims: Dims::Accuracy,
         load: false,
         texture: false,
+        energy: false,
+        margin: Margin::ONE_SESSION,
     };
 
-    /// Extra checks it carries (0-2): fewer is preferred where the figures tie.
+    /// Extra checks it carries (0-3): fewer is preferred where the figures tie.
     pub fn extra_checks(&self) -> usize {
-        self.load as usize + self.texture as usize
+        self.load as usize + self.texture as usize + self.energy as usize
     }
 }
 
@@ -188,10 +223,14 @@ impl std::fmt::Display for Candidate {
             (self.dims == Dims::Max, "dims-max"),
             (self.load, "load"),
             (self.texture, "texture"),
+            (self.energy, "energy"),
         ] {
             if on {
                 write!(f, ",{name}")?;
             }
+        }
+        if self.margin != Margin::ONE_SESSION {
+            write!(f, ",margin-{:.2}", self.margin.factor())?;
         }
         Ok(())
     }
@@ -211,7 +250,8 @@ pub enum UnknownChecks {
 #[derive(Debug, thiserror::Error, Clone, PartialEq, Eq)]
 #[error(
     "`{0}` is not an --unknown-checks item: use auto, or a score (knn-residual or knn) with any \
-     of normalize-load, dims-max, load, texture, comma-separated"
+     of normalize-load, dims-max, load, texture, energy and margin-F (1 <= F <= 3: with one session, \
+     the factor on its thresholds), comma-separated"
 )]
 pub struct ParseUnknownChecksError(pub String);
 
@@ -230,6 +270,15 @@ impl std::str::FromStr for UnknownChecks {
                 "dims-max" => c.dims = Dims::Max,
                 "load" => c.load = true,
                 "texture" => c.texture = true,
+                "energy" => c.energy = true,
+                m if m.starts_with("margin-") => {
+                    c.margin = m["margin-".len()..]
+                        .parse::<f64>()
+                        .ok()
+                        .filter(|f| (1.0..=3.0).contains(f))
+                        .map(|f| Margin((f * 100.0).round() as u16))
+                        .ok_or_else(|| ParseUnknownChecksError(m.to_string()))?
+                }
                 other => return Err(ParseUnknownChecksError(other.to_string())),
             }
         }
@@ -272,8 +321,9 @@ mod tests {
         assert_eq!("auto".parse(), Ok(UnknownChecks::Auto));
         for list in [
             "knn-residual",
-            "knn,normalize-load,dims-max,load,texture",
+            "knn,normalize-load,dims-max,load,texture,energy",
             "knn,texture",
+            "knn,texture,margin-1.30",
         ] {
             let Ok(UnknownChecks::Fixed(c)) = list.parse::<UnknownChecks>() else {
                 panic!("{list}");

@@ -12,7 +12,7 @@ use super::kernels::{centre, gram_inverse, half_matrix, load_area, project, quad
 use super::model::{MinContact, Model};
 use super::repair;
 use crate::unknown::novelty::MAX_K;
-use crate::unknown::{self, Bands, Measured};
+use crate::unknown::{self, Measured};
 
 pub use super::decision::Decision;
 pub use super::model::{DepthMismatch, ImageMismatch, SizeMismatch};
@@ -124,7 +124,7 @@ impl Classifier {
         }
         let stride = model.h.div_ceil(8) * 8;
         // Padded to stride x stride with zeros, as the projection is.
-        let gram_corr = if model.novelty.is_some() && !w16.is_empty() {
+        let gram_corr = if model.unknown.novelty.is_some() && !w16.is_empty() {
             let h = model.h;
             let g = gram_inverse(&model.pca_matrix, &w16, h);
             let mut e = vec![0.0f32; stride * stride];
@@ -149,7 +149,7 @@ impl Classifier {
         let mut reference = Vec::new();
         let mut reference_of = vec![0..0; n_classes];
         let mut nuisance16 = Vec::new();
-        if let Some(nv) = model.novelty.as_ref().filter(|_| model.h > 0) {
+        if let Some(nv) = model.unknown.novelty.as_ref().filter(|_| model.h > 0) {
             for (k, range) in reference_of.iter_mut().enumerate() {
                 let start = reference.len() / stride;
                 for (src, _) in nv
@@ -183,7 +183,14 @@ impl Classifier {
             projected_mean,
             w16,
             q: vec![0.0; stride],
-            centred: vec![0.0; if model.novelty.is_some() { n } else { 0 }],
+            centred: vec![
+                0.0;
+                if model.unknown.novelty.is_some() {
+                    n
+                } else {
+                    0
+                }
+            ],
             gram_corr,
             samples,
             log_kernel: vec![0.0; model.n_samples()],
@@ -194,6 +201,7 @@ impl Classifier {
             nuisance_q: vec![
                 0.0;
                 model
+                    .unknown
                     .novelty
                     .as_ref()
                     .map_or(0, |nv| nv.nuisance.len() / n.max(1))
@@ -327,7 +335,7 @@ impl Classifier {
     /// caller may have repaired the image since.
     pub fn decide_in_contact(&mut self) -> Decision {
         let m = &self.model;
-        let load = if m.normalize_load.is_some() || m.load_ranges.is_some() {
+        let load = if m.normalize_load.is_some() || m.unknown.load_bands.is_some() {
             load_area(&self.work, self.avx2_fma).0
         } else {
             0
@@ -335,27 +343,89 @@ impl Classifier {
         self.decide_with_load(load)
     }
 
-    /// The decision for a working image in contact whose load is `load`.
+    /// The decision for a working image in contact whose load is `load`: the feature vector
+    /// and its projection, the residual, the Parzen posterior, then what the unknown-ground
+    /// checks say of the best class ([`crate::unknown::checks::Checks::image_verdict`]).
     fn decide_with_load(&mut self, load: u64) -> Decision {
         let m = &self.model;
         // Only when the model scales or checks the load.
-        let total = if m.normalize_load.is_some() || m.load_ranges.is_some() {
+        let total = if m.normalize_load.is_some() || m.unknown.load_bands.is_some() {
             load as f64
         } else {
             0.0
         };
+        let c2 = self.project_image(total);
+        self.parts.1 = self.residual(c2);
+        let best = self.posterior();
+        let measured = self.measure(best, total);
+        let reason = self.verdict(measured);
+        let m = &self.model;
+        let known = reason.is_none();
+        Decision {
+            class: known.then_some(best),
+            best,
+            terrain_id: if known {
+                m.classes[best].terrain_id
+            } else {
+                protocol::messages::TERRAIN_UNKNOWN
+            },
+            confidence: self.log_posteriors[best].exp(),
+            log_density: self.log_dens[best],
+            contact: true,
+            novelty: measured.novelty,
+            threshold: measured.threshold,
+            reason,
+        }
+    }
+
+    /// The unknown-ground checks' verdict on the working image measured as `m` (its roughness
+    /// measured only if the other checks call it known: it is the dearest).
+    #[inline]
+    fn verdict(&self, m: Measured) -> Option<unknown::Reason> {
+        let (w, rows, cols, avx2) = (&self.work, self.work_rows, self.work_cols, self.avx2_fma);
+        self.model
+            .unknown
+            .image_verdict(m, || super::texture::roughness_with(w, rows, cols, avx2))
+    }
+
+    /// After a decision: the verdict of the checks on the same image had its class been each
+    /// of the model's in turn, into `out` (one per class). The multi-frame rule decides a
+    /// step's terrain from its frames' summed posterior, and judges that class, not the one
+    /// its sample-time frame would have picked alone. No allocation.
+    pub fn verdicts_per_class(&mut self, out: &mut [Option<unknown::Reason>]) {
+        let m = &self.model;
+        let total = if m.normalize_load.is_some() || m.unknown.load_bands.is_some() {
+            load_area(&self.work, self.avx2_fma).0 as f64
+        } else {
+            0.0
+        };
+        for (k, v) in out.iter_mut().enumerate().take(self.model.classes.len()) {
+            let m = self.measure(k, total);
+            *v = self.verdict(m);
+        }
+        // The decision's own parts are the best class's: put them back.
+        let best = (0..self.log_dens.len())
+            .max_by(|&a, &b| self.log_dens[a].total_cmp(&self.log_dens[b]))
+            .unwrap_or(0);
+        self.measure(best, total);
+    }
+
+    /// The feature vector of the working image (scaled to the model's load when it
+    /// normalises; `total` is the image's) and its projection `q`; returns |F - mean|^2 for the
+    /// residual (0 for models without a novelty score).
+    fn project_image(&mut self, total: f64) -> f64 {
+        let m = &self.model;
         let scale = match m.normalize_load {
             Some(target) if total > 0.0 => (target / total) as f32,
             _ => 1.0,
         };
         self.fx.extract(&self.work, scale, &mut self.feat);
         let h = m.h;
-        let mut c2 = 0.0;
-        if m.novelty.is_some() {
-            // Q = U (F - mean) from the centred vector: the residual below is a difference of
+        if m.unknown.novelty.is_some() {
+            // Q = U (F - mean) from the centred vector: the residual is a difference of
             // |F - mean|^2 and |Q|^2, and U F - U mean loses Q's low digits to F's large mean
             // in f32 (measured: the residual off by a factor 4 on the synthetic textures).
-            c2 = centre(&self.feat, &m.pca_mean, &mut self.centred, self.avx2_fma);
+            let c2 = centre(&self.feat, &m.pca_mean, &mut self.centred, self.avx2_fma);
             project(
                 &m.pca_matrix,
                 &self.w16,
@@ -363,54 +433,64 @@ impl Classifier {
                 &mut self.q[..h],
                 self.avx2_fma,
             );
-        } else {
-            // U (F - mean) = U F - U mean, with U mean computed once in `new`.
+            return c2;
+        }
+        // U (F - mean) = U F - U mean, with U mean computed once in `new`.
+        project(
+            &m.pca_matrix,
+            &self.w16,
+            &self.feat,
+            &mut self.q[..h],
+            self.avx2_fma,
+        );
+        for (q, b) in self.q.iter_mut().zip(&self.projected_mean) {
+            *q -= b;
+        }
+        0.0
+    }
+
+    /// The length of F - mean outside the PCA rows' span and the nuisance directions (0 for a
+    /// `knn` score, which does not use it; NaN without a novelty score).
+    fn residual(&mut self, c2: f64) -> f64 {
+        let m = &self.model;
+        let Some(nv) = &m.unknown.novelty else {
+            return f64::NAN;
+        };
+        if nv.score == crate::unknown::novelty::NoveltyScore::Knn {
+            // The kNN ratio alone: the residual is not part of the score, and not computed.
+            return 0.0;
+        }
+        // |F - mean|^2 less the squared length of its projection, Q^T G^-1 Q with G = U U^T of
+        // the weights the kernel used. The half-precision rows are not orthonormal enough for
+        // |Q|^2 alone: measured on the synthetic textures, the residual came out 1034 where it
+        // is 235.
+        let q = &self.q[..m.h];
+        let mut q2: f64 = q.iter().map(|&v| v as f64 * v as f64).sum();
+        // G^-1 = I + E with E of order 1e-3: Q^T E Q in f32 is exact enough, and vectorises
+        // (3,136 multiply-adds for h = 52 padded to 56).
+        q2 += quad_form(&self.gram_corr, &self.q, self.avx2_fma);
+        // Less its length along the nuisance directions (orthogonal to the rows): where the
+        // known terrains' runs differ, not the terrain.
+        let mut nuisance = 0.0;
+        if !self.nuisance_q.is_empty() {
             project(
-                &m.pca_matrix,
-                &self.w16,
-                &self.feat,
-                &mut self.q[..h],
+                &nv.nuisance,
+                &self.nuisance16,
+                &self.centred,
+                &mut self.nuisance_q,
                 self.avx2_fma,
             );
-            for (q, b) in self.q.iter_mut().zip(&self.projected_mean) {
-                *q -= b;
-            }
+            nuisance = self.nuisance_q.iter().map(|&v| v as f64 * v as f64).sum();
         }
+        (c2 - q2 - nuisance).max(0.0).sqrt()
+    }
+
+    /// The Parzen posterior of the projection against the stored samples (equal priors):
+    /// `log_kernel`, `log_dens` and `log_posteriors`; returns the best class.
+    fn posterior(&mut self) -> usize {
+        let m = &self.model;
         sq_dists(&self.samples, &self.q, &mut self.log_kernel, self.avx2_fma);
         let n_classes = m.classes.len();
-        let knn_only = m
-            .novelty
-            .as_ref()
-            .is_some_and(|nv| nv.score == crate::unknown::novelty::NoveltyScore::Knn);
-        if knn_only {
-            // The kNN ratio alone: the residual is not part of the score, and not computed.
-            self.parts.1 = 0.0;
-        } else if let Some(nv) = &m.novelty {
-            // The part of F - mean outside the rows' span: |F - mean|^2 less the squared length
-            // of its projection, Q^T G^-1 Q with G = U U^T of the weights the kernel used. The
-            // half-precision rows are not orthonormal enough for |Q|^2 alone: measured on the
-            // synthetic textures, the residual came out 1034 where it is 235.
-            let q = &self.q[..h];
-            let mut q2: f64 = q.iter().map(|&v| v as f64 * v as f64).sum();
-            // G^-1 = I + E with E of order 1e-3: Q^T E Q in f32 is exact enough, and
-            // vectorises (3,136 multiply-adds for h = 52 padded to 56).
-            q2 += quad_form(&self.gram_corr, &self.q, self.avx2_fma);
-            // Less its length along the nuisance directions (orthogonal to the rows): where
-            // the known terrains' runs differ, not the terrain.
-            let mut nuisance = 0.0;
-            if !self.nuisance_q.is_empty() {
-                project(
-                    &nv.nuisance,
-                    &self.nuisance16,
-                    &self.centred,
-                    &mut self.nuisance_q,
-                    self.avx2_fma,
-                );
-                nuisance = self.nuisance_q.iter().map(|&v| v as f64 * v as f64).sum();
-            }
-            let residual = (c2 - q2 - nuisance).max(0.0).sqrt();
-            self.parts.1 = residual;
-        }
         let (log_dens, max_e, sums) = (&mut self.log_dens, &mut self.max_e, &mut self.sums);
         max_e.fill(f64::NEG_INFINITY);
         sums.fill(0.0);
@@ -446,78 +526,73 @@ impl Classifier {
         for (lp, ld) in self.log_posteriors.iter_mut().zip(log_dens.iter()) {
             *lp = ld - log_z;
         }
-        let threshold = match &m.unknown_thresholds {
-            Some(t) => t[best],
-            None => m.unknown_threshold,
-        };
-        let (novelty, threshold) = match &m.novelty {
-            Some(nv) => {
-                // The best class's stored samples and references only: the kNN ratio looks at
-                // no other class.
-                let b = &mut self.knn[..nv.k];
-                b.fill(f64::INFINITY);
-                let to_d2 = -1.0 / self.inv_two_s2;
-                for &i in &self.samples_of[best] {
-                    if i != self.exclude {
-                        insert_smallest(b, self.log_kernel[i] * to_d2);
-                    }
-                }
-                let range = self.reference_of[best].clone();
-                if !range.is_empty() {
-                    let stride = self.q.len();
-                    let d2 = &mut self.reference_d2[..range.len()];
-                    let refs = &self.reference[range.start * stride..range.end * stride];
-                    sq_dists(refs, &self.q, d2, self.avx2_fma);
-                    for &v in d2.iter() {
-                        insert_smallest(b, v);
-                    }
-                }
-                let (mut sum, mut n) = (0.0, 0usize);
-                for &d2 in b.iter().take_while(|d| d.is_finite()) {
-                    sum += d2.sqrt();
-                    n += 1;
-                }
-                // A class with no other stored sample (calibrating on its only one): no
-                // distance to judge by, so nothing is known about it.
-                let knn_dist = if n > 0 { sum / n as f64 } else { f64::INFINITY };
+        best
+    }
+
+    /// What the unknown-ground checks judge of the last projection as class `class`: its
+    /// novelty against the class's threshold (the negated log density for a model without a
+    /// novelty score) and the image's load `total`. Sets the kNN part of `novelty_parts`.
+    fn measure(&mut self, class: usize, total: f64) -> Measured {
+        let (novelty, threshold) = match self.model.unknown.novelty.is_some() {
+            true => {
+                let knn_dist = self.knn_distance(class);
                 self.parts.0 = knn_dist;
-                (
-                    nv.score_of(best, knn_dist, self.parts.1),
-                    nv.thresholds[best],
-                )
+                self.model
+                    .unknown
+                    .novelty
+                    .as_ref()
+                    .map_or((f64::NAN, f64::NAN), |nv| {
+                        (
+                            nv.score_of(class, knn_dist, self.parts.1),
+                            nv.thresholds[class],
+                        )
+                    })
             }
-            None => (-log_dens[best], -threshold),
+            false => (
+                -self.log_dens[class],
+                -self.model.unknown.density_thresholds[class],
+            ),
         };
-        let measured = Measured {
-            best,
+        Measured {
+            best: class,
             novelty,
             threshold,
             load: total,
-        };
-        let bands = Bands {
-            load: m.load_ranges.as_deref(),
-            texture: m.texture_ranges.as_deref(),
-        };
-        let (w, rows, cols, avx2) = (&self.work, self.work_rows, self.work_cols, self.avx2_fma);
-        let reason = unknown::image_verdict(measured, bands, || {
-            super::texture::roughness_with(w, rows, cols, avx2)
-        });
-        let known = reason.is_none();
-        Decision {
-            class: known.then_some(best),
-            best,
-            terrain_id: if known {
-                m.classes[best].terrain_id
-            } else {
-                protocol::messages::TERRAIN_UNKNOWN
-            },
-            confidence: self.log_posteriors[best].exp(),
-            log_density: log_dens[best],
-            contact: true,
-            novelty,
-            threshold,
-            reason,
         }
+    }
+
+    /// The mean distance from the projection to the `k` nearest stored samples (and
+    /// references) of `class`, from the posterior's `log_kernel`; +inf for a class with no
+    /// other stored sample (calibrating on its only one: nothing is known about it).
+    fn knn_distance(&mut self, class: usize) -> f64 {
+        let Some(nv) = &self.model.unknown.novelty else {
+            return f64::NAN;
+        };
+        // The class's stored samples and references only: the kNN ratio looks at no other.
+        let b = &mut self.knn[..nv.k];
+        b.fill(f64::INFINITY);
+        let to_d2 = -1.0 / self.inv_two_s2;
+        for &i in &self.samples_of[class] {
+            if i != self.exclude {
+                insert_smallest(b, self.log_kernel[i] * to_d2);
+            }
+        }
+        let range = self.reference_of[class].clone();
+        if !range.is_empty() {
+            let stride = self.q.len();
+            let d2 = &mut self.reference_d2[..range.len()];
+            let refs = &self.reference[range.start * stride..range.end * stride];
+            sq_dists(refs, &self.q, d2, self.avx2_fma);
+            for &v in d2.iter() {
+                insert_smallest(b, v);
+            }
+        }
+        let (mut sum, mut n) = (0.0, 0usize);
+        for &d2 in b.iter().take_while(|d| d.is_finite()) {
+            sum += d2.sqrt();
+            n += 1;
+        }
+        if n > 0 { sum / n as f64 } else { f64::INFINITY }
     }
 
     /// The last decision's projection into the model's PCA space (h values; meaningful after a

@@ -47,9 +47,9 @@ use crate::classifier::Model;
 use crate::classifier::model::{CatalogMismatch, ModelError};
 use crate::config::NodeConfig;
 use crate::gait::{GaitTally, GaitTrack, describe_counts};
-use crate::replay::EnergyTally;
 use crate::stance::{Counters, Decided, StancePipeline};
 use crate::step_table::StepSender;
+use crate::unknown::energy::EnergyTally;
 
 /// Why the node cannot start, or cannot take a model.
 #[derive(Debug, Error)]
@@ -353,7 +353,7 @@ impl NodeService {
         let Some(m) = self.model() else {
             return Vec::new();
         };
-        let maps = m.energy.as_deref().unwrap_or(&[]);
+        let maps = m.unknown.energy.as_deref().unwrap_or(&[]);
         m.classes
             .iter()
             .zip(self.pipeline.energy_tally())

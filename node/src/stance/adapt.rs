@@ -188,9 +188,16 @@ pub(super) struct Adaptation<'a> {
     pub counters: &'a mut Counters,
 }
 
+/// What a multi-frame decision keeps of a frame: its log posteriors added to the stance's
+/// sum, and (for the frame nearest the sample time) the checks' verdict for each class.
+pub(super) struct FrameSums<'a> {
+    pub sum_lp: &'a mut Vec<f64>,
+    pub verdicts: Option<&'a mut Vec<Option<crate::unknown::Reason>>>,
+}
+
 /// Crop, repair and decision for one frame (the foot's `best`). Returns the decision and
 /// whether any line was filled; `observe` feeds the frame to the stance history (once per
-/// stance); `sum_lp` gets the decision's log posteriors added (multi-frame). With history
+/// stance); `sums` (multi-frame) gets the decision's log posteriors and verdicts. With history
 /// repair, a model refitted to the foot's current dead lines decides. An image without contact
 /// is neither learned from nor repaired.
 pub(super) fn classify(
@@ -199,7 +206,7 @@ pub(super) fn classify(
     f: &mut Foot,
     (rows, cols): (usize, usize),
     observe: bool,
-    sum_lp: Option<&mut Vec<f64>>,
+    sums: Option<FrameSums<'_>>,
     ctx: Adaptation<'_>,
 ) -> Option<(Decision, bool)> {
     let Adaptation {
@@ -212,10 +219,13 @@ pub(super) fn classify(
     if !cls.in_contact() {
         return Some((Decision::NO_CONTACT, false));
     }
-    let add = |sum_lp: Option<&mut Vec<f64>>, lp: &[f64]| {
-        if let Some(s) = sum_lp {
-            for (a, b) in s.iter_mut().zip(lp) {
+    let add = |sums: Option<FrameSums<'_>>, c: &mut Classifier| {
+        if let Some(s) = sums {
+            for (a, b) in s.sum_lp.iter_mut().zip(c.log_posteriors()) {
                 *a += b;
+            }
+            if let Some(v) = s.verdicts {
+                c.verdicts_per_class(v);
             }
         }
     };
@@ -231,13 +241,13 @@ pub(super) fn classify(
                 a.cls.work_mut().copy_from_slice(cls.work_mut());
                 let repaired = f.health.repair(a.cls.work_mut()) > 0;
                 let d = a.cls.decide_in_contact();
-                add(sum_lp, a.cls.log_posteriors());
+                add(sums, &mut a.cls);
                 return Some((d, repaired));
             }
             f.health.repair(cls.work_mut()) > 0
         }
     };
     let d = cls.decide_in_contact();
-    add(sum_lp, cls.log_posteriors());
+    add(sums, cls);
     Some((d, repaired))
 }

@@ -80,10 +80,11 @@ struct Foot {
     /// Multi-frame: summed log-posteriors (one per class of the model) and frames used.
     sum_lp: Vec<f64>,
     used: u32,
-    /// Multi-frame: the verdict on the frame nearest the sample time so far (|dt - sample| in
-    /// µs): the checks were calibrated on images at the sample time, so that frame's verdict
-    /// is the step's, as in the single-frame path.
-    sample_verdict: Option<(u32, Option<Reason>)>,
+    /// Multi-frame: how near the sample time the nearest frame so far was (|dt - sample| in
+    /// µs), and its verdict for each class: the checks were calibrated on images at the sample
+    /// time, so that frame's verdict on the class the summed posterior decides is the step's.
+    sample_err: Option<u32>,
+    sample_verdicts: Vec<Option<Reason>>,
     /// An image of this stance was looked at and showed no contact.
     no_contact: bool,
     /// A line of this stance's frames was filled.
@@ -100,7 +101,21 @@ struct Foot {
     heard: Option<(u64, u32)>,
     /// The hop's energy balance over this foot's stances.
     balance: Balance,
+    /// Capture mode: per offset of [`FRAME_OFFSETS_MS`], the image nearest it so far (|dt -
+    /// offset| in µs) and its pixels (empty outside capture).
+    frames: Vec<(Option<u32>, Vec<u16>)>,
 }
+
+/// The times after touchdown (ms) at which `presrs capture` keeps a stance's frames beside its
+/// sampled image: the candidates `train` measures the deciding frame among.
+pub const FRAME_OFFSETS_MS: [u32; 9] = [30, 50, 70, 90, 110, 130, 150, 170, 190];
+
+/// A stance frame counts for an offset when it lies within this of it: half the array's 10 ms
+/// period (further, the stance had ended or its frame was lost).
+const FRAME_NEAR_US: u32 = 5_000;
+
+/// Capture mode decides a stance once its frames are past the last offset (or at liftoff).
+const CAPTURE_DONE_US: u32 = (FRAME_OFFSETS_MS[FRAME_OFFSETS_MS.len() - 1] * 1000) + FRAME_NEAR_US;
 
 impl Foot {
     /// Keeps `img` as the stance's candidate image.
@@ -128,7 +143,8 @@ impl Foot {
             best_ts: 0,
             sum_lp: vec![0.0; classes],
             used: 0,
-            sample_verdict: None,
+            sample_err: None,
+            sample_verdicts: vec![None; classes],
             no_contact: false,
             repaired: false,
             health,
@@ -137,6 +153,7 @@ impl Foot {
             clock: ImageClock::default(),
             heard: None,
             balance: Balance::default(),
+            frames: Vec::new(),
         }
     }
 }
@@ -165,6 +182,9 @@ pub struct StancePipeline {
     /// Per class of the model: stances the energy check judged, and of them those outside
     /// the class's map (sized when a model with another class count is installed).
     energy_tally: Vec<[u32; 2]>,
+    /// The deciding frame's time after touchdown, µs: the model's (measured by `train` on the
+    /// lab's stances), else the config's `sample_ms`.
+    sample_us: u32,
 }
 
 /// One step's decision as the pipeline hands it on: exactly one per step.
@@ -218,6 +238,7 @@ impl StancePipeline {
             counters: Counters::default(),
             capture: false,
             energy_tally: Vec::new(),
+            sample_us: cfg.sample_ms * 1000,
             cfg,
         };
         p.set_model(model);
@@ -234,8 +255,39 @@ impl StancePipeline {
         p.capture = true;
         for f in &mut p.feet {
             f.best = vec![0; protocol::tactile::MAX_PIXELS];
+            f.frames = vec![(None, vec![0; protocol::tactile::MAX_PIXELS]); FRAME_OFFSETS_MS.len()];
         }
         p
+    }
+
+    /// Capture mode: the foot's latest decided stance's frame nearest each of
+    /// [`FRAME_OFFSETS_MS`] (`None` where the stance had no image within half a frame period
+    /// of it: it had ended), of the sampled image's size.
+    pub fn stance_frames(&self, foot: u8) -> impl Iterator<Item = Option<&[u16]>> + '_ {
+        let f = self.feet.get(foot as usize);
+        let n = f.map_or(0, |f| f.best_len);
+        f.into_iter()
+            .flat_map(|f| &f.frames)
+            .map(move |(err, px)| err.filter(|&e| e <= FRAME_NEAR_US).map(|_| &px[..n]))
+    }
+
+    /// Capture mode, at the end of a run: decides every stance still open with an image (the run
+    /// ended before its liftoff or its last frame offset), as a live capture's stop does.
+    pub fn decide_open(&mut self, out: &mut (impl Emit<Decided> + ?Sized)) {
+        if !self.capture {
+            return;
+        }
+        for foot in 0..self.feet.len() {
+            let f = &self.feet[foot];
+            if f.switch.stance && !f.decided && f.best_err.is_some() {
+                self.decide(foot as u8, out);
+            }
+        }
+    }
+
+    /// The deciding frame's time after touchdown the pipeline uses, ms.
+    pub fn sample_ms(&self) -> u32 {
+        self.sample_us / 1000
     }
 
     /// Per class of the model: the stances its energy check judged and, of them, those outside
@@ -279,6 +331,12 @@ impl StancePipeline {
     /// model sizes changes: a sample of another image size is dropped, and the sensor health is
     /// learned afresh when the working image's size changes.
     pub fn set_model(&mut self, model: Option<Model>) {
+        // The model's deciding frame, measured on the lab's stances; older models have none.
+        self.sample_us = model
+            .as_ref()
+            .and_then(|m| m.sample_ms)
+            .unwrap_or(self.cfg.sample_ms)
+            * 1000;
         let (rows, cols) = model.as_ref().and_then(|m| m.work_size()).unwrap_or((1, 1));
         let input = model.as_ref().map_or(1, |m| m.input_rows * m.input_cols);
         let classes = model.as_ref().map_or(0, |m| m.classes.len());
@@ -309,6 +367,7 @@ impl StancePipeline {
         for f in &mut self.feet {
             if f.sum_lp.len() != classes {
                 f.sum_lp = vec![0.0; classes];
+                f.sample_verdicts = vec![None; classes];
                 f.used = 0;
             }
             if f.best.len() != input {
@@ -412,7 +471,7 @@ impl StancePipeline {
             let maps = self
                 .classifier
                 .as_ref()
-                .and_then(|c| c.model().energy.as_deref());
+                .and_then(|c| c.model().unknown.energy.as_deref());
             let judged = f
                 .balance
                 .touchdown(foot, f.step, at_us, self.now_rx_us, maps);
@@ -430,9 +489,12 @@ impl StancePipeline {
                 .saturating_sub(u64::from(now.wrapping_sub(at_us)));
             f.decided = false;
             f.best_err = None;
+            for (err, _) in &mut f.frames {
+                *err = None;
+            }
             f.sum_lp.fill(0.0);
             f.used = 0;
-            f.sample_verdict = None;
+            f.sample_err = None;
             f.no_contact = false;
             f.repaired = false;
             f.step = f.step.wrapping_add(1);
@@ -504,21 +566,29 @@ impl StancePipeline {
                 f.keep(img, rx_us);
                 // The stance history learns from one frame per stance, not every frame.
                 let observe = f.used == 0;
-                let mut sum_lp = std::mem::take(&mut f.sum_lp);
+                let err = dt.abs_diff(self.sample_us);
+                let nearest = f.sample_err.is_none_or(|e| err < e);
+                let (mut sum_lp, mut verdicts) = (
+                    std::mem::take(&mut f.sum_lp),
+                    std::mem::take(&mut f.sample_verdicts),
+                );
                 let ctx = Adaptation {
                     cfg: &self.cfg,
                     refitter: &mut self.refitter,
                     counters: &mut self.counters,
                 };
-                let decided = classify(cls, foot, f, (rows, cols), observe, Some(&mut sum_lp), ctx);
-                f.sum_lp = sum_lp;
+                let sums = adapt::FrameSums {
+                    sum_lp: &mut sum_lp,
+                    verdicts: nearest.then_some(&mut verdicts),
+                };
+                let decided = classify(cls, foot, f, (rows, cols), observe, Some(sums), ctx);
+                (f.sum_lp, f.sample_verdicts) = (sum_lp, verdicts);
                 match decided {
                     Some((d, repaired)) if d.contact => {
                         f.repaired |= repaired;
                         f.used += 1;
-                        let err = dt.abs_diff(self.cfg.sample_ms * 1000);
-                        if f.sample_verdict.is_none_or(|(e, _)| err < e) {
-                            f.sample_verdict = Some((err, d.reason));
+                        if nearest {
+                            f.sample_err = Some(err);
                         }
                     }
                     Some(_) => f.no_contact = true,
@@ -542,14 +612,27 @@ impl StancePipeline {
         rx_us: u64,
         out: &mut (impl Emit<Decided> + ?Sized),
     ) {
-        let sample_us = self.cfg.sample_ms * 1000;
+        let sample_us = self.sample_us;
         let img = self.reassembler.last_image();
         let f = &mut self.feet[foot as usize];
         if let Some(err) = sample::nearer(dt, sample_us, f.best_err) {
             f.best_err = Some(err);
             f.keep(img, rx_us);
         }
-        if sample::nearest_is_final(dt, sample_us, f.clock.period_us()) {
+        // Capture: the stance's frame nearest each candidate deciding time too, and the stance
+        // is decided once past them all (or at liftoff), not at its sample time.
+        for ((err, px), &o) in f.frames.iter_mut().zip(&FRAME_OFFSETS_MS) {
+            if let Some(e) = sample::nearer(dt, o * 1000, *err) {
+                *err = Some(e);
+                px[..img.len()].copy_from_slice(img.pixels());
+            }
+        }
+        let done = if self.capture {
+            dt >= CAPTURE_DONE_US
+        } else {
+            sample::nearest_is_final(dt, sample_us, f.clock.period_us())
+        };
+        if done {
             self.decide(foot, out);
         }
     }
@@ -568,7 +651,7 @@ impl StancePipeline {
     /// arrived. So the deadline only moves with frames; a foot that falls silent is decided at
     /// liftoff.
     pub fn tick(&mut self, now_rx_us: u64, out: &mut (impl Emit<Decided> + ?Sized)) {
-        let sample_us = self.cfg.sample_ms * 1000;
+        let sample_us = self.sample_us;
         let w1 = self.cfg.window_ms[1] * 1000;
         for foot in 0..self.feet.len() {
             let f = &self.feet[foot];
@@ -581,7 +664,10 @@ impl StancePipeline {
                 continue;
             }
             let margin = f.clock.period_us().unwrap_or(10_000);
-            let due = if self.cfg.multi_frame {
+            let due = if self.capture {
+                // Capture keeps the stance's frames to the last offset.
+                f.best_err.is_some() && dt >= CAPTURE_DONE_US + margin
+            } else if self.cfg.multi_frame {
                 f.used > 0 && dt >= w1 + margin
             } else {
                 let last_dt = f.clock.last_ts().map(|l| l.wrapping_sub(f.touchdown_us));
@@ -617,7 +703,10 @@ impl StancePipeline {
                 let (best, pct) = decision::combine(lp);
                 tc.confidence_pct = pct;
                 tc.flags |= flags::MULTI_FRAME;
-                image_reason = f.sample_verdict.and_then(|(_, r)| r);
+                // The checks' verdict on the class the frames decided, at the sample-time frame.
+                image_reason = f
+                    .sample_err
+                    .and_then(|_| f.sample_verdicts.get(best).copied().flatten());
                 if image_reason.is_none() {
                     tc.terrain = m.classes[best].terrain_id;
                 }

@@ -4,8 +4,10 @@
 //! deployed path depends on no simulator or lab code.
 
 pub mod choice;
+pub mod footprint;
+pub mod frame;
 mod report;
 mod set;
 
-pub use report::{Trained, no_training_run_images_note};
+pub use report::{SessionCount, Trained, no_training_run_images_note};
 pub use set::{LoadError, NotInCatalog, RunSplit, TrainCalibratedError, TrainingSet};

@@ -7,7 +7,7 @@ use protocol::terrain::TerrainCatalog;
 use super::report::Trained;
 use crate::classifier::dataset::Dataset;
 use crate::classifier::train::{CalibrateError, Labelled, TrainOptions, train};
-use crate::classifier::{ClassInfo, PressureImage};
+use crate::classifier::{ClassInfo, Crop, CropSpec, PressureImage};
 
 /// A dataset's class folder whose name is no terrain of the catalog.
 #[derive(Debug, thiserror::Error)]
@@ -60,6 +60,14 @@ pub struct TrainingSet {
     /// Each image's gait at touchdown (the capture manifest's `gait`; a simulated set's gait),
     /// or `None` when not known.
     pub gaits: Vec<Option<u8>>,
+    /// Each image's flights before and after its stance, µs (the capture manifest's; read
+    /// with [`TrainingSet::flights_of`], which gives none past the end: a set built without
+    /// them may leave it empty).
+    pub flights: Vec<[Option<u32>; 2]>,
+    /// Each image's stance frames at [`crate::stance::FRAME_OFFSETS_MS`] (a blank image where
+    /// the stance had none), as `presrs capture` keeps them in `DIR/.stance`; empty for an
+    /// image without them, and past the end for a set built without any.
+    pub frames: Vec<Vec<PressureImage>>,
 }
 
 /// Why [`TrainingSet::train_calibrated`] failed: training or the calibration, as they say it.
@@ -137,6 +145,22 @@ impl TrainingSet {
             .map(|e| e.map(|e| e.source.clone()))
             .collect();
         let gaits = entries.iter().map(|e| e.and_then(|e| e.gait)).collect();
+        let flights = entries
+            .iter()
+            .map(|e| e.map_or([None, None], |e| e.flights_us))
+            .collect();
+        // The stances' frames a capture keeps beside each image; an unreadable file is as
+        // none (the image itself is what trains).
+        let frames = ds
+            .samples
+            .iter()
+            .map(|s| {
+                let rel = s.path.strip_prefix(&ds.root).ok()?;
+                let f = ds.root.join(crate::capture::STANCE_DIR).join(rel);
+                crate::classifier::dataset::read_images(&f).ok()
+            })
+            .map(Option::unwrap_or_default)
+            .collect();
         let (images, labels) = ds.samples.into_iter().map(|s| (s.image, s.class)).unzip();
         Ok(Self {
             classes,
@@ -144,7 +168,31 @@ impl TrainingSet {
             labels,
             runs,
             gaits,
+            flights,
+            frames,
         })
+    }
+
+    /// The set with each image replaced by its stance's frame `j` (of
+    /// [`crate::stance::FRAME_OFFSETS_MS`]); images whose stance has no such frame are left
+    /// out. `None` when some image has no frames at all.
+    pub fn at_frame(&self, j: usize) -> Option<TrainingSet> {
+        let n = crate::stance::FRAME_OFFSETS_MS.len();
+        if self.frames.len() != self.images.len() || self.frames.iter().any(|f| f.len() != n) {
+            return None;
+        }
+        let keep: Vec<usize> = (0..self.images.len())
+            .filter(|&i| self.frames[i][j].pixels.iter().any(|&p| p > 0))
+            .collect();
+        let mut s = self.subset(&keep);
+        s.images = keep.iter().map(|&i| self.frames[i][j].clone()).collect();
+        s.frames = Vec::new();
+        Some(s)
+    }
+
+    /// Image `i`'s flights before and after its stance, µs (none where the set has none).
+    pub fn flights_of(&self, i: usize) -> [Option<u32>; 2] {
+        self.flights.get(i).copied().unwrap_or([None, None])
     }
 
     /// `presrs train`'s account of the gaits the set's stances touched down in (the capture
@@ -218,6 +266,11 @@ impl TrainingSet {
             labels: idx.iter().map(|&i| self.labels[i]).collect(),
             runs: idx.iter().map(|&i| self.runs[i].clone()).collect(),
             gaits: idx.iter().map(|&i| self.gaits[i]).collect(),
+            flights: idx.iter().map(|&i| self.flights_of(i)).collect(),
+            frames: idx
+                .iter()
+                .map(|&i| self.frames.get(i).cloned().unwrap_or_default())
+                .collect(),
         }
     }
 
@@ -298,13 +351,109 @@ impl TrainingSet {
             }
             None => (self, None),
         };
+        // The foot's deciding frame, where the sessions keep their stances' frames: the sets
+        // at that frame train.
+        let frame_opts = TrainOptions {
+            crop: crate::classifier::train::resolve_crop(opts.crop, &train_set.images).into(),
+            ..opts.clone()
+        };
+        // A calibration session without frames would be judged at another time than the
+        // training one: then the node's sample time for both.
+        let cal_ok = calibration.is_none_or(|(c, _)| c.at_frame(0).is_some());
+        let default_ms = crate::config::NodeConfig::default().sample_ms;
+        let frame = cal_ok
+            .then(|| super::frame::choose_frame(train_set, &frame_opts, default_ms))
+            .flatten();
+        let Some(fc) = frame else {
+            return train_sets(train_set, calibration, opts, None);
+        };
+        let j = fc.chosen;
+        let at = |s: &TrainingSet| s.at_frame(j).unwrap_or_else(|| s.clone());
+        let t = at(train_set);
+        let c = calibration.map(|(c, n)| (at(c), n));
+        let mut trained = train_sets(&t, c.as_ref().map(|(c, n)| (c, *n)), opts, Some(fc))?;
+        trained.model.sample_ms = trained.frame.as_ref().map(|f| f.offset_ms());
+        Ok(trained)
+    }
+
+    /// Per terrain and run, its images, with `role` (for `train`'s report).
+    pub fn session_counts(&self, role: &'static str) -> Vec<super::SessionCount> {
+        let mut out: Vec<super::SessionCount> = Vec::new();
+        for (k, c) in self.classes.iter().enumerate() {
+            let mut runs: Vec<Option<&String>> = (0..self.labels.len())
+                .filter(|&i| self.labels[i] == k)
+                .map(|i| self.runs[i].as_ref())
+                .collect();
+            runs.sort();
+            for r in runs.chunk_by(|a, b| a == b) {
+                out.push(super::SessionCount {
+                    terrain: c.name.clone(),
+                    run: r[0].cloned(),
+                    images: r.len(),
+                    role,
+                });
+            }
+        }
+        out
+    }
+
+    /// The distinct runs of the set's images (named ones only), sorted.
+    pub fn run_names(&self) -> Vec<String> {
+        let mut v: Vec<String> = self.runs.iter().flatten().cloned().collect();
+        v.sort();
+        v.dedup();
+        v
+    }
+
+    /// The images with their classes, as `crate::classifier::train::train` takes them.
+    pub fn labelled(&self) -> Vec<Labelled<'_>> {
+        self.images
+            .iter()
+            .zip(&self.labels)
+            .enumerate()
+            .map(|(i, (image, &class))| Labelled {
+                image,
+                class,
+                flights: self.flights_of(i),
+            })
+            .collect()
+    }
+}
+
+/// [`TrainingSet::train_calibrated`] once the sets are chosen: the crop, the unknown-ground
+/// choice, the fit, the calibration, the bands and the energy maps.
+fn train_sets(
+    train_set: &TrainingSet,
+    calibration: Option<(&TrainingSet, &[String])>,
+    opts: &TrainOptions,
+    frame: Option<super::frame::FrameChoice>,
+) -> Result<Trained, TrainCalibratedError> {
+    {
+        // The foot's own crop, measured once on every stance (a given one is checked).
+        let footprint = super::footprint::Footprint::of(
+            train_set
+                .images
+                .iter()
+                .chain(calibration.iter().flat_map(|(c, _)| &c.images)),
+        );
+        let crop = match (opts.crop, &footprint) {
+            (CropSpec::Fixed(c), _) => c,
+            (CropSpec::Auto, Some(f)) => f.crop(),
+            (CropSpec::Auto, None) => Crop::default(),
+        };
+        let crop_given = matches!(opts.crop, CropSpec::Fixed(_));
+        let opts = &TrainOptions {
+            crop: crop.into(),
+            ..opts.clone()
+        };
         // Which unknown-ground checks this lab's ground needs, measured on its runs.
         let cal_labelled: Vec<Labelled<'_>> = match calibration {
             Some((cal, names)) => cal
                 .images
                 .iter()
                 .zip(&cal.labels)
-                .map(|(image, &l)| {
+                .enumerate()
+                .map(|(i, (image, &l))| {
                     let name = &cal.classes[l].name;
                     let class = train_set
                         .classes
@@ -314,7 +463,11 @@ impl TrainingSet {
                             run: names.join(", "),
                             class: name.clone(),
                         })?;
-                    Ok(Labelled { image, class })
+                    Ok(Labelled {
+                        image,
+                        class,
+                        flights: cal.flights_of(i),
+                    })
                 })
                 .collect::<Result<_, CalibrateError>>()?,
             None => Vec::new(),
@@ -366,6 +519,21 @@ impl TrainingSet {
                 crate::classifier::train::add_load_check_on(&mut model, images);
             }
         }
+        // The energy check, when chosen: a return map per terrain over every stance's flights.
+        if choice.candidate.energy {
+            let stances: Vec<(usize, f64, f64)> = train_set
+                .labelled()
+                .iter()
+                .chain(&cal_labelled)
+                .filter_map(|l| {
+                    let (before, after) = crate::unknown::energy::plausible_flights_s(l.flights)?;
+                    Some((l.class, before, after))
+                })
+                .collect();
+            let maps =
+                crate::unknown::energy::fit(&stances, model.classes.len(), model.unknown.rate);
+            model.unknown.energy = maps.iter().any(Option::is_some).then_some(maps);
+        }
         // The gaits the model has seen: its stored samples' and its calibration run's.
         let mut gaits: Vec<u8> = split
             .train
@@ -381,31 +549,22 @@ impl TrainingSet {
         gaits.sort_unstable();
         gaits.dedup();
         model.gaits = (!gaits.is_empty()).then_some(gaits);
-        model.unknown_choice = (opts.unknown_rate > 0.0).then(|| choice.record());
+        model.unknown.choice = (opts.unknown_rate > 0.0).then(|| choice.record());
+        let mut sessions = train_set.session_counts("trained");
+        if let Some((cal, _)) = calibration {
+            sessions.extend(cal.session_counts("calibration"));
+        }
         Ok(Trained {
             model,
+            footprint,
+            crop_given,
+            sessions,
+            frame,
             split,
             train_images: train_set.images.len(),
             unused_calibration,
             choice,
         })
-    }
-
-    /// The distinct runs of the set's images (named ones only), sorted.
-    pub fn run_names(&self) -> Vec<String> {
-        let mut v: Vec<String> = self.runs.iter().flatten().cloned().collect();
-        v.sort();
-        v.dedup();
-        v
-    }
-
-    /// The images with their classes, as `crate::classifier::train::train` takes them.
-    pub fn labelled(&self) -> Vec<Labelled<'_>> {
-        self.images
-            .iter()
-            .zip(&self.labels)
-            .map(|(image, &class)| Labelled { image, class })
-            .collect()
     }
 }
 

@@ -84,12 +84,17 @@ pub struct EnergyObservation {
 impl EnergyObservation {
     /// Both flights, seconds, when both are plausible hops.
     pub fn flights_s(&self) -> Option<(f64, f64)> {
-        let ok = |v: Option<u32>| v.filter(|v| PLAUSIBLE_FLIGHT_US.contains(v));
-        Some((
-            ok(self.flight_before_us)? as f64 * 1e-6,
-            ok(self.flight_after_us)? as f64 * 1e-6,
-        ))
+        plausible_flights_s([self.flight_before_us, self.flight_after_us])
     }
+}
+
+/// A stance's flights before and after it (µs), seconds, when both are plausible hops.
+pub fn plausible_flights_s(flights_us: [Option<u32>; 2]) -> Option<(f64, f64)> {
+    let ok = |v: Option<u32>| v.filter(|v| PLAUSIBLE_FLIGHT_US.contains(v));
+    Some((
+        ok(flights_us[0])? as f64 * 1e-6,
+        ok(flights_us[1])? as f64 * 1e-6,
+    ))
 }
 
 /// Fits one return map per class from `(class, flight before s, flight after s)` stances of
@@ -218,6 +223,23 @@ impl Balance {
     pub fn rejects(&self, k: usize) -> bool {
         self.suspect == Some(k)
     }
+}
+
+/// One terrain's stances against its return map over a replay.
+///
+/// On a run over ground known to be the model's terrains, a terrain with more stances outside
+/// than the model's unknown rate has a map that no longer fits the robot: fit the maps again
+/// (`presrs energy`). What moved them on the simulator: a payload put clay's stances outside
+/// and left the others' in (docs/real-robot.md), as sand does; so a run over unknown ground
+/// cannot tell the two apart.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct EnergyTally {
+    /// The terrain's name.
+    pub terrain: String,
+    /// Stances the texture gave this terrain with both flights hops (judged against the map).
+    pub judged: u32,
+    /// Of them, those whose flight after lay outside the map's band.
+    pub outside: u32,
 }
 
 #[cfg(test)]

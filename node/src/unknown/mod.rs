@@ -10,8 +10,14 @@
 //! | [`novelty`] | the image is unlike every known terrain | `train` (calibration) |
 //! | load | the image's load lies outside its terrain's band | `train` (when chosen) |
 //! | texture | the image's roughness lies outside its terrain's band | `train` (when chosen) |
-//! | [`energy`] | the terrain took energy out of the last hop that it does not | `presrs energy` |
+//! | [`energy`] | the terrain took energy out of the last hop that it does not | `train` (a candidate, from the flights), `presrs energy` |
 //!
+//! A model carries them in one section, [`checks::Checks`] (model format 3; a version 2 file's
+//! keys are moved there on load, with identical decisions), and every threshold is held by one
+//! comparison, [`within_threshold`] (a figure that is not a number is unknown, never known).
+//! Fitting lives here too: [`calibrate`] (the thresholds), [`bands`] (the load and texture
+//! bands), [`energy_fit`] (the return maps); `train` chooses among them
+//! ([`crate::training::choice`]).
 //! [`image_verdict`] judges a stance image (called by the classifier, so by the node's
 //! single-frame and multi-frame paths, `classify`, `eval`, `capture`, replays and experiments
 //! alike); [`step_verdict`] adds the energy check for a step. [`crate::training::choice`] is
@@ -21,7 +27,11 @@
 //! The reason travels on the bus (TerrainClass `UnknownReason`, `FlagEnergy`), in the node's
 //! statistics and in recordings, so a monitor can count unknowns per reason.
 
+pub mod bands;
+pub mod calibrate;
+pub mod checks;
 pub mod energy;
+pub mod energy_fit;
 pub mod novelty;
 
 pub use protocol::messages::UnknownReason as Reason;
@@ -63,14 +73,9 @@ pub fn image_verdict(
     roughness: impl FnOnce() -> f64,
 ) -> Option<Reason> {
     let inside = |b: Option<&[[f64; 2]]>, v: f64| {
-        b.is_none_or(|b| b.get(m.best).is_some_and(|r| (r[0]..=r[1]).contains(&v)))
+        b.is_none_or(|b| b.get(m.best).is_some_and(|r| within(v, *r)))
     };
-    // A NaN novelty is unknown, never known.
-    let known_shape = m
-        .novelty
-        .partial_cmp(&m.threshold)
-        .is_some_and(|o| o.is_le());
-    if !known_shape {
+    if !within_threshold(m.novelty, m.threshold) {
         Some(Reason::Novelty)
     } else if !inside(bands.load, m.load) {
         Some(Reason::Load)
@@ -79,6 +84,19 @@ pub fn image_verdict(
     } else {
         None
     }
+}
+
+/// The one comparison every check makes: `value` at or below `threshold` is known ground; a
+/// NaN on either side is not (a figure that could not be measured never passes).
+#[inline]
+pub fn within_threshold(value: f64, threshold: f64) -> bool {
+    value.partial_cmp(&threshold).is_some_and(|o| o.is_le())
+}
+
+/// [`within_threshold`] for a band: `low <= value <= high`.
+#[inline]
+pub fn within(value: f64, [low, high]: [f64; 2]) -> bool {
+    within_threshold(low, value) && within_threshold(value, high)
 }
 
 /// The verdict on a step decided from an image: the image's verdict, else the energy check's
@@ -101,10 +119,14 @@ pub struct ChoiceRecord {
     pub how: String,
     /// The known-image budget.
     pub budget: f64,
-    /// Per candidate: list, AUROC, share of left-out images found, share of known called unknown.
+    /// Per candidate: list, AUROC, share of left-out images found, share of known called
+    /// unknown; a figure nothing measured is absent (`null`), never a number made up.
     #[serde(default)]
-    pub table: Vec<(String, f64, f64, f64)>,
+    pub table: Vec<ChoiceRow>,
 }
+
+/// One candidate of a [`ChoiceRecord`]: its list, AUROC, left-out found, known unknown.
+pub type ChoiceRow = (String, Option<f64>, Option<f64>, Option<f64>);
 
 /// Unknown steps per [`Reason`]: what a monitor counts (the node's statistics and logs).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

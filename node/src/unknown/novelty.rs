@@ -71,6 +71,9 @@ pub enum CalibrationSource {
     SameRun,
     /// The stored samples, each left out of its own neighbours (too few other images).
     LeaveOneOut,
+    /// The training session itself in time blocks, each scored by a model fitted without it
+    /// (`classifier::train::CROSS_FIT_BLOCKS`): one session, every image stored or not.
+    TimeBlocks,
 }
 
 impl CalibrationSource {
@@ -80,6 +83,9 @@ impl CalibrationSource {
             CalibrationSource::HeldOutRuns => "held-out runs",
             CalibrationSource::SameRun => "the training run's unused images, with a margin",
             CalibrationSource::LeaveOneOut => "the stored samples, leave-one-out, with a margin",
+            CalibrationSource::TimeBlocks => {
+                "the session itself in time blocks, each scored by a model fitted without it"
+            }
         }
     }
 }

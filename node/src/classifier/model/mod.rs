@@ -10,17 +10,19 @@ use serde::{Deserialize, Serialize};
 
 use super::image::Crop;
 
-/// Format version written by this build. 2 (issue 47): the novelty score may be `knn`, and the
-/// file keeps how its unknown-ground checks were chosen (`unknown_choice`); a build that reads
-/// only version 1 refuses it, naming the retrain, rather than misread it.
-pub const MODEL_VERSION: u32 = 2;
-/// The oldest format version this build reads: version 1 files load with the decisions they
-/// had (`node/tests/fixtures/model-v1`, written by the build before version 2, checks it).
+/// Format version written by this build. 3: every unknown-ground check in one `unknown`
+/// section ([`crate::unknown::checks::Checks`]); 2: the novelty score may be `knn`, and the
+/// file keeps how its checks were chosen. A build that reads only an older version refuses a
+/// newer file, naming the retrain, rather than misread it.
+pub const MODEL_VERSION: u32 = 3;
+/// The oldest format version this build reads: version 1 and 2 files load with the decisions
+/// they had (`node/tests/fixtures/model-v1` and `model-v2`, written by those builds, check it).
 pub const OLDEST_MODEL_VERSION: u32 = 1;
 /// Largest downsampling factor (a 44x44 image at 8 keeps 6x6 pixels).
 pub const MAX_DOWNSAMPLE: usize = 8;
 
 pub use crate::unknown::MAX_UNKNOWN_RATE;
+pub use crate::unknown::checks::Checks;
 /// Most classes a model may have: one per terrain id of a catalog (0-254; 255 is "unknown").
 /// The classifier's per-class buffers are sized to the model's classes when it is built.
 pub const MAX_CLASSES: usize = 255;
@@ -144,28 +146,6 @@ pub struct Model {
     pub sample_classes: Vec<usize>,
     /// Gaussian kernel width sigma, chosen on the validation split.
     pub kernel_width: f64,
-    /// Log-density below which a decision is "unknown".
-    pub unknown_threshold: f64,
-    /// The share of held-out known-terrain images the threshold was calibrated to call unknown
-    /// (`train --unknown-rate`). Absent in older model files (their threshold rejects almost
-    /// nothing).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub unknown_rate: Option<f64>,
-    /// Per class: the log density below which an image decided as that class is "unknown"
-    /// (calibrated with `unknown_rate`). Absent in older model files: `unknown_threshold` for
-    /// every class.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub unknown_thresholds: Option<Vec<f64>>,
-    /// Per class: the load (summed working image, before any normalisation) its training
-    /// images showed, widened; an image outside its best class's range is "unknown". Absent in
-    /// older model files: no load check.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub load_ranges: Option<Vec<[f64; 2]>>,
-    /// Per class: the roughness ([`super::texture::roughness`]) its training and calibration
-    /// images showed, widened; an image outside its best class's range is "unknown"
-    /// (`train --check-texture`). Absent in older model files: no texture check.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub texture_ranges: Option<Vec<[f64; 2]>>,
     /// Content hashes of the training images (to keep test images out).
     pub train_hashes: Vec<String>,
     /// Content hashes of the validation images.
@@ -183,26 +163,21 @@ pub struct Model {
     /// any depth.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bits: Option<u8>,
-    /// The novelty score that decides "unknown" and its calibration (see
-    /// [`crate::unknown::novelty`]). Absent in older model files: the per-class density thresholds
-    /// (`unknown_thresholds`) decide, as they did.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub novelty: Option<crate::unknown::novelty::Novelty>,
-    /// Per class: the return map of the stance's energy balance (see
-    /// [`crate::unknown::energy`]), `null` for a class without one. Absent in older model
-    /// files, and in models not fitted on closed-loop runs (`presrs energy`): no energy check.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub energy: Option<Vec<Option<crate::unknown::energy::ReturnMap>>>,
     /// The gaits its training and calibration images touched down in (the capture manifest's
     /// `gait`, see [`crate::gait`]), sorted: a stance in another gait may look new to it
     /// (`presrs node --replay` counts unknowns per gait and names those). Absent in older model
     /// files and where no image's gait was known.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gaits: Option<Vec<u8>>,
-    /// How its unknown-ground checks were chosen, with the table measured at training
-    /// (`crate::training::choice`). Absent in older model files and where nothing was chosen.
+    /// The stance's deciding frame, ms after touchdown, as `train` measured it on the lab's
+    /// stances (the frame that classified its held-out stances best); the node samples at it.
+    /// Absent in older files and for sets captured without their stances' frames: the node's
+    /// `sample_ms` (the paper's 70).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub unknown_choice: Option<crate::unknown::ChoiceRecord>,
+    pub sample_ms: Option<u32>,
+    /// Everything that calls a stance unknown ground: format 3's one `unknown` section
+    /// ([`crate::unknown::checks`]; format 1 and 2 files have it made from their keys).
+    pub unknown: crate::unknown::checks::Checks,
 }
 
 /// The working images of the stored samples, in the order of `Model::samples`: the training
@@ -358,6 +333,17 @@ impl Model {
                 path: path.into(),
                 found,
             });
+        }
+        let mut v = v;
+        if found < 3
+            && let Some(obj) = v.as_object_mut()
+        {
+            crate::unknown::checks::upgrade_v2(obj).map_err(|msg| ModelError::Parse {
+                path: path.into(),
+                msg,
+            })?;
+            // Read as this build writes it: saved again, it is a format 3 file.
+            obj.insert("version".into(), MODEL_VERSION.into());
         }
         let m: Model = serde_json::from_value(v).map_err(|e| ModelError::Parse {
             path: path.into(),

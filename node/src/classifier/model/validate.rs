@@ -81,59 +81,6 @@ impl Model {
                 format!("sample class {bad} is not a class index"),
             ));
         }
-        // Values that would not fail loudly but disable the model: every decision unknown
-        // (a NaN or +inf threshold), every image scaled to nothing, a class sent as "unknown".
-        if self.unknown_threshold.is_nan() || self.unknown_threshold == f64::INFINITY {
-            return Err(Invalid::new(
-                "unknown_threshold",
-                format!(
-                    "unknown_threshold {} would make every decision unknown",
-                    self.unknown_threshold
-                ),
-            ));
-        }
-        if let Some(t) = &self.unknown_thresholds {
-            if t.len() != self.classes.len() {
-                return Err(Invalid::new(
-                    "unknown_thresholds",
-                    format!("{} thresholds for {} classes", t.len(), self.classes.len()),
-                ));
-            }
-            if let Some(v) = t.iter().find(|v| v.is_nan() || **v == f64::INFINITY) {
-                return Err(Invalid::new(
-                    "unknown_thresholds",
-                    format!("a threshold of {v} would make every decision of its class unknown"),
-                ));
-            }
-        }
-        for (key, bands) in [
-            ("load_ranges", &self.load_ranges),
-            ("texture_ranges", &self.texture_ranges),
-        ] {
-            if let Some(l) = bands
-                && (l.len() != self.classes.len()
-                    || l.iter().any(|[a, b]| a.is_nan() || b.is_nan() || a > b))
-            {
-                return Err(Invalid::new(
-                    key,
-                    format!(
-                        "{key}: want one [low, high] pair per class ({}), low <= high",
-                        self.classes.len()
-                    ),
-                ));
-            }
-        }
-        if let Some(e) = &self.energy
-            && (e.len() != self.classes.len() || e.iter().flatten().any(|m| !m.is_valid()))
-        {
-            return Err(Invalid::new(
-                "energy",
-                format!(
-                    "want one return map (or null) per class ({}), finite, residual_s low <= high; fit it again with `presrs energy`",
-                    self.classes.len()
-                ),
-            ));
-        }
         if let Some(g) = &self.gaits
             && (g.contains(&0) || g.windows(2).any(|w| w[0] >= w[1]))
         {
@@ -144,12 +91,13 @@ impl Model {
                 ),
             ));
         }
-        if let Some(r) = self.unknown_rate
-            && !(0.0..=MAX_UNKNOWN_RATE).contains(&r)
+        if let Some(ms) = self.sample_ms
+            && !(1..=1000).contains(&ms)
         {
-            return Err(Invalid::new(
-                "unknown_rate",
-                format!("unknown_rate {r} is not a share in 0..={MAX_UNKNOWN_RATE}"),
+            return Err(Invalid::range(
+                "sample_ms",
+                ms,
+                "1..=1000 ms after touchdown",
             ));
         }
         if let Some(v) = self.normalize_load
@@ -191,46 +139,9 @@ impl Model {
                 "non-finite numbers in the PCA or samples",
             ));
         }
-        if let Some(nv) = &self.novelty {
-            nv.validate(self.classes.len())
-                .map_err(|e| Invalid::new("novelty", e.0))?;
-            let n_feat = self.pca_mean.len();
-            if n_feat == 0 || !nv.nuisance.len().is_multiple_of(n_feat) {
-                return Err(Invalid::new(
-                    "novelty",
-                    format!(
-                        "novelty.nuisance has {} values: not whole rows of {n_feat} features",
-                        nv.nuisance.len()
-                    ),
-                ));
-            }
-            if nv.nuisance.iter().any(|v| !v.is_finite()) {
-                return Err(Invalid::new(
-                    "novelty",
-                    "non-finite numbers in novelty.nuisance",
-                ));
-            }
-            if nv.reference.len() != nv.reference_classes.len() * self.h {
-                return Err(Invalid::new(
-                    "novelty",
-                    format!(
-                        "novelty.reference has {} values for {} images of h = {}",
-                        nv.reference.len(),
-                        nv.reference_classes.len(),
-                        self.h
-                    ),
-                ));
-            }
-            if let Some(i) = nv.calibration.pixels.iter().position(|p| p.len() != r * c) {
-                return Err(Invalid::new(
-                    "novelty",
-                    format!(
-                        "calibration image {i} has {} pixels, expected {r}x{c}",
-                        nv.calibration.pixels[i].len()
-                    ),
-                ));
-            }
-        }
+        self.unknown
+            .validate(self.classes.len(), n, self.h, r * c)
+            .map_err(|(key, msg)| Invalid::new(key, format!("{key}: {msg}")))?;
         if let Some(im) = &self.images {
             if im.pixels.len() != self.n_samples()
                 || im.n_train == 0

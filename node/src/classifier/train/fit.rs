@@ -16,6 +16,15 @@ pub enum TrainError {
         /// Images needed (`per_class`).
         need: usize,
     },
+    /// Every image of a class is blank: no stance's load, nothing to learn a terrain from.
+    #[error(
+        "every image of class `{class}` is blank (no load on any sensel): not a stance image; \
+         capture stances with the foot on the ground"
+    )]
+    NoLoad {
+        /// The class.
+        class: String,
+    },
     #[error(
         "--train {train} must be at least 1 and below --per-class {per_class} (the rest validate)"
     )]
@@ -61,11 +70,25 @@ pub enum TrainError {
 }
 
 /// One labelled image.
+#[derive(Clone, Copy)]
 pub struct Labelled<'a> {
     /// The image.
     pub image: &'a PressureImage,
     /// Its class index.
     pub class: usize,
+    /// The flights before and after its stance, µs, where known (the energy check's input).
+    pub flights: [Option<u32>; 2],
+}
+
+impl<'a> Labelled<'a> {
+    /// `image` of `class`, its flights not known.
+    pub fn new(image: &'a PressureImage, class: usize) -> Self {
+        Self {
+            image,
+            class,
+            flights: [None, None],
+        }
+    }
 }
 
 /// What was used for what, by index into the input.
@@ -77,6 +100,20 @@ pub struct Split {
     pub validation: Vec<usize>,
     /// Indices of the images left for testing.
     pub test: Vec<usize>,
+}
+
+/// The crop `spec` asks for: as given, or the footprint's of `images`
+/// ([`crate::training::footprint`]; none without a loaded image).
+pub fn resolve_crop<'a>(
+    spec: CropSpec,
+    images: impl IntoIterator<Item = &'a PressureImage>,
+) -> Crop {
+    match spec {
+        CropSpec::Fixed(c) => c,
+        CropSpec::Auto => crate::training::footprint::Footprint::of(images)
+            .map(|f| f.crop())
+            .unwrap_or_default(),
+    }
 }
 
 /// Crop, then keep every `downsample`-th row and column: the working image.
@@ -114,7 +151,7 @@ pub fn train_with_max_dims(
     train_variants(data, classes, o, true)
 }
 
-pub(super) fn train_variants(
+pub(crate) fn train_variants(
     data: &[Labelled<'_>],
     classes: &[ClassInfo],
     o: &TrainOptions,
@@ -142,6 +179,9 @@ pub(super) fn train_variants(
             });
         }
     }
+    // `auto`: the footprint of these images (a caller that trains several models of one set,
+    // as `TrainingSet::train_calibrated` does, measures it once on the whole set).
+    let crop = resolve_crop(o.crop, data.iter().map(|l| l.image));
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(o.seed);
     let mut split = Split::default();
     for (k, c) in classes.iter().enumerate() {
@@ -153,6 +193,14 @@ pub(super) fn train_variants(
                 need: o.per_class,
             });
         }
+        if idx
+            .iter()
+            .all(|&i| data[i].image.pixels.iter().all(|&p| p == 0))
+        {
+            return Err(TrainError::NoLoad {
+                class: c.name.clone(),
+            });
+        }
         idx.shuffle(&mut rng);
         split.train.extend_from_slice(&idx[..o.train]);
         split
@@ -161,11 +209,7 @@ pub(super) fn train_variants(
         split.test.extend_from_slice(&idx[o.per_class..]);
     }
     let prep = |i: usize| {
-        preprocess(data[i].image, &o.crop, o.downsample).ok_or(TrainError::Crop {
-            crop: o.crop,
-            rows,
-            cols,
-        })
+        preprocess(data[i].image, &crop, o.downsample).ok_or(TrainError::Crop { crop, rows, cols })
     };
     let tv: Vec<usize> = split
         .train
@@ -196,7 +240,7 @@ pub(super) fn train_variants(
         classes: classes.to_vec(),
         input_rows: rows,
         input_cols: cols,
-        crop: o.crop,
+        crop,
         downsample: o.downsample,
         normalize_load: None,
         n_fft: 0,
@@ -206,11 +250,6 @@ pub(super) fn train_variants(
         samples: Vec::new(),
         sample_classes: labels,
         kernel_width: 1.0,
-        unknown_threshold: f64::NEG_INFINITY,
-        unknown_rate: Some(o.unknown_rate),
-        unknown_thresholds: None,
-        load_ranges: None,
-        texture_ranges: None,
         train_hashes: hash(&split.train),
         val_hashes: hash(&split.validation),
         contact: Some(MinContact::of_training(&work)),
@@ -219,10 +258,12 @@ pub(super) fn train_variants(
             n_train: split.train.len(),
             pixels: work,
         }),
-        novelty: None,
-        energy: None,
         gaits: None,
-        unknown_choice: None,
+        sample_ms: None,
+        unknown: Checks {
+            rate: o.unknown_rate,
+            ..Checks::none(classes.len())
+        },
     };
     let (fitted, fitted_max) = fitted?;
     let max_model = (with_max && o.h.is_none()).then(|| {
@@ -241,7 +282,7 @@ pub(super) fn train_variants(
 
 /// What [`train`] adds to a fitted model: the checks `o` asks for and the novelty's
 /// calibration on the training run's unused images (`split.test`).
-pub(super) fn finish(
+pub(crate) fn finish(
     mut model: Model,
     data: &[Labelled<'_>],
     classes: &[ClassInfo],
@@ -258,31 +299,39 @@ pub(super) fn finish(
     // The paper's classifier had no rejection: a rate of 0 keeps the density rule, which
     // rejects almost nothing.
     if o.unknown_rate > 0.0 {
-        // The training run's images the model does not store, as many per class as fit in the
-        // file; with too few, the stored samples themselves, each left out in turn.
-        let mut per_class = vec![0usize; classes.len()];
-        let mut cal = Vec::new();
+        // The session itself in time blocks (`calibrate::cross_fit`): every stored image, and
+        // as many of the unused ones per class as fit in the file (the split's first), in
+        // recording order.
+        let mut keep: std::collections::BTreeSet<usize> = split
+            .train
+            .iter()
+            .chain(&split.validation)
+            .copied()
+            .collect();
+        let mut unused = vec![0usize; classes.len()];
         for &i in &split.test {
             let k = data[i].class;
-            if per_class[k] < MAX_CALIBRATION_PER_CLASS {
-                per_class[k] += 1;
-                cal.push((prep(i)?.pixels, k));
+            if unused[k] < MAX_CALIBRATION_PER_CLASS {
+                unused[k] += 1;
+                keep.insert(i);
             }
         }
-        let source = if per_class.iter().all(|&n| n >= MIN_SAME_RUN_PER_CLASS) {
-            CalibrationSource::SameRun
-        } else {
-            cal.clear();
-            CalibrationSource::LeaveOneOut
+        let cal: Vec<(Vec<u16>, usize)> = keep
+            .iter()
+            .map(|&i| Ok((prep(i)?.pixels, data[i].class)))
+            .collect::<Result<_, TrainError>>()?;
+        let margin = match o.unknown_checks {
+            UnknownChecks::Fixed(c) => c.margin,
+            UnknownChecks::Auto => Margin::ONE_SESSION,
         };
         let (pixels, cls): (Vec<_>, Vec<_>) = cal.into_iter().unzip();
         set_novelty(
             &mut model,
             pixels,
             cls,
-            source,
+            CalibrationSource::TimeBlocks,
             Vec::new(),
-            SAME_RUN_MARGIN,
+            margin.factor(),
             0,
             o.score(),
         );
@@ -291,7 +340,7 @@ pub(super) fn finish(
 }
 
 /// What [`fit`] computes: everything of a model that depends on the stored images.
-pub(super) struct Fitted {
+pub(crate) struct Fitted {
     normalize_load: Option<f64>,
     n_fft: usize,
     h: usize,
@@ -302,7 +351,7 @@ pub(super) struct Fitted {
 }
 
 impl Fitted {
-    pub(super) fn install(self, m: &mut Model) {
+    pub(crate) fn install(self, m: &mut Model) {
         m.normalize_load = self.normalize_load;
         m.n_fft = self.n_fft;
         m.h = self.h;
@@ -310,16 +359,14 @@ impl Fitted {
         m.pca_matrix = self.pca_matrix;
         m.samples = self.samples;
         m.kernel_width = self.kernel_width;
-        let (per_class, min) = unknown_thresholds(m);
-        m.unknown_threshold = min;
-        m.unknown_thresholds = Some(per_class);
+        m.unknown.density_thresholds = unknown_thresholds(m);
     }
 }
 
 /// Features, PCA, and the choice of h and kernel width on V, for working images `work` (T then
 /// V; the first `n_t` are T) with class `labels`; second, the model at the most dimensions
 /// (`Dims::Max`, with its own best kernel width), from the same SVD and the same search.
-pub(super) fn fit(
+pub(crate) fn fit(
     work: &[Vec<u16>],
     labels: &[usize],
     n_t: usize,
@@ -329,8 +376,10 @@ pub(super) fn fit(
 ) -> Result<(Fitted, Fitted), TrainError> {
     let n_px = work[0].len();
     let total = |p: &[u16]| p.iter().map(|&v| v as f64).sum::<f64>();
+    // The mean load of the loaded images (a blank one, no contact, is not scaled either).
+    let loaded: Vec<f64> = work.iter().map(|p| total(p)).filter(|&t| t > 0.0).collect();
     let normalize_load =
-        normalize.then(|| work.iter().map(|p| total(p)).sum::<f64>() / work.len() as f64);
+        (normalize && !loaded.is_empty()).then(|| loaded.iter().sum::<f64>() / loaded.len() as f64);
     let mut fx = FeatureExtractor::new(n_px);
     let n = fx.feature_len();
     let mut x = DMatrix::<f64>::zeros(work.len(), n);
@@ -439,7 +488,7 @@ pub(super) fn fit(
 
 /// The Parzen decision for one projected vector `q` against stored samples `t` (equal class
 /// priors, as in [`crate::classifier::Classifier`]): the best class and the log-posterior of class `truth`.
-pub(super) fn parzen(
+pub(crate) fn parzen(
     t: &[f32],
     labels: &[usize],
     q: &[f32],
@@ -478,7 +527,7 @@ pub(super) fn parzen(
 
 /// Squared Euclidean distance of two projected samples. (`d * d`, not `powi(2)`: this build
 /// called libgcc's `__powidf2` for it, half of `train`'s time; the same value.)
-pub(super) fn sq_dist(a: &[f32], b: &[f32]) -> f64 {
+pub(crate) fn sq_dist(a: &[f32], b: &[f32]) -> f64 {
     a.iter()
         .zip(b)
         .map(|(x, y)| {
@@ -489,7 +538,7 @@ pub(super) fn sq_dist(a: &[f32], b: &[f32]) -> f64 {
 }
 
 /// Median over stored samples of the distance to the nearest other sample.
-pub(super) fn median_nn_distance(p: &[f32], h: usize) -> f64 {
+pub(crate) fn median_nn_distance(p: &[f32], h: usize) -> f64 {
     let m = p.len() / h;
     let mut d: Vec<f64> = (0..m)
         .map(|i| {

@@ -3,33 +3,29 @@
 //! T and V; the kernel width chosen by the accuracy on V with T as the stored samples; then all
 //! of T and V are stored as the model's samples P.
 
-//! `fit` trains, `calibrate` sets the rejection from other images, `bands` adds the load and
-//! texture checks, `refit` follows a damaged sensor.
+//! `fit` trains, `refit` follows a damaged sensor; the unknown-ground checks a model carries
+//! are fitted in `crate::unknown` (`calibrate`: the thresholds, `bands`: the load and texture
+//! bands), re-exported here for the training pipeline.
 
 use nalgebra::DMatrix;
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
 
 use super::features::{FeatureExtractor, fft_len};
-use super::image::{Crop, PressureImage};
+use super::image::{Crop, CropSpec, PressureImage};
 use super::model::{
-    ClassInfo, MAX_CLASSES, MAX_DOWNSAMPLE, MAX_UNKNOWN_RATE, MODEL_VERSION, MinContact, Model,
-    StoredImages,
+    Checks, ClassInfo, MAX_CLASSES, MAX_DOWNSAMPLE, MAX_UNKNOWN_RATE, MODEL_VERSION, MinContact,
+    Model, StoredImages,
 };
-use crate::stats::{median, upper_quantile};
-use crate::unknown::novelty::{
-    Calibration, CalibrationSource, HELD_OUT_RATE_FACTOR, NOVELTY_K, NUISANCE_DIRECTIONS, Novelty,
-    NoveltyScore, SAME_RUN_MARGIN, SHRINK_IMAGES,
-};
+use crate::unknown::novelty::CalibrationSource;
 
 pub use super::options::{DEFAULT_UNKNOWN_RATE, TrainOptions};
+use super::options::{Margin, UnknownChecks};
 
-mod bands;
-mod calibrate;
 mod fit;
 mod refit;
 
-pub use bands::*;
-pub use calibrate::*;
+pub use crate::unknown::bands::*;
+pub use crate::unknown::calibrate::*;
 pub use fit::*;
 pub use refit::*;

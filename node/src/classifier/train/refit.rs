@@ -46,7 +46,8 @@ pub fn refit(model: &Model, dead_rows: &[bool], dead_cols: &[bool]) -> Result<Mo
     let mut m = model.clone();
     // At the dimensions the model was chosen with.
     let max_dims = model
-        .unknown_choice
+        .unknown
+        .choice
         .as_ref()
         .and_then(|c| c.chosen.parse::<crate::classifier::options::UnknownChecks>().ok())
         .is_some_and(|c| {
@@ -58,15 +59,11 @@ pub fn refit(model: &Model, dead_rows: &[bool], dead_cols: &[bool]) -> Result<Mo
     // The texture ranges were drawn on a whole sensor: filled lines are smoother and dead ones
     // edged, and the stored images alone are too few to draw them again. A refitted model
     // goes without the check rather than call a damaged sensor's known steps unknown.
-    if m.texture_ranges.take().is_some() {
+    if m.unknown.texture_bands.take().is_some() {
         tracing::info!("refit to dead lines: the texture check is off for this model");
     }
-    if m.load_ranges.is_some() {
-        m.load_ranges = Some(load_ranges(
-            &work,
-            &m.sample_classes,
-            m.unknown_rate.unwrap_or(0.0),
-        ));
+    if m.unknown.load_bands.is_some() {
+        m.unknown.load_bands = Some(load_ranges(&work, &m.sample_classes, m.unknown.rate));
     }
     m.images = Some(StoredImages {
         n_train: images.n_train,
@@ -75,7 +72,7 @@ pub fn refit(model: &Model, dead_rows: &[bool], dead_cols: &[bool]) -> Result<Mo
     // The novelty is calibrated again, on the same calibration images with the same lines dead
     // (the new PCA and samples move every distance), then the undamaged images are put back:
     // a later refit starts from them again.
-    if let Some(nv) = model.novelty.clone() {
+    if let Some(nv) = model.unknown.novelty.clone() {
         let c = nv.calibration;
         let damaged: Vec<Vec<u16>> = c.pixels.iter().map(damage).collect();
         set_novelty(
@@ -88,7 +85,7 @@ pub fn refit(model: &Model, dead_rows: &[bool], dead_cols: &[bool]) -> Result<Mo
             c.held_out_images,
             nv.score,
         );
-        if let Some(n) = m.novelty.as_mut() {
+        if let Some(n) = m.unknown.novelty.as_mut() {
             n.calibration.pixels = c.pixels;
             n.calibration.classes = c.classes;
         }

@@ -20,7 +20,7 @@
 use std::fmt;
 
 use crate::classifier::options::TrainOptions;
-use crate::classifier::options::{Candidate, Dims, UnknownChecks};
+use crate::classifier::options::{Candidate, Dims, Margin, UnknownChecks};
 use crate::classifier::texture::roughness;
 use crate::classifier::train::{
     CalibrateError, Labelled, TrainError, add_load_check_on, add_texture_check, calibrate_on_runs,
@@ -36,7 +36,7 @@ mod table;
 
 use pick::pick;
 pub use pick::{BUDGET_FACTOR, CHECK_COST, FALLBACK_SLACK, NEAR, tie};
-pub use table::{Choice, JudgedOn, MIN_CALIBRATION_IMAGES, Outcome};
+pub use table::{Choice, EnergyAlone, JudgedOn, MIN_CALIBRATION_IMAGES, Outcome};
 
 /// Why the choice could not be measured.
 #[derive(Debug, thiserror::Error)]
@@ -52,6 +52,8 @@ pub enum ChoiceError {
 /// One judged image: known ground or the left-out terrain.
 struct Judged {
     novel: bool,
+    /// The stance's flights before and after, s, where known (the energy check's input).
+    flights: Option<(f64, f64)>,
     /// `None`: no contact (unknown under every candidate).
     measured: Option<Measured>,
     roughness: f64,
@@ -62,7 +64,7 @@ struct Judged {
 /// the next one here (measured: the texture band of one run on the simulator's hopping
 /// stances, kept by a choice judged on that run, called 10.4% of the next run on another sensor
 /// unknown, against 2.1% without it).
-fn grid(opts: &TrainOptions, one_run: bool) -> Vec<Candidate> {
+fn grid(opts: &TrainOptions, one_run: bool, energy_ok: bool) -> Vec<Candidate> {
     let both = [false, true];
     let pinned = |on: bool| if on { &both[1..] } else { &both[..] };
     let band = |on: bool| {
@@ -77,19 +79,33 @@ fn grid(opts: &TrainOptions, one_run: bool) -> Vec<Candidate> {
     } else {
         &[Dims::Accuracy, Dims::Max]
     };
+    // With one session, how far past its own time blocks' thresholds the next session may lie
+    // is weighed too; another session measures it.
+    let margins: &[Margin] = if one_run {
+        &Margin::ONE_SESSION_GRID
+    } else {
+        &[Margin::ONE_SESSION]
+    };
+    let energies: &[bool] = if energy_ok { &both } else { &both[..1] };
     let mut out = Vec::new();
     for &normalize_load in pinned(opts.normalize_load) {
         for &d in dims {
             for score in [NoveltyScore::KnnResidual, NoveltyScore::Knn] {
                 for &load in band(opts.check_load) {
                     for &texture in band(opts.check_texture) {
-                        out.push(Candidate {
-                            score,
-                            normalize_load,
-                            dims: d,
-                            load,
-                            texture,
-                        });
+                        for &energy in energies {
+                            for &margin in margins {
+                                out.push(Candidate {
+                                    score,
+                                    normalize_load,
+                                    dims: d,
+                                    load,
+                                    texture,
+                                    energy,
+                                    margin,
+                                });
+                            }
+                        }
                     }
                 }
             }
@@ -133,6 +149,9 @@ pub fn choose(
         why: Some(why.to_string()),
         classes: names.clone(),
         thin: thin.clone(),
+        nn_auroc: None,
+        energy_note: None,
+        energy_alone: None,
     };
     let pins = Candidate {
         normalize_load: opts.normalize_load,
@@ -153,14 +172,23 @@ pub fn choose(
              flags' checks as given",
         ));
     }
-    let grid = grid(opts, calibration.is_empty());
+    let energy = energy_support(training, calibration, classes.len());
+    let grid = grid(opts, calibration.is_empty(), energy.is_ok());
     let n_classes = classes.len();
+    // One session: its last time block is the known ground judged (a model fitted on the
+    // earlier blocks meets it as it would the next session), the rest trains.
+    let (training, later) = if calibration.is_empty() {
+        split_in_time(training, n_classes)
+    } else {
+        (training.to_vec(), Vec::new())
+    };
+    let (training, later) = (training.as_slice(), later.as_slice());
     // The folds are independent: on the machine's cores, merged in their order, so that the
     // figures do not depend on how many cores there are.
     let threads = std::thread::available_parallelism()
         .map_or(1, |n| n.get())
         .min(n_classes);
-    let mut tallies: Vec<Option<Result<Vec<Tally>, ChoiceError>>> = Vec::new();
+    let mut tallies: Vec<Option<Result<FoldTally, ChoiceError>>> = Vec::new();
     tallies.resize_with(n_classes, || None);
     std::thread::scope(|scope| {
         let handles: Vec<_> = (0..threads)
@@ -169,7 +197,10 @@ pub fn choose(
                 scope.spawn(move || {
                     (t..n_classes)
                         .step_by(threads)
-                        .map(|k| (k, fold(k, training, calibration, classes, opts, grid)))
+                        .map(|k| {
+                            let f = fold(k, training, calibration, later, classes, opts, grid);
+                            (k, f)
+                        })
                         .collect::<Vec<_>>()
                 })
             })
@@ -185,9 +216,16 @@ pub fn choose(
     let mut found = vec![vec![f64::NAN; n_classes]; grid.len()];
     let mut known = vec![[0usize; 2]; grid.len()];
     let mut aurocs = vec![Vec::new(); grid.len()];
+    let mut nn = Vec::new();
+    let (mut alone_found, mut alone_known) = (Vec::new(), [0usize; 2]);
     for (out_k, t) in tallies.into_iter().enumerate() {
         let Some(t) = t else { continue };
-        for (ci, t) in t?.into_iter().enumerate() {
+        let (t, fold_nn, alone) = t?;
+        nn.extend(fold_nn);
+        alone_found.extend(alone.found);
+        alone_known[0] += alone.known[0];
+        alone_known[1] += alone.known[1];
+        for (ci, t) in t.into_iter().enumerate() {
             if let Some(f) = t.found {
                 found[ci][out_k] = f;
             }
@@ -216,7 +254,27 @@ pub fn choose(
             known_judged: known[i][0],
         })
         .collect();
-    let chosen = pick(&outcomes, budget);
+    let mut chosen = pick(&outcomes, budget);
+    let alone = EnergyAlone {
+        found: mean(&alone_found),
+        known: alone_known,
+    };
+    // The energy check beside the kept image checks, when it finds left-out ground at next to
+    // no cost on known ground (`pick::energy_pays`): what it finds, the image checks missed.
+    if let Some(i) = chosen
+        && !outcomes[i].candidate.energy
+        && pick::energy_pays(&alone, opts.unknown_rate)
+        && let Some(j) = outcomes.iter().position(|o| {
+            o.candidate
+                == Candidate {
+                    energy: true,
+                    ..outcomes[i].candidate
+                }
+        })
+        && outcomes[j].known_unknown <= budget + 1e-12
+    {
+        chosen = Some(j);
+    }
     Ok(Choice {
         candidate: chosen.map_or(pins, |i| outcomes[i].candidate),
         chosen,
@@ -226,6 +284,9 @@ pub fn choose(
         why: None,
         classes: names,
         thin,
+        nn_auroc: Some(mean(&nn)).filter(|v| v.is_finite()),
+        energy_note: energy.err(),
+        energy_alone: Some(alone),
     })
 }
 
@@ -240,87 +301,201 @@ struct Tally {
     auroc: Option<f64>,
 }
 
-/// One fold: terrain `out_k` left out; per candidate of `grid`, its tally.
+/// Whether the sessions' flights can carry the energy check, or why not in words: every
+/// terrain needs [`crate::unknown::energy::MIN_STANCES`] stances with both flights heard, and
+/// the flights after them must vary (a hop's flight that never changes, as a robot standing or a
+/// generated stream's, says nothing of the ground).
+pub fn energy_support(
+    training: &[Labelled<'_>],
+    calibration: &[Labelled<'_>],
+    n_classes: usize,
+) -> Result<(), String> {
+    use crate::unknown::energy::MIN_STANCES;
+    let mut per = vec![Vec::new(); n_classes];
+    for l in training.iter().chain(calibration) {
+        if let (Some(v), Some((_, after))) = (per.get_mut(l.class), flights_s(l)) {
+            v.push(after);
+        }
+    }
+    let total: usize = per.iter().map(Vec::len).sum();
+    if total == 0 {
+        return Err(
+            "no stance with both flights in the sessions' manifests (captured before the \
+             flights were kept, or from a bus whose foot switch was not heard): capture again \
+             with this build"
+                .into(),
+        );
+    }
+    if let Some(k) = per.iter().position(|v| v.len() < MIN_STANCES) {
+        return Err(format!(
+            "a terrain has {} stances with both flights, fewer than the {MIN_STANCES} a return \
+             map needs (class {k}): capture more steps per terrain",
+            per[k].len()
+        ));
+    }
+    let all: Vec<f64> = per.into_iter().flatten().collect();
+    let (lo, hi) = all
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    // The foot switch reports at 100 Hz: flights within one report of each other are one.
+    if hi - lo < 0.01 {
+        return Err(format!(
+            "every flight after a stance lasts {:.0}-{:.0} ms: flights that do not vary say \
+             nothing of the ground",
+            lo * 1e3,
+            hi * 1e3
+        ));
+    }
+    Ok(())
+}
+
+/// One session's images cut in time: per class, all but its last time block
+/// (`classifier::train::time_blocks`), and the last block.
+fn split_in_time<'a>(
+    training: &[Labelled<'a>],
+    n_classes: usize,
+) -> (Vec<Labelled<'a>>, Vec<Labelled<'a>>) {
+    let classes: Vec<usize> = training.iter().map(|l| l.class).collect();
+    let blocks = crate::classifier::train::time_blocks(&classes, n_classes);
+    let last = (crate::classifier::train::TIME_BLOCKS - 1) as u8;
+    let (early, late): (Vec<_>, Vec<_>) =
+        training.iter().zip(&blocks).partition(|(_, b)| **b < last);
+    (
+        early.into_iter().map(|(l, _)| *l).collect(),
+        late.into_iter().map(|(l, _)| *l).collect(),
+    )
+}
+
+/// `opts` for a fold's training images of `counts` per class: the paper's split at the same
+/// share where a class has fewer images than `--per-class` (one session, cut in time).
+fn fold_options(opts: &TrainOptions, counts: &[usize]) -> TrainOptions {
+    let mut o = opts.clone();
+    let least = counts.iter().copied().min().unwrap_or(0);
+    if least < o.per_class && least >= 2 {
+        let train = (least * o.train / o.per_class.max(1)).clamp(1, least - 1);
+        (o.per_class, o.train) = (least, train);
+    }
+    o
+}
+
+/// What one fold measured: per candidate its tally, the plain nearest neighbour's AUROC, and
+/// the energy check's on its own (each stance's flights against its texture class's map).
+type FoldTally = (Vec<Tally>, Option<f64>, Tally);
+
+/// A judged image with its stance's flights (seconds, both plausible hops), where known.
+type WithFlights<'a> = (&'a PressureImage, Option<(f64, f64)>);
+
+/// One labelled image's flights, as the energy check judges them: both plausible hops.
+fn flights_s(l: &Labelled<'_>) -> Option<(f64, f64)> {
+    crate::unknown::energy::plausible_flights_s(l.flights)
+}
+
+/// The images one fold sees, terrain `out_k` left out (classes renumbered without it).
+struct FoldSets<'a> {
+    classes: Vec<ClassInfo>,
+    /// The fold model's training images.
+    train: Vec<Labelled<'a>>,
+    /// The calibration run's known images: `cal_a` calibrates, `cal_b` is judged.
+    cal_a: Vec<(&'a PressureImage, usize)>,
+    cal_b: Vec<WithFlights<'a>>,
+    /// With one session: its later known images, judged.
+    later: Vec<WithFlights<'a>>,
+    /// The left-out terrain's images, from every run.
+    novel: Vec<WithFlights<'a>>,
+    /// Known stances (class, flight before, flight after) the energy maps are fitted on.
+    stances: Vec<(usize, f64, f64)>,
+}
+
+impl<'a> FoldSets<'a> {
+    fn new(
+        out_k: usize,
+        training: &[Labelled<'a>],
+        calibration: &[Labelled<'a>],
+        later: &[Labelled<'a>],
+        classes: &[ClassInfo],
+    ) -> Self {
+        let keep: Vec<usize> = (0..classes.len()).filter(|&k| k != out_k).collect();
+        let relabel = |k: usize| keep.iter().position(|&c| c == k);
+        let train: Vec<Labelled<'a>> = training
+            .iter()
+            .filter_map(|l| relabel(l.class).map(|class| Labelled { class, ..*l }))
+            .collect();
+        // The calibration run's known images alternate per terrain: A calibrates, B is judged.
+        let (mut cal_a, mut cal_b) = (Vec::new(), Vec::new());
+        let mut seen = vec![0usize; classes.len()];
+        let mut stances: Vec<(usize, f64, f64)> = train
+            .iter()
+            .filter_map(|l| flights_s(l).map(|(b, a)| (l.class, b, a)))
+            .collect();
+        for l in calibration {
+            if let Some(k) = relabel(l.class) {
+                seen[l.class] += 1;
+                if seen[l.class] % 2 == 1 {
+                    cal_a.push((l.image, k));
+                    stances.extend(flights_s(l).map(|(b, a)| (k, b, a)));
+                } else {
+                    cal_b.push((l.image, flights_s(l)));
+                }
+            }
+        }
+        let novel = training
+            .iter()
+            .chain(calibration)
+            .chain(later)
+            .filter(|l| l.class == out_k)
+            .map(|l| (l.image, flights_s(l)))
+            .collect();
+        let later = later
+            .iter()
+            .filter(|l| l.class != out_k)
+            .map(|l| (l.image, flights_s(l)))
+            .collect();
+        Self {
+            classes: keep.iter().map(|&k| classes[k].clone()).collect(),
+            train,
+            cal_a,
+            cal_b,
+            later,
+            novel,
+            stances,
+        }
+    }
+
+    /// The known images judged: half the calibration run; else the session's later images;
+    /// else the training images the model does not store (`test`).
+    fn judged_known(&self, test: &[usize]) -> Vec<WithFlights<'a>> {
+        if !self.cal_a.is_empty() {
+            self.cal_b.clone()
+        } else if !self.later.is_empty() {
+            self.later.clone()
+        } else {
+            test.iter()
+                .map(|&i| (self.train[i].image, flights_s(&self.train[i])))
+                .collect()
+        }
+    }
+}
+
+/// One fold: terrain `out_k` left out; per candidate of `grid`, its tally. `later`, with no
+/// calibration run: the session's later images, judged as known ground.
 fn fold(
     out_k: usize,
     training: &[Labelled<'_>],
     calibration: &[Labelled<'_>],
+    later: &[Labelled<'_>],
     classes: &[ClassInfo],
     opts: &TrainOptions,
     grid: &[Candidate],
-) -> Result<Vec<Tally>, ChoiceError> {
-    let n_classes = classes.len();
+) -> Result<FoldTally, ChoiceError> {
+    let sets = FoldSets::new(out_k, training, calibration, later, classes);
+    let fits = fold_models(&sets, opts, grid)?;
+    let maps = crate::unknown::energy::fit(&sets.stances, sets.classes.len(), opts.unknown_rate);
     let mut tally = vec![Tally::default(); grid.len()];
-    let keep: Vec<usize> = (0..n_classes).filter(|&k| k != out_k).collect();
-    let relabel = |k: usize| keep.iter().position(|&c| c == k);
-    let fold_classes: Vec<ClassInfo> = keep.iter().map(|&k| classes[k].clone()).collect();
-    let train_k: Vec<Labelled<'_>> = training
-        .iter()
-        .filter_map(|l| {
-            relabel(l.class).map(|class| Labelled {
-                image: l.image,
-                class,
-            })
-        })
-        .collect();
-    // The calibration run's known images alternate per terrain: A calibrates, B is judged.
-    let (mut cal_a, mut cal_b) = (Vec::new(), Vec::new());
-    let mut seen = vec![0usize; n_classes];
-    for l in calibration {
-        if let Some(k) = relabel(l.class) {
-            seen[l.class] += 1;
-            let side = if seen[l.class] % 2 == 1 {
-                &mut cal_a
-            } else {
-                &mut cal_b
-            };
-            side.push((l.image, fold_classes[k].name.as_str(), k));
-        }
-    }
-    let novel: Vec<&PressureImage> = training
-        .iter()
-        .chain(calibration)
-        .filter(|l| l.class == out_k)
-        .map(|l| l.image)
-        .collect();
-    // The load and texture bands over the images the fold's model may meet as known.
-    let band_images: Vec<(&PressureImage, usize)> = train_k
-        .iter()
-        .map(|l| (l.image, l.class))
-        .chain(cal_a.iter().map(|&(img, _, k)| (img, k)))
-        .collect();
-    let mut fits: Vec<((bool, Dims), Model, Vec<&PressureImage>)> = Vec::new();
-    let mut norms: Vec<bool> = grid.iter().map(|c| c.normalize_load).collect();
-    norms.dedup();
-    let want_max = grid.iter().any(|c| c.dims == Dims::Max);
-    for normalize_load in norms {
-        let mut o = opts.clone();
-        o.normalize_load = normalize_load;
-        o.check_load = false;
-        o.check_texture = false;
-        o.unknown_checks = UnknownChecks::Fixed(Candidate::PLAIN);
-        // Both dimension choices from one PCA.
-        let (by_accuracy, most, split) = train_with_max_dims(&train_k, &fold_classes, &o)?;
-        let judged_known: Vec<&PressureImage> = if cal_a.is_empty() {
-            split.test.iter().map(|&i| train_k[i].image).collect()
-        } else {
-            cal_b.iter().map(|&(img, _, _)| img).collect()
-        };
-        let variants = [(Dims::Accuracy, Some(by_accuracy)), (Dims::Max, most)];
-        for (dims, m) in variants {
-            let Some(mut m) = m.filter(|_| dims == Dims::Accuracy || want_max) else {
-                continue;
-            };
-            if !cal_a.is_empty() {
-                let imgs: Vec<(&PressureImage, &str)> =
-                    cal_a.iter().map(|&(img, n, _)| (img, n)).collect();
-                calibrate_on_runs(&mut m, &imgs, &["calibration run, half".to_string()])?;
-            }
-            add_load_check_on(&mut m, band_images.iter().copied());
-            add_texture_check(&mut m, band_images.iter().copied());
-            fits.push(((normalize_load, dims), m, judged_known.clone()));
-        }
-    }
+    let mut nn_auroc = None;
+    let mut energy_alone = Tally::default();
+    let one_session = !sets.later.is_empty();
     for (key, base, judged_known) in &fits {
         for score in [NoveltyScore::KnnResidual, NoveltyScore::Knn] {
             let of_this = |c: &Candidate| (c.normalize_load, c.dims) == *key && c.score == score;
@@ -331,9 +506,20 @@ fn fold(
             if score != NoveltyScore::KnnResidual {
                 rescore(&mut m, score);
             }
+            // The nearest neighbour and the energy check alone, once per fold: on the first
+            // (plain) model's classes.
+            let first = nn_auroc.is_none();
+            if first {
+                nn_auroc = Some(nearest_neighbour_auroc(
+                    m.clone(),
+                    judged_known,
+                    &sets.novel,
+                ));
+            }
             // The bands are held here, per candidate; the classifier judges the novelty.
-            let (load_bands, texture_bands) = (m.load_ranges.take(), m.texture_ranges.take());
-            let judged = judge(m, judged_known, &novel);
+            let (load_bands, texture_bands) =
+                (m.unknown.load_bands.take(), m.unknown.texture_bands.take());
+            let judged = judge(m, judged_known, &sets.novel);
             let ratio = |j: &Judged| {
                 j.measured
                     .map_or(f64::INFINITY, |x| x.novelty / x.threshold.abs().max(1e-12))
@@ -341,45 +527,153 @@ fn fold(
             let neg: Vec<f64> = judged.iter().filter(|j| !j.novel).map(ratio).collect();
             let pos: Vec<f64> = judged.iter().filter(|j| j.novel).map(ratio).collect();
             let a = auroc(&neg, &pos);
+            if first {
+                energy_alone = tally_of(&judged, Bands::default(), f64::INFINITY, Some(&maps));
+            }
             for (ci, c) in grid.iter().enumerate().filter(|(_, c)| of_this(c)) {
                 let bands = Bands {
                     load: load_bands.as_deref().filter(|_| c.load),
                     texture: texture_bands.as_deref().filter(|_| c.texture),
                 };
-                let (mut n_novel, mut novel_unknown) = (0usize, 0usize);
-                for j in &judged {
-                    let is_unknown = j
-                        .measured
-                        .is_none_or(|x| unknown::image_verdict(x, bands, || j.roughness).is_some());
-                    if j.novel {
-                        n_novel += 1;
-                        novel_unknown += is_unknown as usize;
-                    } else {
-                        tally[ci].known[0] += 1;
-                        tally[ci].known[1] += is_unknown as usize;
-                    }
-                }
-                if n_novel > 0 {
-                    tally[ci].found = Some(novel_unknown as f64 / n_novel as f64);
-                }
+                // One session: the candidate's factor on its own thresholds.
+                let margin = if one_session { c.margin.factor() } else { 1.0 };
+                let energy = c.energy.then_some(maps.as_slice());
+                tally[ci] = tally_of(&judged, bands, margin, energy);
                 if a.is_finite() {
                     tally[ci].auroc = Some(a);
                 }
             }
         }
     }
-    Ok(tally)
+    Ok((tally, nn_auroc.filter(|v| v.is_finite()), energy_alone))
+}
+
+/// The fold's models, one per load normalisation and dimension choice of `grid` (calibrated
+/// on half the calibration run when there is one; with the load and texture bands, held apart
+/// per candidate), each with the known images it is judged on.
+type FoldModel<'a> = ((bool, Dims), Model, Vec<WithFlights<'a>>);
+
+fn fold_models<'a>(
+    sets: &FoldSets<'a>,
+    opts: &TrainOptions,
+    grid: &[Candidate],
+) -> Result<Vec<FoldModel<'a>>, ChoiceError> {
+    let mut counts = vec![0usize; sets.classes.len()];
+    for l in &sets.train {
+        counts[l.class] += 1;
+    }
+    let opts = &fold_options(opts, &counts);
+    // The load and texture bands over the images the fold's model may meet as known.
+    let band_images: Vec<(&PressureImage, usize)> = sets
+        .train
+        .iter()
+        .map(|l| (l.image, l.class))
+        .chain(sets.cal_a.iter().copied())
+        .collect();
+    let mut fits = Vec::new();
+    let mut norms: Vec<bool> = grid.iter().map(|c| c.normalize_load).collect();
+    norms.dedup();
+    let want_max = grid.iter().any(|c| c.dims == Dims::Max);
+    for normalize_load in norms {
+        let mut o = opts.clone();
+        o.normalize_load = normalize_load;
+        o.check_load = false;
+        o.check_texture = false;
+        // Thresholds as the time blocks set them: each candidate's margin is applied later.
+        o.unknown_checks = UnknownChecks::Fixed(Candidate {
+            margin: Margin::MEASURED,
+            ..Candidate::PLAIN
+        });
+        // Both dimension choices from one PCA.
+        let (by_accuracy, most, split) = train_with_max_dims(&sets.train, &sets.classes, &o)?;
+        let judged_known = sets.judged_known(&split.test);
+        for (dims, m) in [(Dims::Accuracy, Some(by_accuracy)), (Dims::Max, most)] {
+            let Some(mut m) = m.filter(|_| dims == Dims::Accuracy || want_max) else {
+                continue;
+            };
+            if !sets.cal_a.is_empty() {
+                let imgs: Vec<(&PressureImage, &str)> = sets
+                    .cal_a
+                    .iter()
+                    .map(|&(img, k)| (img, sets.classes[k].name.as_str()))
+                    .collect();
+                calibrate_on_runs(&mut m, &imgs, &["calibration run, half".to_string()])?;
+            }
+            add_load_check_on(&mut m, band_images.iter().copied());
+            add_texture_check(&mut m, band_images.iter().copied());
+            fits.push(((normalize_load, dims), m, judged_known.clone()));
+        }
+    }
+    Ok(fits)
+}
+
+/// One candidate's tally over `judged`: the share of the left-out terrain called unknown and
+/// the known images called unknown, by the image's checks at `margin` on the novelty's
+/// thresholds, and by the energy check with `maps` (each stance's own flights against its best
+/// class's map).
+fn tally_of(
+    judged: &[Judged],
+    bands: Bands<'_>,
+    margin: f64,
+    maps: Option<&[Option<crate::unknown::energy::ReturnMap>]>,
+) -> Tally {
+    let mut t = Tally::default();
+    let (mut n_novel, mut novel_unknown) = (0usize, 0usize);
+    for j in judged {
+        let is_unknown = j.measured.is_none_or(|mut x| {
+            x.threshold *= margin;
+            let energy = maps.is_some_and(|maps| {
+                j.flights.is_some_and(|(b, a)| {
+                    maps.get(x.best)
+                        .copied()
+                        .flatten()
+                        .is_some_and(|m| !m.passes(b, a))
+                })
+            });
+            let image = unknown::image_verdict(x, bands, || j.roughness);
+            unknown::step_verdict(image, energy).is_some()
+        });
+        if j.novel {
+            n_novel += 1;
+            novel_unknown += is_unknown as usize;
+        } else {
+            t.known[0] += 1;
+            t.known[1] += is_unknown as usize;
+        }
+    }
+    if n_novel > 0 {
+        t.found = Some(novel_unknown as f64 / n_novel as f64);
+    }
+    t
+}
+
+/// The AUROC of the plain nearest-neighbour distance in `model`'s PCA space, `novel` against
+/// `known` (an image without contact the most novel).
+fn nearest_neighbour_auroc(
+    model: Model,
+    known: &[WithFlights<'_>],
+    novel: &[WithFlights<'_>],
+) -> f64 {
+    let mut cls = Classifier::new(model);
+    let mut dist = |img: &PressureImage| match cls.classify(&img.pixels, img.rows, img.cols, false)
+    {
+        Ok(d) if d.contact => cls.nearest_sample_distance(),
+        _ => f64::INFINITY,
+    };
+    let neg: Vec<f64> = known.iter().map(|(i, _)| dist(i)).collect();
+    let pos: Vec<f64> = novel.iter().map(|(i, _)| dist(i)).collect();
+    auroc(&neg, &pos)
 }
 
 /// Classifies `known` and `novel` with `model` and keeps what the verdict needs.
-fn judge(model: Model, known: &[&PressureImage], novel: &[&PressureImage]) -> Vec<Judged> {
+fn judge(model: Model, known: &[WithFlights<'_>], novel: &[WithFlights<'_>]) -> Vec<Judged> {
     let (crop, down) = (model.crop, model.downsample);
     let mut cls = Classifier::new(model);
     let mut out = Vec::with_capacity(known.len() + novel.len());
-    for (img, is_novel) in known
+    for (&(img, flights), is_novel) in known
         .iter()
-        .map(|i| (*i, false))
-        .chain(novel.iter().map(|i| (*i, true)))
+        .map(|i| (i, false))
+        .chain(novel.iter().map(|i| (i, true)))
     {
         let d = cls.classify(&img.pixels, img.rows, img.cols, false);
         let work = preprocess(img, &crop, down);
@@ -398,6 +692,7 @@ fn judge(model: Model, known: &[&PressureImage], novel: &[&PressureImage]) -> Ve
                 load,
             }),
             roughness: rough,
+            flights,
         });
     }
     out
@@ -435,10 +730,7 @@ mod tests {
 
     fn labelled(v: &[(PressureImage, usize)]) -> Vec<Labelled<'_>> {
         v.iter()
-            .map(|(image, class)| Labelled {
-                image,
-                class: *class,
-            })
+            .map(|(image, class)| Labelled::new(image, *class))
             .collect()
     }
 
@@ -455,7 +747,7 @@ mod tests {
 
     fn opts() -> TrainOptions {
         TrainOptions {
-            crop: "1,1,1,1".parse::<Crop>().unwrap(),
+            crop: "1,1,1,1".parse::<Crop>().unwrap().into(),
             ..TrainOptions::default()
         }
     }
@@ -527,8 +819,9 @@ mod tests {
                 .iter()
                 .all(|o| o.candidate.extra_checks() == 0)
         );
-        assert_eq!(choice.outcomes.len(), 8);
-        assert!(choice.to_string().contains("one run only"), "{choice}");
+        // The 8 candidates without a band, each at the 4 margins one session chooses among.
+        assert_eq!(choice.outcomes.len(), 8 * Margin::ONE_SESSION_GRID.len());
+        assert!(choice.to_string().contains("one session only"), "{choice}");
         // A pinned band is kept even so: the flag is the lab's word.
         let pinned = TrainOptions {
             check_texture: true,

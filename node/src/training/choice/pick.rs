@@ -24,9 +24,23 @@ pub const NEAR: f64 = 0.05;
 /// n)` at their mean share `p` (at least one image), not a fixed share: unknown-choice.md,
 /// "Kept (seventh stop)".
 pub fn tie(x: f64, y: f64, n: usize) -> bool {
-    let n = n.max(1) as f64;
+    // With fewer than two judged images nothing tells two shares apart.
+    if n < 2 || !(x.is_finite() && y.is_finite()) {
+        return true;
+    }
+    let n = n as f64;
     let p = ((x + y) / 2.0).clamp(1.0 / n, 1.0 - 1.0 / n);
     (x - y).abs() <= (2.0 * p * (1.0 - p) / n).sqrt()
+}
+
+/// Whether the energy check earns its place beside the kept image checks: it finds some of
+/// the left-out ground on its own and calls at most `rate` of the known stances unknown (what
+/// one check may cost), and finds more than it costs. A return map fitted on two sessions
+/// judges the hop, not the image, so it finds ground the image checks pass (sand that looks
+/// like clay) where the left-out terrains rarely show it: docs/decisions/unknown-energy-train.md.
+pub fn energy_pays(e: &super::EnergyAlone, rate: f64) -> bool {
+    let known = e.known[1] as f64 / e.known[0].max(1) as f64;
+    e.known[0] > 0 && e.found.is_finite() && e.found > 0.0 && known <= rate && e.found > known
 }
 
 /// With no candidate within the budget, those within this of the fewest known images called
@@ -169,6 +183,9 @@ mod tests {
             why: None,
             classes: vec![],
             thin: vec![],
+            nn_auroc: None,
+            energy_note: None,
+            energy_alone: None,
         };
         let text = c.to_string();
         assert!(

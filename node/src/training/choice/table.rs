@@ -49,6 +49,24 @@ pub struct Choice {
     /// Terrains of the model with fewer than [`MIN_CALIBRATION_IMAGES`] images in the
     /// calibration run (with their count): too few to judge them as known ground, said by name.
     pub thin: Vec<(String, usize)>,
+    /// The plain nearest neighbour's AUROC on the same judged images (the distance in the
+    /// plain model's PCA space to the nearest stored sample): the scale the candidates' figures
+    /// are read against; `None` when nothing was measured.
+    pub nn_auroc: Option<f64>,
+    /// Why the energy check was not weighed (`None`: it was, or nothing was measured).
+    pub energy_note: Option<String>,
+    /// What the energy check finds on its own, where it was weighed.
+    pub energy_alone: Option<EnergyAlone>,
+}
+
+/// The energy check on its own over the folds: each stance's flights held against the map of
+/// the class its texture gave it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EnergyAlone {
+    /// The share of the left-out terrains' stances it calls unknown (mean over the folds).
+    pub found: f64,
+    /// Known stances judged, and of them called unknown.
+    pub known: [usize; 2],
 }
 
 /// Fewest images of a terrain in the calibration run for the choice to judge it as known ground
@@ -74,16 +92,139 @@ impl Choice {
             table: self
                 .outcomes
                 .iter()
-                .map(|o| (o.candidate.to_string(), o.auroc, o.found, o.known_unknown))
+                .map(|o| {
+                    let f = |v: f64| v.is_finite().then_some(v);
+                    (
+                        o.candidate.to_string(),
+                        f(o.auroc),
+                        f(o.found),
+                        f(o.known_unknown),
+                    )
+                })
                 .collect(),
         }
     }
 }
 
-/// The table `train` prints: each candidate's figures, the kept one marked, and how it was
-/// judged.
+impl Choice {
+    /// The candidate with at most one part changed from [`Candidate::PLAIN`] (its margin
+    /// aside) that scores the largest AUROC: what a user who sets one flag gets at best.
+    pub fn best_single_option(&self) -> Option<usize> {
+        let changed = |c: &Candidate| {
+            let p = Candidate::PLAIN;
+            (c.score != p.score) as usize
+                + (c.normalize_load != p.normalize_load) as usize
+                + (c.dims != p.dims) as usize
+                + c.extra_checks()
+        };
+        (0..self.outcomes.len())
+            .filter(|&i| {
+                changed(&self.outcomes[i].candidate) <= 1 && self.outcomes[i].auroc.is_finite()
+            })
+            .max_by(|&a, &b| self.outcomes[a].auroc.total_cmp(&self.outcomes[b].auroc))
+    }
+
+    /// The choice as `train` prints it: how it was judged, the kept candidate, the best single
+    /// option and the plain nearest neighbour; with `verbose`, every candidate's row.
+    pub fn report(&self, verbose: bool) -> String {
+        Report {
+            choice: self,
+            verbose,
+        }
+        .to_string()
+    }
+}
+
+/// [`Choice::report`]'s text.
+struct Report<'a> {
+    choice: &'a Choice,
+    verbose: bool,
+}
+
+/// The same as [`Choice::report`] with every row.
 impl fmt::Display for Choice {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.report(true))
+    }
+}
+
+impl fmt::Display for Report<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let c = self.choice;
+        c.header(f)?;
+        let row = |f: &mut fmt::Formatter<'_>, mark: &str, o: &Outcome, note: &str| {
+            writeln!(
+                f,
+                "{mark} {:<50} {:>6} {:>9} {:>13}{note}",
+                o.candidate.to_string(),
+                num(o.auroc, 3, ""),
+                num(100.0 * o.found, 1, "%"),
+                num(100.0 * o.known_unknown, 1, "%"),
+            )
+        };
+        writeln!(
+            f,
+            "  {:<50} {:>6} {:>10} {:>14}",
+            "candidate (--unknown-checks)", "AUROC", "left out", "known unknown"
+        )?;
+        let single = c.best_single_option();
+        for (i, o) in c.outcomes.iter().enumerate() {
+            let kept = Some(i) == c.chosen;
+            if self.verbose {
+                row(f, if kept { "*" } else { " " }, o, "")?;
+            } else if kept {
+                row(f, "*", o, "  (kept)")?;
+            } else if Some(i) == single {
+                row(f, " ", o, "  (the best single option)")?;
+            }
+        }
+        if let Some(why) = &c.energy_note {
+            writeln!(f, "  energy check: not weighed: {why}")?;
+        } else if let Some(e) = c.energy_alone {
+            writeln!(
+                f,
+                "  energy check on its own: {} of the left-out ground, {}/{} known stances \
+                 unknown{}",
+                num(100.0 * e.found, 1, "%"),
+                e.known[1],
+                e.known[0],
+                if c.candidate.energy {
+                    ": kept beside the image checks (what it finds, they miss)"
+                } else {
+                    ""
+                }
+            )?;
+        }
+        if let Some(nn) = c.nn_auroc.filter(|v| v.is_finite()) {
+            writeln!(
+                f,
+                "  {:<50} {nn:>6.3}  (the plain nearest neighbour's distance, for scale)",
+                "nearest neighbour"
+            )?;
+        }
+        if !self.verbose && c.outcomes.len() > 2 {
+            writeln!(
+                f,
+                "  ({} more candidates measured: `presrs train --verbose` lists them)",
+                c.outcomes.len() - 1 - usize::from(single.is_some() && single != c.chosen)
+            )?;
+        }
+        c.kept_line(f)
+    }
+}
+
+/// `v` with `digits` decimals and `unit`, or `n/a` for a figure nothing measured.
+fn num(v: f64, digits: usize, unit: &str) -> String {
+    if v.is_finite() {
+        format!("{v:.digits$}{unit}")
+    } else {
+        "n/a".into()
+    }
+}
+
+impl Choice {
+    /// How the choice was judged (or why nothing was measured), and thin terrains.
+    fn header(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         if let Some(why) = &self.why {
             return writeln!(f, "unknown-ground checks: {} ({why})", self.candidate);
         }
@@ -110,27 +251,19 @@ impl fmt::Display for Choice {
                 JudgedOn::CalibrationRun =>
                     "half of the calibration run (the other half calibrated)",
                 JudgedOn::TrainingRun => {
-                    "the training run's unused images (one run only: the next run will scatter \
-                     more, and the load and texture bands, which one run cannot test, stay off; \
-                     record a second run and pass it with --calibrate, or capture two runs)"
+                    "the session's last quarter, by a model of the rest (one session only: how \
+                     far the next session lies from this one is not measured, nor are the load \
+                     and texture bands, which stay off; record a second session and pass it \
+                     with --calibrate, or capture two)"
                 }
             }
-        )?;
-        writeln!(
-            f,
-            "  {:<50} {:>6} {:>10} {:>14}",
-            "candidate (--unknown-checks)", "AUROC", "left out", "known unknown"
-        )?;
-        for (i, o) in self.outcomes.iter().enumerate() {
-            let mark = if Some(i) == self.chosen { "*" } else { " " };
-            writeln!(
-                f,
-                "{mark} {:<50} {:>6.3} {:>9.1}% {:>13.1}%",
-                o.candidate.to_string(),
-                o.auroc,
-                100.0 * o.found,
-                100.0 * o.known_unknown
-            )?;
+        )
+    }
+
+    /// The kept candidate and why, or that nothing met the budget.
+    fn kept_line(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.why.is_some() {
+            return Ok(());
         }
         if let Some(o) = self.chosen.map(|i| &self.outcomes[i]) {
             let per: Vec<String> = self

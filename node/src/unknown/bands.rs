@@ -1,6 +1,8 @@
 //! The load and texture bands: per class, the range a known image's load or texture falls in.
 
-use super::*;
+use crate::classifier::image::PressureImage;
+use crate::classifier::model::Model;
+use crate::classifier::train::*;
 
 /// Adds the texture check (`TrainOptions::check_texture`) to `m`: per class, the roughness
 /// band of `images` (each with its class index) through the model's crop and downsampling,
@@ -10,7 +12,7 @@ pub fn add_texture_check<'a>(
     m: &mut Model,
     images: impl IntoIterator<Item = (&'a PressureImage, usize)>,
 ) {
-    m.texture_ranges = Some(bands_of(m, images, |w| {
+    m.unknown.texture_bands = Some(bands_of(m, images, |w| {
         crate::classifier::texture::roughness(&w.pixels, w.rows, w.cols)
     }));
 }
@@ -18,7 +20,7 @@ pub fn add_texture_check<'a>(
 /// Per class of `m`, the band of `value` over `images` (each with its class index) through
 /// the model's crop and downsampling, calibrated with its `unknown_rate`: the load and texture
 /// checks' bands.
-pub(super) fn bands_of<'a>(
+pub(crate) fn bands_of<'a>(
     m: &Model,
     images: impl IntoIterator<Item = (&'a PressureImage, usize)>,
     value: impl Fn(&PressureImage) -> f64,
@@ -29,7 +31,7 @@ pub(super) fn bands_of<'a>(
             v.push(value(&w));
         }
     }
-    crate::stats::class_bands(per, m.unknown_rate.unwrap_or(0.0))
+    crate::stats::class_bands(per, m.unknown.rate)
 }
 
 /// Adds the load check to `m` with bands drawn over `images` (each with its class index),
@@ -40,7 +42,7 @@ pub fn add_load_check_on<'a>(
     m: &mut Model,
     images: impl IntoIterator<Item = (&'a PressureImage, usize)>,
 ) {
-    m.load_ranges = Some(bands_of(m, images, |w| {
+    m.unknown.load_bands = Some(bands_of(m, images, |w| {
         w.pixels.iter().map(|&p| p as f64).sum()
     }));
 }
@@ -51,11 +53,7 @@ pub fn add_load_check(m: &mut Model) -> bool {
     let Some(imgs) = &m.images else {
         return false;
     };
-    m.load_ranges = Some(load_ranges(
-        &imgs.pixels,
-        &m.sample_classes,
-        m.unknown_rate.unwrap_or(0.0),
-    ));
+    m.unknown.load_bands = Some(load_ranges(&imgs.pixels, &m.sample_classes, m.unknown.rate));
     true
 }
 
@@ -63,7 +61,7 @@ pub fn add_load_check(m: &mut Model) -> bool {
 /// ([`crate::stats::class_bands`]): an image whose load lies outside its best class's band is
 /// unknown, however its texture matches. It also carries the hopper's history (the steps after
 /// sand are light too): docs/decisions/unknown-load-check.md.
-pub(super) fn load_ranges(work: &[Vec<u16>], labels: &[usize], rate: f64) -> Vec<[f64; 2]> {
+pub(crate) fn load_ranges(work: &[Vec<u16>], labels: &[usize], rate: f64) -> Vec<[f64; 2]> {
     let n_classes = labels.iter().max().map_or(0, |m| m + 1);
     let mut per: Vec<Vec<f64>> = vec![Vec::new(); n_classes];
     for (p, &k) in work.iter().zip(labels) {
@@ -79,7 +77,7 @@ pub(super) fn load_ranges(work: &[Vec<u16>], labels: &[usize], rate: f64) -> Vec
 ///
 /// Why: held-out training images come from the same recording as the stored samples; the
 /// robot's next run does not. Measured: docs/decisions/calibration-distance-margin.md.
-pub(super) fn widen(m: &Model, k: usize, q: f64) -> f64 {
+pub(crate) fn widen(m: &Model, k: usize, q: f64) -> f64 {
     let n_k = m.sample_classes.iter().filter(|&&c| c == k).count().max(1) as f64;
     let s2 = 2.0 * m.kernel_width * m.kernel_width;
     let c = -n_k.ln() - 0.5 * m.h as f64 * (std::f64::consts::PI * s2).ln();
@@ -88,4 +86,4 @@ pub(super) fn widen(m: &Model, k: usize, q: f64) -> f64 {
 }
 
 /// See [`widen`].
-pub(super) const DISTANCE_MARGIN: f64 = 0.1;
+pub(crate) const DISTANCE_MARGIN: f64 = 0.1;

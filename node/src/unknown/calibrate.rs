@@ -1,7 +1,16 @@
 //! Calibrating the rejection on images the fit never saw: the novelty score's threshold per
 //! class, from a second run or held-out images of the training run.
 
-use super::*;
+use nalgebra::DMatrix;
+
+use crate::classifier::image::PressureImage;
+use crate::classifier::model::Model;
+use crate::classifier::train::*;
+use crate::stats::{median, upper_quantile};
+use crate::unknown::novelty::{
+    Calibration, CalibrationSource, HELD_OUT_RATE_FACTOR, NOVELTY_K, NUISANCE_DIRECTIONS, Novelty,
+    NoveltyScore, SHRINK_IMAGES,
+};
 
 /// Most calibration images per class kept in a model file (each is a working image: 41x38
 /// pixels are about 6 kB of JSON).
@@ -130,16 +139,12 @@ pub fn calibrate_on_runs(
     // With the training run's unused images too: more images for the tails, and both kinds
     // of spread (within a run, across runs) in one calibration. (Not again after an earlier
     // calibration on runs: those images would count twice.)
-    if let Some(nv) = model
-        .novelty
-        .as_ref()
-        .filter(|n| n.calibration.source == CalibrationSource::SameRun)
-    {
-        pixels.extend(nv.calibration.pixels.iter().cloned());
-        classes.extend(nv.calibration.classes.iter().copied());
-    }
+    let (extra, extra_classes) = training_run_unused(model);
+    pixels.extend(extra);
+    classes.extend(extra_classes);
     let n = pixels.len();
     let score = model
+        .unknown
         .novelty
         .as_ref()
         .map_or(NoveltyScore::KnnResidual, |nv| nv.score);
@@ -153,16 +158,43 @@ pub fn calibrate_on_runs(
         held_out,
         score,
     );
-    match &model.novelty {
+    match &model.unknown.novelty {
         Some(nv) => Ok(nv.calibration.called_unknown),
         None => Err(CalibrateError::NoContact { run, n }),
     }
 }
 
+/// The training run's images its model does not store, from its calibration on that run
+/// (every class with [`MIN_SAME_RUN_PER_CLASS`] or more of them, else none), with their
+/// classes: what a calibration on another run adds.
+fn training_run_unused(model: &Model) -> (Vec<Vec<u16>>, Vec<usize>) {
+    let Some(c) = model.unknown.novelty.as_ref().map(|n| &n.calibration) else {
+        return Default::default();
+    };
+    let stored: std::collections::HashSet<&[u16]> = match (&model.images, c.source) {
+        (_, CalibrationSource::SameRun) => Default::default(),
+        (Some(im), CalibrationSource::TimeBlocks) => im.pixels.iter().map(Vec::as_slice).collect(),
+        _ => return Default::default(),
+    };
+    let unused: Vec<(Vec<u16>, usize)> = c
+        .pixels
+        .iter()
+        .zip(&c.classes)
+        .filter(|(p, _)| !stored.contains(p.as_slice()))
+        .map(|(p, &k)| (p.clone(), k))
+        .collect();
+    let enough = (0..model.classes.len())
+        .all(|k| unused.iter().filter(|u| u.1 == k).count() >= MIN_SAME_RUN_PER_CLASS);
+    if !enough {
+        return Default::default();
+    }
+    unused.into_iter().unzip()
+}
+
 /// Calibrates `model`'s novelty again, on the images it was calibrated on, for another
 /// `score` (nothing without a novelty score).
 pub fn rescore(model: &mut Model, score: NoveltyScore) {
-    if let Some(nv) = model.novelty.clone() {
+    if let Some(nv) = model.unknown.novelty.clone() {
         let c = nv.calibration;
         set_novelty(
             model,
@@ -183,7 +215,7 @@ pub fn rescore(model: &mut Model, score: NoveltyScore) {
 /// contact are left out; with none left, the model keeps no novelty score (the density rule
 /// decides).
 #[allow(clippy::too_many_arguments)]
-pub(super) fn set_novelty(
+pub(crate) fn set_novelty(
     model: &mut Model,
     pixels: Vec<Vec<u16>>,
     classes: Vec<usize>,
@@ -196,7 +228,7 @@ pub(super) fn set_novelty(
     let n_classes = model.classes.len();
     let k = NOVELTY_K;
     let spread = class_spreads(model, k);
-    let rate = model.unknown_rate.unwrap_or(0.0);
+    let rate = model.unknown.rate;
     let provisional = Novelty {
         score,
         k,
@@ -219,8 +251,20 @@ pub(super) fn set_novelty(
         reference_classes: Vec::new(),
         nuisance: Vec::new(),
     };
+    if source == CalibrationSource::TimeBlocks {
+        let measured = cross_fit(model, &pixels, &classes, &provisional);
+        finish_novelty(
+            model,
+            provisional,
+            measured,
+            margin,
+            (pixels, classes, 0),
+            rate,
+        );
+        return;
+    }
     let mut m = model.clone();
-    m.novelty = Some(provisional.clone());
+    m.unknown.novelty = Some(provisional.clone());
     m.images = None;
     let mut cls = crate::classifier::Classifier::new(m);
     // (best class, kNN distance, residual) per calibration image in contact and classified
@@ -258,8 +302,53 @@ pub(super) fn set_novelty(
             }
         }
     }
+    let measured = Parts {
+        parts,
+        wrong,
+        reference,
+        reference_classes,
+        residuals,
+    };
+    let kept = if loo {
+        (Vec::new(), Vec::new(), 0)
+    } else {
+        (pixels, classes, held_out)
+    };
+    finish_novelty(model, provisional, measured, margin, kept, rate);
+}
+
+/// What calibration images measured: per image in contact and classified right, (best class,
+/// kNN distance, residual); the images taken for another class; and a held-out run's
+/// references and residual vectors.
+pub(crate) struct Parts {
+    parts: Vec<(usize, f64, f64)>,
+    wrong: usize,
+    reference: Vec<f32>,
+    reference_classes: Vec<usize>,
+    residuals: Vec<Vec<f64>>,
+}
+
+/// Sets `model`'s novelty from what its calibration images measured: residual scales, each
+/// part stretched to its tail, per-class thresholds; keeps `kept` (the images, their classes
+/// and how many came from held-out runs) for a later refit.
+fn finish_novelty(
+    model: &mut Model,
+    provisional: Novelty,
+    measured: Parts,
+    margin: f64,
+    kept: (Vec<Vec<u16>>, Vec<usize>, usize),
+    rate: f64,
+) {
+    let n_classes = model.classes.len();
+    let Parts {
+        parts,
+        wrong,
+        reference,
+        reference_classes,
+        residuals,
+    } = measured;
     if parts.is_empty() {
-        model.novelty = None;
+        model.unknown.novelty = None;
         return;
     }
     // Calibration images of a held-out run are scored as a run the model has never seen; the
@@ -333,26 +422,157 @@ pub(super) fn set_novelty(
     let above = parts
         .iter()
         .zip(&scores)
-        .filter(|(p, s)| **s > nv.thresholds[p.0])
+        .filter(|(p, s)| !crate::unknown::within_threshold(**s, nv.thresholds[p.0]))
         .count();
     nv.calibration.images = parts.len() + wrong;
     nv.calibration.called_unknown = above as f64 / parts.len() as f64;
     nv.calibration.misclassified = wrong as f64 / (parts.len() + wrong) as f64;
-    if !loo {
-        nv.calibration.pixels = pixels;
-        nv.calibration.classes = classes;
-        nv.calibration.held_out_images = held_out;
-    }
+    (
+        nv.calibration.pixels,
+        nv.calibration.classes,
+        nv.calibration.held_out_images,
+    ) = kept;
     nv.calibration.rate = cal_rate;
     nv.reference = reference;
     nv.reference_classes = reference_classes;
     nv.nuisance = nuisance_directions(&residuals, NUISANCE_DIRECTIONS);
-    model.novelty = Some(nv);
+    model.unknown.novelty = Some(nv);
+}
+
+/// Time blocks a session is cut into to calibrate on itself ([`CalibrationSource::TimeBlocks`]).
+pub const TIME_BLOCKS: usize = 4;
+
+/// The time block of each of `classes` (the session's images in recording order): per class,
+/// its images cut into [`TIME_BLOCKS`] runs of consecutive stances.
+pub fn time_blocks(classes: &[usize], n_classes: usize) -> Vec<u8> {
+    time_blocks_of(classes, n_classes, TIME_BLOCKS)
+}
+
+/// [`time_blocks`] in `blocks` blocks.
+pub fn time_blocks_of(classes: &[usize], n_classes: usize, blocks: usize) -> Vec<u8> {
+    let mut count = vec![0usize; n_classes];
+    for &k in classes {
+        if let Some(c) = count.get_mut(k) {
+            *c += 1;
+        }
+    }
+    let mut seen = vec![0usize; n_classes];
+    classes
+        .iter()
+        .map(|&k| {
+            let (i, n) = (seen[k], count[k].max(1));
+            seen[k] += 1;
+            (i * blocks / n) as u8
+        })
+        .collect()
+}
+
+/// Time blocks the session's own calibration cross-fits over: each block is scored by a model
+/// of the other nine, whose stored samples are nine tenths of the deployed model's (with four,
+/// three quarters: on a noisy foot the held-out scores then sat lower than the deployed
+/// model's scores of new stances; docs/decisions/unknown-one-session.md).
+pub const CROSS_FIT_BLOCKS: usize = 10;
+
+/// Each calibration image scored as the next session's would be: `pixels` (the session's
+/// working images, every one, in recording order, of classes `classes`) in time blocks; per
+/// block, a model fitted as `model` (its dimensions, normalisation) on the stored samples of
+/// the other blocks scores the block's images, and their kNN distances are put in `model`'s
+/// units (`provisional`'s class spreads) by the ratio of the spreads. No image is scored by a
+/// model that saw it or its neighbours in time: the stored samples spanned the PCA, so their
+/// own residuals were near zero and a leave-one-out calibration called 71% of the next
+/// session's known ground unknown (docs/decisions/unknown-one-session.md).
+fn cross_fit(
+    model: &Model,
+    pixels: &[Vec<u16>],
+    classes: &[usize],
+    provisional: &Novelty,
+) -> Parts {
+    let n_classes = model.classes.len();
+    let mut out = Parts {
+        parts: Vec::new(),
+        wrong: 0,
+        reference: Vec::new(),
+        reference_classes: Vec::new(),
+        residuals: Vec::new(),
+    };
+    let Some(stored) = model.images.as_ref() else {
+        return out;
+    };
+    // Which block each image is in; a stored sample is found among the images by content.
+    let n_blocks = CROSS_FIT_BLOCKS;
+    let blocks = time_blocks_of(classes, n_classes, n_blocks);
+    let block_of: std::collections::HashMap<&[u16], u8> = pixels
+        .iter()
+        .zip(&blocks)
+        .map(|(p, &b)| (p.as_slice(), b))
+        .collect();
+    for b in 0..n_blocks as u8 {
+        let keep: Vec<usize> = (0..stored.pixels.len())
+            .filter(|&i| block_of.get(stored.pixels[i].as_slice()) != Some(&b))
+            .collect();
+        let (t, v): (Vec<usize>, Vec<usize>) = keep.iter().partition(|&&i| i < stored.n_train);
+        let work: Vec<Vec<u16>> = t
+            .iter()
+            .chain(&v)
+            .map(|&i| stored.pixels[i].clone())
+            .collect();
+        let labels: Vec<usize> = t
+            .iter()
+            .chain(&v)
+            .map(|&i| model.sample_classes[i])
+            .collect();
+        // Every class needs stored samples of its own outside the block.
+        if (0..n_classes).any(|k| !t.iter().any(|&i| model.sample_classes[i] == k)) {
+            continue;
+        }
+        let Ok((fitted, _)) = fit(
+            &work,
+            &labels,
+            t.len(),
+            n_classes,
+            model.normalize_load.is_some(),
+            Some(model.h),
+        ) else {
+            continue;
+        };
+        let mut fold = model.clone();
+        fold.images = None;
+        fold.unknown.novelty = None;
+        fold.sample_classes = labels;
+        fitted.install(&mut fold);
+        let spread = class_spreads(&fold, provisional.k);
+        let mut nv = provisional.clone();
+        nv.class_spread = spread.clone();
+        fold.unknown.novelty = Some(nv);
+        let mut cls = crate::classifier::Classifier::new(fold);
+        for (p, &k) in pixels
+            .iter()
+            .zip(classes)
+            .zip(&blocks)
+            .filter(|(_, bk)| **bk == b)
+            .map(|(pk, _)| pk)
+        {
+            let d = cls.classify_work(p);
+            if !d.contact {
+                continue;
+            }
+            if d.best != k {
+                out.wrong += 1;
+                continue;
+            }
+            let (knn, res) = cls.novelty_parts();
+            if knn.is_finite() && res.is_finite() {
+                let to_model = provisional.class_spread[k] / spread[k];
+                out.parts.push((k, knn * to_model, res));
+            }
+        }
+    }
+    out
 }
 
 /// The part of the centred feature vector `c` outside the span of the PCA rows `u` (h rows),
 /// in f64: the nuisance directions are fitted on it once per calibration.
-pub(super) fn residual_vector(u: &[f32], h: usize, c: &[f32]) -> Vec<f64> {
+pub(crate) fn residual_vector(u: &[f32], h: usize, c: &[f32]) -> Vec<f64> {
     let n = c.len();
     let mut e: Vec<f64> = c.iter().map(|&v| v as f64).collect();
     for j in 0..h {
@@ -368,7 +588,7 @@ pub(super) fn residual_vector(u: &[f32], h: usize, c: &[f32]) -> Vec<f64> {
 /// The `r` leading right singular vectors of the residual vectors (rows), as f32 rows: the
 /// directions outside the PCA subspace along which the held-out runs' known images lie (no more
 /// than there are images: their span is all they show).
-pub(super) fn nuisance_directions(residuals: &[Vec<f64>], r: usize) -> Vec<f32> {
+pub(crate) fn nuisance_directions(residuals: &[Vec<f64>], r: usize) -> Vec<f32> {
     if r == 0 || residuals.is_empty() {
         return Vec::new();
     }
@@ -393,7 +613,7 @@ pub(super) fn nuisance_directions(residuals: &[Vec<f64>], r: usize) -> Vec<f32> 
 }
 
 /// `v` when it is a positive number, else `fallback` (else 1).
-pub(super) fn positive(v: f64, fallback: f64) -> f64 {
+pub(crate) fn positive(v: f64, fallback: f64) -> f64 {
     if v.is_finite() && v > 0.0 {
         v
     } else if fallback.is_finite() && fallback > 0.0 {
@@ -405,7 +625,7 @@ pub(super) fn positive(v: f64, fallback: f64) -> f64 {
 
 /// Per class, the median over its stored samples of the mean distance to the `k` nearest other
 /// stored samples of the class (the kNN ratio's unit).
-pub(super) fn class_spreads(m: &Model, k: usize) -> Vec<f64> {
+pub(crate) fn class_spreads(m: &Model, k: usize) -> Vec<f64> {
     let h = m.h;
     let n = m.n_samples();
     let mut per: Vec<Vec<f64>> = vec![Vec::new(); m.classes.len()];
@@ -451,9 +671,10 @@ pub(super) fn class_spreads(m: &Model, k: usize) -> Vec<f64> {
 ///
 /// Without a rate (0, or an older model): for every class the lowest density of any sample
 /// less 10 nats (22,000 times less dense than the least typical training image), which rejects
-/// almost nothing: the paper's classifier, which had no rejection.
-/// Returns the thresholds and their minimum (the model's overall `unknown_threshold`).
-pub(super) fn unknown_thresholds(m: &Model) -> (Vec<f64>, f64) {
+/// almost nothing: the paper's classifier, which had no rejection. A class alone with one
+/// sample has no density to calibrate on: its threshold is the least finite number (nothing
+/// is below it, and a model file holds it: JSON has no infinity).
+pub(crate) fn unknown_thresholds(m: &Model) -> Vec<f64> {
     let lo = loo_log_densities(m);
     let mut per: Vec<Vec<f64>> = vec![Vec::new(); m.classes.len()];
     for (d, &k) in lo.iter().zip(&m.sample_classes) {
@@ -471,11 +692,11 @@ pub(super) fn unknown_thresholds(m: &Model) -> (Vec<f64>, f64) {
         .enumerate()
         .map(|(k, v)| {
             if v.is_empty() {
-                return f64::NEG_INFINITY;
+                return f64::MIN;
             }
             v.sort_by(f64::total_cmp);
-            match m.unknown_rate {
-                Some(r) if r > 0.0 => {
+            match m.unknown.rate {
+                r if r > 0.0 => {
                     // Images strictly below v[k] are unknown: k of n, at most the rate.
                     let q = v[((r * v.len() as f64).floor() as usize).min(v.len() - 1)];
                     widen(m, k, q)
@@ -483,16 +704,9 @@ pub(super) fn unknown_thresholds(m: &Model) -> (Vec<f64>, f64) {
                 _ => lowest - 10.0,
             }
         })
+        .map(|t: f64| if t.is_finite() { t } else { f64::MIN })
         .collect();
-    let min = t.iter().copied().fold(f64::INFINITY, f64::min);
-    (
-        t,
-        if min.is_finite() {
-            min
-        } else {
-            f64::NEG_INFINITY
-        },
-    )
+    t
 }
 
 /// Each stored sample's leave-one-out log density under its own class, in the samples' order

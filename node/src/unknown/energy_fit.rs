@@ -116,7 +116,7 @@ pub fn fit_energy(
     };
     let mut stances: Vec<(usize, f64, f64)> = Vec::new();
     let mut plain = model.clone();
-    plain.energy = None;
+    plain.unknown.energy = None;
     let mut cfg = cfg.clone();
     cfg.refit = cfg.refit.reproducible();
     for run in runs.iter_mut() {
@@ -164,7 +164,7 @@ pub fn fit_energy(
             }
         }
     }
-    let rate = model.unknown_rate.unwrap_or(0.02);
+    let rate = model.unknown.rate;
     let maps = energy::fit(&stances, n, rate);
     if maps.iter().all(Option::is_none) {
         return Err(EnergyFitError::TooFew {
@@ -186,13 +186,13 @@ pub fn fit_energy(
             out as f64 / mine.len().max(1) as f64
         })
         .collect();
-    model.energy = Some(maps);
+    model.unknown.energy = Some(maps);
     Ok(rep)
 }
 
 /// The fitted maps, one line per class for a person.
 pub fn describe(model: &Model, rep: &EnergyFitReport) -> Vec<String> {
-    let maps: &[Option<ReturnMap>] = model.energy.as_deref().unwrap_or(&[]);
+    let maps: &[Option<ReturnMap>] = model.unknown.energy.as_deref().unwrap_or(&[]);
     model
         .classes
         .iter()
