@@ -119,7 +119,7 @@ impl Trained {
         for s in &self.sessions {
             let text = format!(
                 "{} {} {}",
-                s.run.as_deref().unwrap_or("(no run)"),
+                s.run.as_deref().unwrap_or("(no manifest)"),
                 s.images,
                 s.role
             );

@@ -172,7 +172,7 @@ pub fn choose(
              flags' checks as given",
         ));
     }
-    let energy = energy_support(training, calibration, classes.len());
+    let energy = energy_support(training, calibration, classes);
     let grid = grid(opts, calibration.is_empty(), energy.is_ok());
     let n_classes = classes.len();
     // One session: its last time block is the known ground judged (a model fitted on the
@@ -308,10 +308,10 @@ struct Tally {
 pub fn energy_support(
     training: &[Labelled<'_>],
     calibration: &[Labelled<'_>],
-    n_classes: usize,
+    classes: &[ClassInfo],
 ) -> Result<(), String> {
     use crate::unknown::energy::MIN_STANCES;
-    let mut per = vec![Vec::new(); n_classes];
+    let mut per = vec![Vec::new(); classes.len()];
     for l in training.iter().chain(calibration) {
         if let (Some(v), Some((_, after))) = (per.get_mut(l.class), flights_s(l)) {
             v.push(after);
@@ -328,8 +328,9 @@ pub fn energy_support(
     }
     if let Some(k) = per.iter().position(|v| v.len() < MIN_STANCES) {
         return Err(format!(
-            "a terrain has {} stances with both flights, fewer than the {MIN_STANCES} a return \
-             map needs (class {k}): capture more steps per terrain",
+            "{} has {} stances with both flights, fewer than the {MIN_STANCES} a return map \
+             needs: capture more steps of it",
+            classes[k].name,
             per[k].len()
         ));
     }
