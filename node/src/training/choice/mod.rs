@@ -183,8 +183,36 @@ pub fn choose(
         (training.to_vec(), Vec::new())
     };
     let (training, later) = (training.as_slice(), later.as_slice());
-    // The folds are independent: on the machine's cores, merged in their order, so that the
-    // figures do not depend on how many cores there are.
+    let tallies = run_folds(training, calibration, later, classes, opts, &grid);
+    let (outcomes, nn, alone) = pool(tallies, &grid, n_classes)?;
+    let chosen = with_energy(pick(&outcomes, budget), &outcomes, &alone, opts, budget);
+    Ok(Choice {
+        candidate: chosen.map_or(pins, |i| outcomes[i].candidate),
+        chosen,
+        outcomes,
+        budget,
+        judged_on,
+        why: None,
+        classes: names,
+        thin,
+        nn_auroc: Some(nn).filter(|v| v.is_finite()),
+        energy_note: energy.err(),
+        energy_alone: Some(alone),
+    })
+}
+
+/// Every fold (each known terrain left out in turn), on the machine's cores; the folds are
+/// independent and merged in their order, so the figures do not depend on how many cores
+/// there are.
+fn run_folds(
+    training: &[Labelled<'_>],
+    calibration: &[Labelled<'_>],
+    later: &[Labelled<'_>],
+    classes: &[ClassInfo],
+    opts: &TrainOptions,
+    grid: &[Candidate],
+) -> Vec<Option<Result<FoldTally, ChoiceError>>> {
+    let n_classes = classes.len();
     let threads = std::thread::available_parallelism()
         .map_or(1, |n| n.get())
         .min(n_classes);
@@ -193,7 +221,6 @@ pub fn choose(
     std::thread::scope(|scope| {
         let handles: Vec<_> = (0..threads)
             .map(|t| {
-                let grid = &grid;
                 scope.spawn(move || {
                     (t..n_classes)
                         .step_by(threads)
@@ -212,7 +239,27 @@ pub fn choose(
             }
         }
     });
-    // Per candidate: per left-out terrain its share found; pooled known counts; per-fold AUROC.
+    tallies
+}
+
+/// The mean of the finite values of `v` (NaN when none is).
+fn finite_mean(v: &[f64]) -> f64 {
+    let f: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
+    if f.is_empty() {
+        f64::NAN
+    } else {
+        f.iter().sum::<f64>() / f.len() as f64
+    }
+}
+
+/// The folds' tallies pooled per candidate: per left-out terrain its share found, the known
+/// counts summed, the AUROC averaged; with the plain nearest neighbour's AUROC and the energy
+/// check's on its own.
+fn pool(
+    tallies: Vec<Option<Result<FoldTally, ChoiceError>>>,
+    grid: &[Candidate],
+    n_classes: usize,
+) -> Result<(Vec<Outcome>, f64, EnergyAlone), ChoiceError> {
     let mut found = vec![vec![f64::NAN; n_classes]; grid.len()];
     let mut known = vec![[0usize; 2]; grid.len()];
     let mut aurocs = vec![Vec::new(); grid.len()];
@@ -234,60 +281,48 @@ pub fn choose(
             aurocs[ci].extend(t.auroc);
         }
     }
-    let mean = |v: &[f64]| {
-        let f: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
-        if f.is_empty() {
-            f64::NAN
-        } else {
-            f.iter().sum::<f64>() / f.len() as f64
-        }
-    };
-    let outcomes: Vec<Outcome> = grid
+    let outcomes = grid
         .iter()
         .enumerate()
         .map(|(i, c)| Outcome {
             candidate: *c,
-            auroc: mean(&aurocs[i]),
-            found: mean(&found[i]),
+            auroc: finite_mean(&aurocs[i]),
+            found: finite_mean(&found[i]),
             found_per_class: found[i].clone(),
             known_unknown: known[i][1] as f64 / known[i][0].max(1) as f64,
             known_judged: known[i][0],
         })
         .collect();
-    let mut chosen = pick(&outcomes, budget);
     let alone = EnergyAlone {
-        found: mean(&alone_found),
+        found: finite_mean(&alone_found),
         known: alone_known,
     };
-    // The energy check beside the kept image checks, when it finds left-out ground at next to
-    // no cost on known ground (`pick::energy_pays`): what it finds, the image checks missed.
-    if let Some(i) = chosen
-        && !outcomes[i].candidate.energy
-        && pick::energy_pays(&alone, opts.unknown_rate)
-        && let Some(j) = outcomes.iter().position(|o| {
-            o.candidate
-                == Candidate {
-                    energy: true,
-                    ..outcomes[i].candidate
-                }
-        })
-        && outcomes[j].known_unknown <= budget + 1e-12
-    {
-        chosen = Some(j);
+    Ok((outcomes, finite_mean(&nn), alone))
+}
+
+/// The kept candidate with the energy check beside it, when the check finds left-out ground
+/// at next to no cost on known ground (`pick::energy_pays`: what it finds, the image checks
+/// missed) and the pair stays within the budget; else `chosen` as it is.
+fn with_energy(
+    chosen: Option<usize>,
+    outcomes: &[Outcome],
+    alone: &EnergyAlone,
+    opts: &TrainOptions,
+    budget: f64,
+) -> Option<usize> {
+    let i = chosen?;
+    if outcomes[i].candidate.energy || !pick::energy_pays(alone, opts.unknown_rate) {
+        return chosen;
     }
-    Ok(Choice {
-        candidate: chosen.map_or(pins, |i| outcomes[i].candidate),
-        chosen,
-        outcomes,
-        budget,
-        judged_on,
-        why: None,
-        classes: names,
-        thin,
-        nn_auroc: Some(mean(&nn)).filter(|v| v.is_finite()),
-        energy_note: energy.err(),
-        energy_alone: Some(alone),
-    })
+    let paired = Candidate {
+        energy: true,
+        ..outcomes[i].candidate
+    };
+    outcomes
+        .iter()
+        .position(|o| o.candidate == paired)
+        .filter(|&j| outcomes[j].known_unknown <= budget + 1e-12)
+        .or(chosen)
 }
 
 /// What one fold measured of one candidate.
