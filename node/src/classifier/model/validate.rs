@@ -6,13 +6,24 @@ use super::*;
 impl Model {
     /// Checks that the model's parts fit together (sizes, indexes, finite numbers).
     pub fn validate(&self) -> Result<(), Invalid> {
+        let (r, c) = self.validate_input()?;
+        let n = self.feature_len();
+        self.validate_projection(n)?;
+        self.validate_labels()?;
+        self.unknown
+            .validate(self.classes.len(), n, self.h, r * c)
+            .map_err(|(key, msg)| Invalid::new(key, format!("{key}: {msg}")))?;
+        self.validate_images(r * c)
+    }
+
+    /// The image the model takes and what its crop leaves: the working size.
+    fn validate_input(&self) -> Result<(usize, usize), Invalid> {
         if let Some(b) = self.bits
             && b != 8
             && b != 16
         {
             return Err(Invalid::range("bits", b, "8 or 16"));
         }
-        let n = self.feature_len();
         if self.classes.is_empty() || self.classes.len() > MAX_CLASSES {
             return Err(Invalid::new(
                 "classes",
@@ -44,6 +55,12 @@ impl Model {
                 format!("n_fft {} does not fit {r}x{c} images", self.n_fft),
             ));
         }
+        Ok((r, c))
+    }
+
+    /// The PCA and the stored samples for feature vectors of `n` values: sizes, class
+    /// indexes, finite numbers, a positive kernel width.
+    fn validate_projection(&self, n: usize) -> Result<(), Invalid> {
         if self.pca_mean.len() != n {
             return Err(Invalid::new(
                 "pca_mean",
@@ -81,6 +98,30 @@ impl Model {
                 format!("sample class {bad} is not a class index"),
             ));
         }
+        if !(self.kernel_width.is_finite() && self.kernel_width > 0.0) {
+            return Err(Invalid::new(
+                "kernel_width",
+                format!("kernel_width {} must be positive", self.kernel_width),
+            ));
+        }
+        let finite = self
+            .pca_mean
+            .iter()
+            .chain(&self.pca_matrix)
+            .chain(&self.samples)
+            .all(|v| v.is_finite());
+        if !finite {
+            return Err(Invalid::new(
+                "pca_matrix",
+                "non-finite numbers in the PCA or samples",
+            ));
+        }
+        Ok(())
+    }
+
+    /// What the model says of its terrains and stances: gaits, the deciding frame, the load
+    /// normalisation, terrain ids.
+    fn validate_labels(&self) -> Result<(), Invalid> {
         if let Some(g) = &self.gaits
             && (g.contains(&0) || g.windows(2).any(|w| w[0] >= w[1]))
         {
@@ -121,27 +162,11 @@ impl Model {
                 ),
             ));
         }
-        if !(self.kernel_width.is_finite() && self.kernel_width > 0.0) {
-            return Err(Invalid::new(
-                "kernel_width",
-                format!("kernel_width {} must be positive", self.kernel_width),
-            ));
-        }
-        let finite = self
-            .pca_mean
-            .iter()
-            .chain(&self.pca_matrix)
-            .chain(&self.samples)
-            .all(|v| v.is_finite());
-        if !finite {
-            return Err(Invalid::new(
-                "pca_matrix",
-                "non-finite numbers in the PCA or samples",
-            ));
-        }
-        self.unknown
-            .validate(self.classes.len(), n, self.h, r * c)
-            .map_err(|(key, msg)| Invalid::new(key, format!("{key}: {msg}")))?;
+        Ok(())
+    }
+
+    /// The stored working images, one per stored sample, each of `px` pixels.
+    fn validate_images(&self, px: usize) -> Result<(), Invalid> {
         if let Some(im) = &self.images {
             if im.pixels.len() != self.n_samples()
                 || im.n_train == 0
@@ -157,11 +182,11 @@ impl Model {
                     ),
                 ));
             }
-            if let Some(i) = im.pixels.iter().position(|p| p.len() != r * c) {
+            if let Some(i) = im.pixels.iter().position(|p| p.len() != px) {
                 return Err(Invalid::new(
                     "images",
                     format!(
-                        "stored image {i} has {} pixels, expected {r}x{c}",
+                        "stored image {i} has {} pixels, expected {px} (the crop's working size)",
                         im.pixels[i].len()
                     ),
                 ));
