@@ -219,6 +219,33 @@ impl LegConfig {
 
     fn validate_joint(&self, which: usize) -> Result<(), Invalid> {
         let (name, j) = self.joint(which);
+        let kind = self.validate_joint_fields(which)?;
+        // The gains the joint must give, at the driver.
+        let imp = &self.impedance;
+        let (kp, kd) = if which == 0 {
+            let m = self.map(0);
+            (
+                m.stiffness_to_driver(imp.hip_stiffness_nm_per_rad),
+                m.stiffness_to_driver(imp.hip_damping_nm_s_per_rad),
+            )
+        } else {
+            self.length_gains_needed()
+        };
+        let stiff_key = if which == 0 {
+            "impedance.hip_stiffness_nm_per_rad"
+        } else {
+            "impedance.stance_stiffness_n_per_m"
+        };
+        match kind {
+            DriverKind::Mit => validate_mit(name, j, stiff_key, kp, kd),
+            DriverKind::Moteus => validate_moteus(name, j, stiff_key, kp, kd),
+            DriverKind::Odrive => self.validate_odrive(which),
+        }
+    }
+
+    /// A joint's driver, CAN id and mechanics (gear, direction, zero, metres per turn).
+    fn validate_joint_fields(&self, which: usize) -> Result<DriverKind, Invalid> {
+        let (name, j) = self.joint(which);
         let key = |k: &str| format!("{name}.{k}");
         let Some(kind) = j.driver else {
             return Err(Invalid::new(
@@ -288,138 +315,31 @@ impl LegConfig {
             }
             (false, None) => {}
         }
-        // The gains the joint must give, at the driver.
+        Ok(kind)
+    }
+
+    /// An ODrive gives stiffness only with damping (cascaded loops: stiffness is pos_gain *
+    /// vel_gain, with vel_gain the damping).
+    fn validate_odrive(&self, which: usize) -> Result<(), Invalid> {
         let imp = &self.impedance;
-        let (kp, kd) = if which == 0 {
-            let m = self.map(0);
-            (
-                m.stiffness_to_driver(imp.hip_stiffness_nm_per_rad),
-                m.stiffness_to_driver(imp.hip_damping_nm_s_per_rad),
-            )
+        let damp_key = if which == 0 {
+            "impedance.hip_damping_nm_s_per_rad"
         } else {
-            self.length_gains_needed()
+            "impedance.stance_damping_n_s_per_m"
         };
-        let stiff_key = if which == 0 {
-            "impedance.hip_stiffness_nm_per_rad"
+        let imp_d = if which == 0 {
+            imp.hip_damping_nm_s_per_rad
         } else {
-            "impedance.stance_stiffness_n_per_m"
+            imp.stance_damping_n_s_per_m
+                .min(imp.flight_damping_n_s_per_m)
         };
-        match kind {
-            DriverKind::Mit => {
-                let r = match (&j.mit_ranges, &j.mit_model) {
-                    (Some(r), _) => *r,
-                    (None, Some(m)) => Ranges::of_model(m).ok_or_else(|| {
-                        Invalid::new(
-                            key("mit_model"),
-                            format!("{} = {m:?}: not a known model; one of {:?}, or give [{}] with p_max, v_max, kp_max, kd_max, t_max", key("mit_model"), Ranges::MODELS, key("mit_ranges")),
-                        )
-                    })?,
-                    (None, None) => {
-                        return Err(Invalid::new(
-                            key("mit_model"),
-                            format!("{}: missing: an MIT motor needs its model (or {}) for its ranges", key("mit_model"), key("mit_ranges")),
-                        ));
-                    }
-                };
-                for (k, v) in [
-                    ("p_max", r.p_max),
-                    ("v_max", r.v_max),
-                    ("kp_max", r.kp_max),
-                    ("kd_max", r.kd_max),
-                    ("t_max", r.t_max),
-                ] {
-                    if !(v.is_finite() && v > 0.0) {
-                        return Err(Invalid::range(
-                            &key(&format!("mit_ranges.{k}")),
-                            v,
-                            "a finite value > 0",
-                        ));
-                    }
-                }
-                if kp > r.kp_max {
-                    return Err(Invalid::new(
-                        stiff_key,
-                        format!(
-                            "{stiff_key}: needs {kp:.3} N m/rad at {name}'s MIT motor, over its kp_max {}",
-                            r.kp_max
-                        ),
-                    ));
-                }
-                if kd > r.kd_max {
-                    return Err(Invalid::new(
-                        stiff_key,
-                        format!(
-                            "{stiff_key}: the damping needs {kd:.3} N m s/rad at {name}'s MIT motor, over its kd_max {}",
-                            r.kd_max
-                        ),
-                    ));
-                }
-            }
-            DriverKind::Moteus => {
-                let kp_full = j.moteus_kp.unwrap_or(f64::NAN);
-                let kd_full = j.moteus_kd.unwrap_or(f64::NAN);
-                if !(kp_full.is_finite() && kp_full > 0.0) {
-                    return Err(Invalid::range(
-                        &key("moteus_kp"),
-                        kp_full,
-                        "the controller's servo.pid_position.kp, N m/rev (> 0)",
-                    ));
-                }
-                if !(kd_full.is_finite() && kd_full > 0.0) {
-                    return Err(Invalid::range(
-                        &key("moteus_kd"),
-                        kd_full,
-                        "the controller's servo.pid_position.kd, N m s/rev (> 0)",
-                    ));
-                }
-                if j.moteus_source > 127 {
-                    return Err(Invalid::range(
-                        &key("moteus_source"),
-                        j.moteus_source,
-                        "0..=127",
-                    ));
-                }
-                if kp > kp_full / TAU {
-                    return Err(Invalid::new(
-                        stiff_key,
-                        format!(
-                            "{stiff_key}: needs {:.3} N m/rev at {name}'s moteus, over its servo.pid_position.kp {kp_full} (kp_scale can only lower it)",
-                            kp * TAU
-                        ),
-                    ));
-                }
-                if kd > kd_full / TAU {
-                    return Err(Invalid::new(
-                        stiff_key,
-                        format!(
-                            "{stiff_key}: the damping needs {:.3} N m s/rev at {name}'s moteus, over its servo.pid_position.kd {kd_full}",
-                            kd * TAU
-                        ),
-                    ));
-                }
-            }
-            DriverKind::Odrive => {
-                // Cascaded loops: stiffness is pos_gain * vel_gain, with vel_gain the damping.
-                let damp_key = if which == 0 {
-                    "impedance.hip_damping_nm_s_per_rad"
-                } else {
-                    "impedance.stance_damping_n_s_per_m"
-                };
-                let imp_d = if which == 0 {
-                    imp.hip_damping_nm_s_per_rad
-                } else {
-                    imp.stance_damping_n_s_per_m
-                        .min(imp.flight_damping_n_s_per_m)
-                };
-                if imp_d <= 0.0 {
-                    return Err(Invalid::new(
-                        damp_key,
-                        format!(
-                            "{damp_key} = {imp_d}: an ODrive gives stiffness only with damping (its position loop drives its velocity loop); > 0"
-                        ),
-                    ));
-                }
-            }
+        if imp_d <= 0.0 {
+            return Err(Invalid::new(
+                damp_key,
+                format!(
+                    "{damp_key} = {imp_d}: an ODrive gives stiffness only with damping (its position loop drives its velocity loop); > 0"
+                ),
+            ));
         }
         Ok(())
     }
@@ -477,4 +397,118 @@ impl LegConfig {
         }
         Ok(())
     }
+}
+
+/// An MIT motor's ranges (its model's or given) and the gains the impedance needs within them.
+fn validate_mit(
+    name: &str,
+    j: &JointConfig,
+    stiff_key: &str,
+    kp: f64,
+    kd: f64,
+) -> Result<(), Invalid> {
+    let key = |k: &str| format!("{name}.{k}");
+    let r = match (&j.mit_ranges, &j.mit_model) {
+        (Some(r), _) => *r,
+        (None, Some(m)) => Ranges::of_model(m).ok_or_else(|| {
+            Invalid::new(
+                key("mit_model"),
+                format!("{} = {m:?}: not a known model; one of {:?}, or give [{}] with p_max, v_max, kp_max, kd_max, t_max", key("mit_model"), Ranges::MODELS, key("mit_ranges")),
+            )
+        })?,
+        (None, None) => {
+            return Err(Invalid::new(
+                key("mit_model"),
+                format!("{}: missing: an MIT motor needs its model (or {}) for its ranges", key("mit_model"), key("mit_ranges")),
+            ));
+        }
+    };
+    for (k, v) in [
+        ("p_max", r.p_max),
+        ("v_max", r.v_max),
+        ("kp_max", r.kp_max),
+        ("kd_max", r.kd_max),
+        ("t_max", r.t_max),
+    ] {
+        if !(v.is_finite() && v > 0.0) {
+            return Err(Invalid::range(
+                &key(&format!("mit_ranges.{k}")),
+                v,
+                "a finite value > 0",
+            ));
+        }
+    }
+    if kp > r.kp_max {
+        return Err(Invalid::new(
+            stiff_key,
+            format!(
+                "{stiff_key}: needs {kp:.3} N m/rad at {name}'s MIT motor, over its kp_max {}",
+                r.kp_max
+            ),
+        ));
+    }
+    if kd > r.kd_max {
+        return Err(Invalid::new(
+            stiff_key,
+            format!(
+                "{stiff_key}: the damping needs {kd:.3} N m s/rad at {name}'s MIT motor, over its kd_max {}",
+                r.kd_max
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// A moteus's configured gains (the kp and kd scales can only lower them) against the gains
+/// the impedance needs, and its source id.
+fn validate_moteus(
+    name: &str,
+    j: &JointConfig,
+    stiff_key: &str,
+    kp: f64,
+    kd: f64,
+) -> Result<(), Invalid> {
+    let key = |k: &str| format!("{name}.{k}");
+    let kp_full = j.moteus_kp.unwrap_or(f64::NAN);
+    let kd_full = j.moteus_kd.unwrap_or(f64::NAN);
+    if !(kp_full.is_finite() && kp_full > 0.0) {
+        return Err(Invalid::range(
+            &key("moteus_kp"),
+            kp_full,
+            "the controller's servo.pid_position.kp, N m/rev (> 0)",
+        ));
+    }
+    if !(kd_full.is_finite() && kd_full > 0.0) {
+        return Err(Invalid::range(
+            &key("moteus_kd"),
+            kd_full,
+            "the controller's servo.pid_position.kd, N m s/rev (> 0)",
+        ));
+    }
+    if j.moteus_source > 127 {
+        return Err(Invalid::range(
+            &key("moteus_source"),
+            j.moteus_source,
+            "0..=127",
+        ));
+    }
+    if kp > kp_full / TAU {
+        return Err(Invalid::new(
+            stiff_key,
+            format!(
+                "{stiff_key}: needs {:.3} N m/rev at {name}'s moteus, over its servo.pid_position.kp {kp_full} (kp_scale can only lower it)",
+                kp * TAU
+            ),
+        ));
+    }
+    if kd > kd_full / TAU {
+        return Err(Invalid::new(
+            stiff_key,
+            format!(
+                "{stiff_key}: the damping needs {:.3} N m s/rev at {name}'s moteus, over its servo.pid_position.kd {kd_full}",
+                kd * TAU
+            ),
+        ));
+    }
+    Ok(())
 }
