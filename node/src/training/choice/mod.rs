@@ -183,7 +183,15 @@ pub fn choose(
         (training.to_vec(), Vec::new())
     };
     let (training, later) = (training.as_slice(), later.as_slice());
-    let tallies = run_folds(training, calibration, later, classes, opts, &grid);
+    let folds = Folds {
+        training,
+        calibration,
+        later,
+        classes,
+        opts,
+        grid: &grid,
+    };
+    let tallies = run_folds(&folds);
     let (outcomes, nn, alone) = pool(tallies, &grid, n_classes)?;
     let chosen = with_energy(pick(&outcomes, budget), &outcomes, &alone, opts, budget);
     Ok(Choice {
@@ -201,18 +209,22 @@ pub fn choose(
     })
 }
 
+/// What every fold is cut from: the sessions, the terrains, the options and the candidates.
+/// `later`, with no calibration run: the session's later images, judged as known ground.
+struct Folds<'s, 'a> {
+    training: &'s [Labelled<'a>],
+    calibration: &'s [Labelled<'a>],
+    later: &'s [Labelled<'a>],
+    classes: &'s [ClassInfo],
+    opts: &'s TrainOptions,
+    grid: &'s [Candidate],
+}
+
 /// Every fold (each known terrain left out in turn), on the machine's cores; the folds are
 /// independent and merged in their order, so the figures do not depend on how many cores
 /// there are.
-fn run_folds(
-    training: &[Labelled<'_>],
-    calibration: &[Labelled<'_>],
-    later: &[Labelled<'_>],
-    classes: &[ClassInfo],
-    opts: &TrainOptions,
-    grid: &[Candidate],
-) -> Vec<Option<Result<FoldTally, ChoiceError>>> {
-    let n_classes = classes.len();
+fn run_folds(folds: &Folds<'_, '_>) -> Vec<Option<Result<FoldTally, ChoiceError>>> {
+    let n_classes = folds.classes.len();
     let threads = std::thread::available_parallelism()
         .map_or(1, |n| n.get())
         .min(n_classes);
@@ -224,10 +236,7 @@ fn run_folds(
                 scope.spawn(move || {
                     (t..n_classes)
                         .step_by(threads)
-                        .map(|k| {
-                            let f = fold(k, training, calibration, later, classes, opts, grid);
-                            (k, f)
-                        })
+                        .map(|k| (k, fold(k, folds)))
                         .collect::<Vec<_>>()
                 })
             })
@@ -514,17 +523,16 @@ impl<'a> FoldSets<'a> {
     }
 }
 
-/// One fold: terrain `out_k` left out; per candidate of `grid`, its tally. `later`, with no
-/// calibration run: the session's later images, judged as known ground.
-fn fold(
-    out_k: usize,
-    training: &[Labelled<'_>],
-    calibration: &[Labelled<'_>],
-    later: &[Labelled<'_>],
-    classes: &[ClassInfo],
-    opts: &TrainOptions,
-    grid: &[Candidate],
-) -> Result<FoldTally, ChoiceError> {
+/// One fold: terrain `out_k` left out; per candidate of the grid, its tally.
+fn fold(out_k: usize, folds: &Folds<'_, '_>) -> Result<FoldTally, ChoiceError> {
+    let Folds {
+        training,
+        calibration,
+        later,
+        classes,
+        opts,
+        grid,
+    } = *folds;
     let sets = FoldSets::new(out_k, training, calibration, later, classes);
     let fits = fold_models(&sets, opts, grid)?;
     let maps = crate::unknown::energy::fit(&sets.stances, sets.classes.len(), opts.unknown_rate);
