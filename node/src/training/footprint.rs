@@ -7,8 +7,7 @@
 //! rows and its columns as shares of its total (so every stance counts the same, whatever its
 //! load), the shares are averaged over the stances, and the crop keeps the rows and columns
 //! from the first to the last that carry at least [`LOADED_SHARE`] of the load. On the
-//! simulator's foot that is the paper's own crop (its three bottom rows carry 0.16% and less,
-//! its six left columns 0.19% and less).
+//! simulator's foot that is the paper's own crop (docs/decisions/foot-settings.md).
 //!
 //! A crop given with `--crop` that cuts a line carrying that much is warned about, with the
 //! share of the load it cuts.

@@ -478,9 +478,8 @@ pub const CROSS_FIT_BLOCKS: usize = 10;
 /// block, a model fitted as `model` (its dimensions, normalisation) on the stored samples of
 /// the other blocks scores the block's images, and their kNN distances are put in `model`'s
 /// units (`provisional`'s class spreads) by the ratio of the spreads. No image is scored by a
-/// model that saw it or its neighbours in time: the stored samples spanned the PCA, so their
-/// own residuals were near zero and a leave-one-out calibration called 71% of the next
-/// session's known ground unknown (docs/decisions/unknown-one-session.md).
+/// model that saw it or its neighbours in time: the stored samples span the PCA, so their own
+/// residuals are near zero (why leave-one-out failed: docs/decisions/unknown-one-session.md).
 fn cross_fit(
     model: &Model,
     pixels: &[Vec<u16>],
