@@ -27,9 +27,10 @@ arm_build_pid=$!
 tree() { echo "$1"; for c in $(ps -o pid= --ppid "$1" 2>/dev/null); do tree "$c"; done; }
 trap 'for p in $(tree "$arm_build_pid") ${arm_pid:+$(tree "$arm_pid")}; do kill "$p" 2>/dev/null; done' EXIT
 part "cargo clippy"; cargo clippy --workspace --all-targets --features vcan,interop -- -D warnings
-part "protocol without std, for the foot's microcontroller (thumbv7em-none-eabihf)"
-cargo build -p presrs-protocol --no-default-features --target thumbv7em-none-eabihf
-cargo clippy -p presrs-protocol --no-default-features --target thumbv7em-none-eabihf -- -D warnings
+part "the wire crate without std, for the foot's microcontroller (thumbv7em-none-eabihf)"
+cargo build -p presrs-wire --no-default-features --target thumbv7em-none-eabihf
+cargo clippy -p presrs-wire --no-default-features --target thumbv7em-none-eabihf -- -D warnings
+cargo clippy -p presrs-wire --features alloc --target thumbv7em-none-eabihf -- -D warnings
 # With vcan: the vcan suite's binary is built here, with the rest, and its tests listed as
 # ignored; tests/vcan/run.sh runs them below, on real SocketCAN.
 part "cargo test (unit, property, cantools/python-can interop)"

@@ -3,7 +3,7 @@
 # among them (wood, sand, clay, grass), one 15 s run per terrain on each of sensors 1-3 (the
 # simulator on a one-terrain track holding G2, written as a candump log), each log through
 # `presrs capture --labels`, so the manifest names three runs per terrain. For
-# `presrs experiment open-set --data OUT --crop 0,3,6,0 --normalize-load`: the left-out sand
+# `presrs lab experiment open-set --data OUT --crop 0,3,6,0 --normalize-load`: the left-out sand
 # that texture cannot find, and what a check costs on images that came over the bus
 # (docs/real-robot.md, "The texture check").
 #
@@ -21,7 +21,7 @@ for t in wood sand clay grass; do
   printf 'diameter_m = 2.8\n\n[[segments]]\nterrain = "%s"\nlength_m = 8.8\n' "$t" >"$work/$t.toml"
   for s in 1 2 3; do
     log="$work/${t}_run$s.log"
-    "$presrs" sim --log "$log" --truth "$work/${t}_run$s.csv" --track "$work/$t.toml" \
+    "$presrs" lab sim --log "$log" --truth "$work/${t}_run$s.csv" --track "$work/$t.toml" \
       --duration 15 --sensor "$s" --seed $((40 + s)) >/dev/null
     "$presrs" capture --replay "$log" --labels "$work/${t}_run$s.csv" --out "$out" >/dev/null
   done

@@ -3,7 +3,7 @@
 KernelDensity for the Parzen step) against `presrs`, one image at a time, on the same data and
 the same model file.
 
-    presrs dataset static --out /tmp/ds/static
+    presrs lab dataset static --out /tmp/ds/static
     presrs train --data /tmp/ds/static --out /tmp/ds/static.json --crop 2,2,2,2 --dims 52
     python3 scripts/compare_numpy.py --model /tmp/ds/static.json --data /tmp/ds/static
 
@@ -11,7 +11,7 @@ Per image, both sides do: crop (and downsample), rows concatenated and zero-padd
 magnitude (first N/2+1 bins), PCA projection with the model's mean and matrix, and the Parzen
 decision over the model's stored samples. numpy uses `rfft` (its fastest real transform). Our
 time is `presrs eval --json`'s `classify_us_median` on the same images. The script also checks
-that both sides pick the same terrain for every image (`presrs classify`), so the timing is of
+that both sides pick the same terrain for every image (`presrs lab classify`), so the timing is of
 the same computation. Prints one JSON object; exits 1 if the decisions disagree.
 """
 import argparse
@@ -26,7 +26,7 @@ import numpy as np
 
 
 def read_pgm(path):
-    """P2 or P5, maxval up to 65535 (what `presrs dataset` writes)."""
+    """P2 or P5, maxval up to 65535 (what `presrs lab dataset` writes)."""
     data = path.read_bytes()
     tokens, pos = [], 0
     while len(tokens) < 4:
@@ -135,7 +135,7 @@ def main():
     model = json.loads(a.model.read_text())
     files = sorted(a.data.glob("*/*.pgm"))[: a.max_images]
     if not files:
-        sys.exit(f"no PGM images in class folders under {a.data}; make some with `presrs dataset`")
+        sys.exit(f"no PGM images in class folders under {a.data}; make some with `presrs lab dataset`")
     images = [read_pgm(p) for p in files]
     names = [c["name"] for c in model["classes"]]
 

@@ -1,13 +1,13 @@
 #!/usr/bin/env python3
 """Writes the real plantar-pressure images of the `jiku-data` package's SpeedPP2D set (Pataky
 et al. 2008: 10 subjects x 3 walking speeds x 20 trials, 63x33 peak-pressure maps) as a
-presrs dataset, from the installed package (its files are GPL: they are read here, never copied
+presrs lab dataset, from the installed package (its files are GPL: they are read here, never copied
 into this repository):
 
     OUT/subjNN/speedS_trialTT.pgm   16-bit PGM, one class per subject
     OUT/manifest.csv                the `presrs capture` manifest; `source` = the block of trials
                                     (0-9, 10-14, 15-19 of each speed, in recording order), so
-                                    that `presrs train` and `presrs experiment open-set` hold
+                                    that `presrs train` and `presrs lab experiment open-set` hold
                                     out later trials as the "next run". (Not the speeds: a
                                     subject's walk changes more between speeds than between
                                     subjects, measured: 38% of subjects right across speeds.)
@@ -19,7 +19,7 @@ into this repository):
 
     python3 scripts/speedpp2d.py --out DIR
     python3 scripts/speedpp2d.py --out DIR --runs speed-blocks   # source = speedS/trialsXX-YY
-    presrs experiment open-set --normalize-load --extra-source DIR --terrains DIR/terrains.toml
+    presrs lab experiment open-set --normalize-load --extra-source DIR --terrains DIR/terrains.toml
 
 Load-normalise (`--normalize-load`, also for `presrs train`): the three speeds load the foot
 differently and the person is in the shape. Measured (open-set, seeds 1-3): a left-out subject

@@ -38,7 +38,7 @@ import sys
 import zlib
 
 BLOCKS = [("trials00-09", range(0, 10)), ("trials10-14", range(10, 15)), ("trials15-19", range(15, 20))]
-EPOCH_S = 1_700_000_000  # the logs' receive clock, as `presrs sim --log` writes
+EPOCH_S = 1_700_000_000  # the logs' receive clock, as `presrs lab sim --log` writes
 FOOT_ID_CONTACT = 0x100
 FOOT_ID_TACTILE = 0x600
 TICK_US = 10_000  # the foot's 100 Hz

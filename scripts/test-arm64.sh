@@ -47,8 +47,8 @@ export CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_RUNNER="qemu-aarch64 -L /usr/aarch
 # tests and benches, linted on the host, compile for aarch64 in the next step. With
 # --all-targets the dev-dependencies (criterion, proptest) were checked for aarch64 too: 77 s
 # against 46 s on a fresh target directory (2-core machine, 2026-11-25).
-step "cargo clippy --target $triple --lib (node, protocol)"
-cross cargo clippy --quiet --target "$triple" -p presrs-node -p presrs-protocol --lib -- -D warnings
+step "cargo clippy --target $triple --lib (node, protocol, wire)"
+cross cargo clippy --quiet --target "$triple" -p presrs-node -p presrs-protocol -p presrs-wire --lib -- -D warnings
 
 # --release: the emulated tests run in seconds instead of minutes. The node crate only: the
 # CLI's tests cross-built with it compiled the whole workspace and the CLI's dev-dependencies

@@ -44,7 +44,7 @@ for seed in "${@:-1 2 3}"; do
     mkdir -p "$w"
     for g in 1 2 3; do
       for sensor in 1 2 3; do
-        "$presrs" dataset dynamic --n 60 --gait "G$g" --sensor "$sensor" \
+        "$presrs" lab dataset dynamic --n 60 --gait "G$g" --sensor "$sensor" \
           --seed $((s * 100 + sensor * 10 + g)) --out "$w/G$g-s$sensor" > /dev/null
       done
     done

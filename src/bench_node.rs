@@ -1,4 +1,4 @@
-//! `presrs bench-node`: the speed targets measured on the node as it runs.
+//! `presrs lab bench-node`: the speed targets measured on the node as it runs.
 //!
 //! A load generator plays `--feet` feet at 100 Hz (PreSRS frame rate, CAN FD segments) with a
 //! step every 300 ms (150 ms stance), using simulated G2 images of the four dynamic terrains.

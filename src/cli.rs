@@ -1,6 +1,6 @@
 //! The classifier commands: argument handling and printing around `node::classifier`.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
 
@@ -74,38 +74,59 @@ pub fn train(a: &TrainArgs) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-pub fn eval(
-    model_path: &Path,
-    data: &Path,
-    spec: &lab::score::EvalSpec,
-    json: bool,
-    skip_bad: bool,
-    terrains: &protocol::TerrainsArg,
-) -> Result<ExitCode> {
-    let model = Model::load(model_path)?;
-    model.check_catalog(&terrains.catalog()?)?;
-    let ds = load_dataset(data, skip_bad)?;
+/// `presrs eval`.
+#[derive(clap::Args)]
+pub struct EvalArgs {
+    #[arg(long)]
+    pub model: PathBuf,
+    #[arg(long)]
+    pub data: PathBuf,
+    #[command(flatten)]
+    pub spec: tools::eval::EvalSpec,
+    #[arg(long)]
+    pub json: bool,
+    /// Skip unreadable files (counted) instead of stopping.
+    #[arg(long)]
+    pub skip_bad: bool,
+    #[command(flatten)]
+    pub terrains: protocol::TerrainsArg,
+}
+
+pub fn eval(a: &EvalArgs) -> Result<ExitCode> {
+    let model = Model::load(&a.model)?;
+    model.check_catalog(&a.terrains.catalog()?)?;
+    let ds = load_dataset(&a.data, a.skip_bad)?;
     let names: Vec<String> = model.classes.iter().map(|c| c.name.clone()).collect();
-    let ev = lab::score::evaluate(model, &ds, spec)?;
-    if json {
-        println!("{}", ev.to_json(&names, spec));
+    let ev = tools::eval::evaluate(model, &ds, &a.spec)?;
+    if a.json {
+        println!("{}", ev.to_json(&names, &a.spec));
     } else {
-        print!("{}", ev.table(&names, spec));
+        print!("{}", ev.table(&names, &a.spec));
     }
     Ok(ExitCode::SUCCESS)
 }
 
-pub fn classify(
-    model_path: &Path,
-    files: &[PathBuf],
-    json: bool,
-    terrains: &protocol::TerrainsArg,
-) -> Result<ExitCode> {
-    let model = Model::load(model_path)?;
-    model.check_catalog(&terrains.catalog()?)?;
+/// `presrs lab classify`.
+#[derive(clap::Args)]
+pub struct ClassifyArgs {
+    #[arg(long)]
+    pub model: PathBuf,
+    pub files: Vec<PathBuf>,
+    /// One JSON object per line: `file`, `terrain`, `confidence`, `novelty` (larger = less
+    /// like any known terrain) and `threshold` (above it: unknown), so that the score's
+    /// ROC can be drawn on your own images.
+    #[arg(long)]
+    pub json: bool,
+    #[command(flatten)]
+    pub terrains: protocol::TerrainsArg,
+}
+
+pub fn classify(a: &ClassifyArgs) -> Result<ExitCode> {
+    let model = Model::load(&a.model)?;
+    model.check_catalog(&a.terrains.catalog()?)?;
     let names: Vec<String> = model.classes.iter().map(|c| c.name.clone()).collect();
     let mut c = Classifier::new(model);
-    for f in files {
+    for f in &a.files {
         for (i, img) in read_images(f)?.iter().enumerate() {
             let d = c
                 .classify_image(img, false)
@@ -114,7 +135,7 @@ pub fn classify(
                 0 => f.display().to_string(),
                 i => format!("{}#{i}", f.display()),
             };
-            if json {
+            if a.json {
                 println!("{}", d.to_json(&file, &names));
             } else {
                 // Unknown ground chose no terrain: no confidence (`--json` gives the nearest
@@ -130,14 +151,25 @@ pub fn classify(
     Ok(ExitCode::SUCCESS)
 }
 
-pub fn features(file: &Path, crop: &Crop, json: bool) -> Result<ExitCode> {
+/// `presrs lab features`.
+#[derive(clap::Args)]
+pub struct FeaturesArgs {
+    pub file: PathBuf,
+    #[arg(long, default_value = "0,0,0,0")]
+    pub crop: Crop,
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn features(a: &FeaturesArgs) -> Result<ExitCode> {
+    let (file, crop) = (&a.file, &a.crop);
     let img = read_image(file)?;
     let img = img
         .crop(crop)
         .with_context(|| format!("crop {crop:?} leaves nothing of {}", file.display()))?;
     let mut fx = node::classifier::features::FeatureExtractor::new(img.rows * img.cols);
     let f = fx.features(&img.pixels, 1.0);
-    if json {
+    if a.json {
         println!("{}", serde_json::json!({ "features": f }));
     } else {
         for v in f {
@@ -147,18 +179,52 @@ pub fn features(file: &Path, crop: &Crop, json: bool) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-pub fn repair(file: &Path, out: &Path) -> Result<ExitCode> {
-    let mut img = read_image(file)?;
+/// `presrs lab repair`.
+#[derive(clap::Args)]
+pub struct RepairArgs {
+    pub file: PathBuf,
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+pub fn repair(a: &RepairArgs) -> Result<ExitCode> {
+    let mut img = read_image(&a.file)?;
     let (r, c) = repair_mod::repair(&mut img);
-    write_pgm(&img, out).with_context(|| format!("writing {}", out.display()))?;
+    write_pgm(&img, &a.out).with_context(|| format!("writing {}", a.out.display()))?;
     println!(
         "filled {r} dead rows and {c} dead columns; wrote {}",
-        out.display()
+        a.out.display()
     );
     Ok(ExitCode::SUCCESS)
 }
 
-/// `presrs dataset`.
+/// `presrs lab dbc`.
+#[derive(clap::Args)]
+pub struct DbcArgs {
+    /// TOML file with the identifier map (`extended`, `leg_command`, ... `tactile_frame_classic`).
+    #[arg(long)]
+    pub ids: Option<PathBuf>,
+    /// Output file (stdout when absent).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    #[command(flatten)]
+    pub terrains: protocol::TerrainsArg,
+}
+
+pub fn dbc(a: &DbcArgs) -> Result<ExitCode> {
+    let cfg = match &a.ids {
+        None => protocol::IdConfig::default(),
+        Some(p) => protocol::config::ids_from_file(p)?,
+    };
+    let text = protocol::dbc::generate(&cfg, &a.terrains.catalog()?);
+    match &a.out {
+        Some(p) => std::fs::write(p, text).with_context(|| format!("writing {}", p.display()))?,
+        None => print!("{text}"),
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `presrs lab dataset`.
 #[derive(clap::Args)]
 pub struct DatasetArgs {
     /// static (section 4), sandpaper (section 5) or dynamic (section 7, on the hopper).

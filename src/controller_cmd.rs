@@ -21,7 +21,7 @@ pub struct ControllerArgs {
     /// Gaits and policy (TOML or JSON by extension); see `examples/controller.toml`.
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// The controller's clock rate relative to the wall clock; match `presrs sim --speed` when
+    /// The controller's clock rate relative to the wall clock; match `presrs lab sim --speed` when
     /// the simulator runs slower or faster than real time (on a robot: 1).
     #[arg(long, default_value_t = 1.0)]
     pub time_scale: f64,

@@ -70,7 +70,7 @@ pub struct DemoArgs {
     #[command(flatten)]
     pub ros2: ros2::Ros2Options,
     /// Every frame of the demo's bus (motor frames included) as a candump log (`candump -L`
-    /// format, interface can0, as `presrs sim --log` writes): `canplayer vcan0=can0 -I FILE`
+    /// format, interface can0, as `presrs lab sim --log` writes): `canplayer vcan0=can0 -I FILE`
     /// replays it, `presrs mcap` and python-can read it.
     #[arg(long, value_name = "FILE", conflicts_with = "realtime")]
     pub candump: Option<PathBuf>,
@@ -79,8 +79,8 @@ pub struct DemoArgs {
     #[arg(long, value_name = "KG", default_value_t = 0.0)]
     pub payload: f64,
     /// With --candump: the true terrain of every step as a labels CSV in the log's timestamps
-    /// (`start_s,end_s,terrain,foot`, as `presrs sim --truth` writes it), for `presrs capture
-    /// --labels` and `presrs energy --labels`.
+    /// (`start_s,end_s,terrain,foot`, as `presrs lab sim --truth` writes it), for `presrs capture
+    /// --labels` and `presrs lab energy --labels`.
     #[arg(long, value_name = "FILE", requires = "candump")]
     pub truth: Option<PathBuf>,
 }

@@ -1,4 +1,4 @@
-//! `presrs energy`: fits a model's energy check on the robot's closed-loop runs on known
+//! `presrs lab energy`: fits a model's energy check on the robot's closed-loop runs on known
 //! ground. The work is [`node::unknown::energy_fit`]; this module reads the arguments and the logs and
 //! prints what was fitted.
 

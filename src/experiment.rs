@@ -1,4 +1,4 @@
-//! `presrs experiment`: the paper's tables and figures ([`lab::report`]) written to
+//! `presrs lab experiment`: the paper's tables and figures ([`lab::report`]) written to
 //! `OUT/results.md` (or `OUT/WHICH.md`) with `OUT/figures/`, under a header saying where the
 //! data came from and how to regenerate it.
 

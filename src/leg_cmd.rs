@@ -25,7 +25,7 @@ pub struct LegArgs {
     /// Read every joint and send LegState, move nothing (bring-up).
     #[arg(long)]
     pub check: bool,
-    /// The robot's clock rate relative to the wall clock (match `presrs sim --speed`; 1 on a robot).
+    /// The robot's clock rate relative to the wall clock (match `presrs lab sim --speed`; 1 on a robot).
     #[arg(long, default_value_t = 1.0)]
     pub time_scale: f64,
 }

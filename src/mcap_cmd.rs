@@ -1,5 +1,5 @@
 //! `presrs mcap`: a candump log to an MCAP file; and the `--mcap` / `--foxglove` options with
-//! which `presrs node` and `presrs sim` record live. The channels and the writing are
+//! which `presrs node` and `presrs lab sim` record live. The channels and the writing are
 //! [`record`]'s; this module reads arguments and says what happened.
 
 use std::path::PathBuf;
@@ -60,7 +60,7 @@ pub fn run(a: McapArgs) -> Result<ExitCode> {
         let names = ros2::Names::new(0, &a.namespace)?;
         let mut bag = ros2::RosBag::create(&a.out, names.clone()).context("--out")?;
         let mut enc = ros2::Encoder::new(ids, catalog, &names);
-        lab::replay::log_to_bag(&mut records, node.as_mut(), &mut enc, &mut bag)
+        tools::replay::log_to_bag(&mut records, node.as_mut(), &mut enc, &mut bag)
             .context("--out")?;
         bag.finish().context("--out")?;
         records.finish()?;
@@ -84,7 +84,7 @@ pub fn run(a: McapArgs) -> Result<ExitCode> {
     }
     let mut out = McapFile::create(&a.out).context("--out")?;
     let mut rec = Recorder::new(ids, catalog);
-    lab::replay::log_to_recording(&mut records, node.as_mut(), &mut rec, &mut out)
+    tools::replay::log_to_recording(&mut records, node.as_mut(), &mut rec, &mut out)
         .context("--out")?;
     records.finish()?;
     out.finish().context("--out")?;
@@ -128,7 +128,7 @@ pub fn view(a: ViewArgs) -> Result<ExitCode> {
         .recording
         .file_name()
         .map_or_else(String::new, |n| n.to_string_lossy().to_string());
-    let s = lab::view::render(
+    let s = tools::view::render(
         &msgs,
         a.foot,
         a.at,

@@ -1,4 +1,4 @@
-//! `presrs sim`: the simulated hopper and foot on a CAN interface, in real time (or `--speed`
+//! `presrs lab sim`: the simulated hopper and foot on a CAN interface, in real time (or `--speed`
 //! times faster), as a separate process: it publishes FootContact, LegState and the tactile
 //! frames, obeys LegCommand, and holds its configured gait when no controller is on the bus.
 //!
@@ -163,7 +163,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
         let _ = l.join();
     }
     outputs.finish();
-    eprintln!("presrs sim: {r}");
+    eprintln!("presrs lab sim: {r}");
     if let Some(p) = &a.report {
         std::fs::write(p, serde_json::to_string_pretty(&r)?)
             .with_context(|| format!("writing --report {}", p.display()))?;
@@ -171,7 +171,7 @@ pub fn run(a: SimArgs) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// `presrs sim --log`: the robot's frames to a candump log, and its truth to a labels CSV.
+/// `presrs lab sim --log`: the robot's frames to a candump log, and its truth to a labels CSV.
 fn write_log(
     cfg: SimConfig,
     a: &SimArgs,
@@ -201,7 +201,7 @@ fn write_log(
             .with_context(|| format!("writing --truth {}", p.display()))?;
     }
     eprintln!(
-        "presrs sim: {:.1} s simulated, {} steps, {frames} frames written to {}",
+        "presrs lab sim: {:.1} s simulated, {} steps, {frames} frames written to {}",
         duration_us as f64 * 1e-6,
         steps.len(),
         log.display()

@@ -1,6 +1,6 @@
 //! `presrs capture` builds a training set from the robot's own logs, and
 //! the whole path a lab walks (record per terrain, capture, train, deploy, classify a fresh
-//! mixed run) works from the CLI. The simulator stands in for the robot (`presrs sim --log`);
+//! mixed run) works from the CLI. The simulator stands in for the robot (`presrs lab sim --log`);
 //! the vcan suite walks the same path over real SocketCAN with candump.
 
 mod common;
@@ -40,8 +40,15 @@ fn track(dir: &Path, terrain: &str) -> PathBuf {
 fn sim_log(dir: &Path, name: &str, track: Option<&Path>, secs: u32, seed: u64) -> PathBuf {
     let log = dir.join(format!("{name}.log"));
     let mut cmd = presrs();
-    cmd.args(["sim", "--log", s(&log), "--duration", &secs.to_string()])
-        .args(["--seed", &seed.to_string()]);
+    cmd.args([
+        "lab",
+        "sim",
+        "--log",
+        s(&log),
+        "--duration",
+        &secs.to_string(),
+    ])
+    .args(["--seed", &seed.to_string()]);
     if let Some(t) = track {
         cmd.args(["--track", s(t)]);
     } else {
@@ -92,7 +99,7 @@ fn a_lab_records_captures_trains_and_classifies_a_fresh_run() {
     assert_eq!(rows.len() as u64, total);
     for r in &rows {
         let f: Vec<&str> = r.split(',').collect();
-        // `presrs sim --log` is the foot's traffic only: no controller, no GaitStatus, no gait.
+        // `presrs lab sim --log` is the foot's traffic only: no controller, no GaitStatus, no gait.
         assert_eq!((f.len(), f[9]), (12, ""), "{r}");
         // The flights beside the stance (the foot switch's), empty where the log has none.
         for flight in &f[10..12] {

@@ -111,6 +111,7 @@ fn train_eval_classify_features_repair() {
     let img = data.join("grass/029.pgm");
     let classify_with = |model: &Path, file: &Path| {
         presrs(&[
+            "lab",
             "classify",
             "--model",
             model.to_str().unwrap(),
@@ -157,6 +158,7 @@ fn train_eval_classify_features_repair() {
     );
 
     let (ok, out, _) = presrs(&[
+        "lab",
         "features",
         img.to_str().unwrap(),
         "--crop",
@@ -168,7 +170,7 @@ fn train_eval_classify_features_repair() {
     assert_eq!(f["features"].as_array().unwrap().len(), 1025);
 
     let asf = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/tekscan/FrasP01L.asf");
-    let (ok, out, err) = presrs(&["features", asf.to_str().unwrap(), "--json"]);
+    let (ok, out, err) = presrs(&["lab", "features", asf.to_str().unwrap(), "--json"]);
     assert!(ok, "{err}");
     let f: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
     assert_eq!(f["features"].as_array().unwrap().len(), 1025); // 60x21 = 1260 -> N = 2048
@@ -178,6 +180,7 @@ fn train_eval_classify_features_repair() {
     let mut b = b"P2\n3 3\n255\n1 2 3\n0 0 0\n7 8 9\n".to_vec();
     std::fs::write(&broken, &b).unwrap();
     let (ok, out, _) = presrs(&[
+        "lab",
         "repair",
         broken.to_str().unwrap(),
         "--out",
@@ -191,6 +194,7 @@ fn train_eval_classify_features_repair() {
     b = b"P2\n3 3\n255\n1 2 3\n0 x 0\n7 8 9\n".to_vec();
     std::fs::write(&broken, &b).unwrap();
     let (ok, _, err) = presrs(&[
+        "lab",
         "classify",
         "--model",
         model.to_str().unwrap(),
@@ -201,17 +205,18 @@ fn train_eval_classify_features_repair() {
         "{err}"
     );
     let (ok, _, err) = presrs(&[
+        "lab",
         "classify",
         "--model",
         broken.to_str().unwrap(),
         img.to_str().unwrap(),
     ]);
     assert!(!ok && err.contains("not a PreSRS model"), "{err}");
-    let (ok, _, err) = presrs(&["sim"]);
+    let (ok, _, err) = presrs(&["lab", "sim"]);
     assert!(!ok && err.contains("--iface"), "{err}");
     let (ok, _, err) = presrs(&["node", "--model", "m.json"]);
     assert!(!ok && err.contains("--iface"), "{err}");
-    let (ok, _, err) = presrs(&["experiment", "tables"]);
+    let (ok, _, err) = presrs(&["lab", "experiment", "tables"]);
     assert!(!ok && err.contains("invalid value 'tables'"), "{err}");
 }
 
@@ -279,7 +284,7 @@ fn calibration_runs_and_classify_json() {
     );
     // classify --json: one object per image, a known image below its threshold.
     let img = set.join("wood/003.pgm");
-    let (ok, out, err) = presrs(&["classify", "--json", "--model", &s(&model), &s(&img)]);
+    let (ok, out, err) = presrs(&["lab", "classify", "--json", "--model", &s(&model), &s(&img)]);
     assert!(ok, "{err}");
     let v: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
     assert_eq!(v["terrain"], "wood");

@@ -240,7 +240,7 @@ fn demo_candump_where_no_file_can_be_made_names_it() {
 }
 
 /// The lab's path: a closed-loop run recorded with its truth (`presrs demo
-/// --candump --truth`), `presrs energy` fits a model's energy check on it, and that model meets
+/// --candump --truth`), `presrs lab energy` fits a model's energy check on it, and that model meets
 /// sand. Bad inputs are refused naming the input: labels for another number of logs, a label
 /// the model does not know, a model file whose energy check is broken.
 #[test]
@@ -271,7 +271,7 @@ fn energy_is_fitted_from_a_recorded_run_and_bad_inputs_are_named() {
     let fitted = dir.join("fitted.json");
     let out = common::output_ok(
         presrs()
-            .args(["energy", "--json", "--model"])
+            .args(["lab", "energy", "--json", "--model"])
             .arg(&plain)
             .arg("--replay")
             .arg(&log)
@@ -371,7 +371,7 @@ fn energy_is_fitted_from_a_recorded_run_and_bad_inputs_are_named() {
     let s = |p: &std::path::Path| p.to_str().unwrap().to_string();
     let (p_plain, p_log, p_out) = (s(&plain), s(&log), s(&dir.join("x.json")));
     let energy = [
-        "energy", "--model", &p_plain, "--replay", &p_log, "--out", &p_out,
+        "lab", "energy", "--model", &p_plain, "--replay", &p_log, "--out", &p_out,
     ];
     let e = fails(&[&energy[..], &["--replay", &p_log, "--labels", &s(&truth)]].concat());
     assert!(e.contains("1 --labels for 2 --replay"), "{e}");
@@ -386,6 +386,7 @@ fn energy_is_fitted_from_a_recorded_run_and_bad_inputs_are_named() {
     let head: Vec<&str> = text.lines().take(3000).collect();
     std::fs::write(&short, head.join("\n") + "\n").unwrap();
     let e = fails(&[
+        "lab",
         "energy",
         "--model",
         &p_plain,
@@ -407,11 +408,15 @@ fn energy_is_fitted_from_a_recorded_run_and_bad_inputs_are_named() {
     let bad = dir.join("broken.json");
     std::fs::write(&bad, broken.to_string()).unwrap();
     let e = fails(&["demo", "--steps", "5", "--model", &s(&bad)]);
-    assert!(e.contains("energy") && e.contains("presrs energy"), "{e}");
+    assert!(
+        e.contains("energy") && e.contains("presrs lab energy"),
+        "{e}"
+    );
     // A payload the hopper cannot carry is refused naming the option and the range.
     for args in [
         &["demo", "--steps", "5", "--payload", "3"][..],
         &[
+            "lab",
             "sim",
             "--duration",
             "1",

@@ -92,8 +92,8 @@ fn the_shell_blocks_are_read_as_a_shell_would() {
     assert_eq!(lines, ["presrs a --b c", "presrs d  --e f > out.txt &"]);
     assert_eq!(presrs_commands(&lines[1]), [["d", "--e", "f"]]);
     assert_eq!(
-        presrs_commands("presrs dataset x && presrs train --data x"),
-        [vec!["dataset", "x"], vec!["train", "--data", "x"]]
+        presrs_commands("presrs lab dataset x && presrs train --data x"),
+        [vec!["lab", "dataset", "x"], vec!["train", "--data", "x"]]
     );
     assert!(presrs_commands("sudo ./vcan-setup.sh vcan0").is_empty());
 }
@@ -190,16 +190,34 @@ fn the_readme_path_for_a_labs_robot_runs_as_written() {
             let track = track.to_str().unwrap();
             run(
                 &dir,
-                &words(&["sim", "--log", &log, "--duration", "10", "--track", track])
-                    .into_iter()
-                    .chain(["--seed".to_string(), seed.to_string()])
-                    .collect::<Vec<_>>(),
+                &words(&[
+                    "lab",
+                    "sim",
+                    "--log",
+                    &log,
+                    "--duration",
+                    "10",
+                    "--track",
+                    track,
+                ])
+                .into_iter()
+                .chain(["--seed".to_string(), seed.to_string()])
+                .collect::<Vec<_>>(),
             );
         }
     }
     run(
         &dir,
-        &words(&["sim", "--log", "run.log", "--duration", "8", "--seed", "35"]),
+        &words(&[
+            "lab",
+            "sim",
+            "--log",
+            "run.log",
+            "--duration",
+            "8",
+            "--seed",
+            "35",
+        ]),
     );
     for c in &captures {
         run(&dir, c);

@@ -1,4 +1,4 @@
-//! `presrs experiment all --quick`: every table and figure is written and is what it says.
+//! `presrs lab experiment all --quick`: every table and figure is written and is what it says.
 
 mod common;
 
@@ -10,7 +10,7 @@ fn experiment_all_quick_writes_every_table_and_figure() {
     let _ = std::fs::remove_dir_all(&dir);
     common::output_ok(
         Command::new(env!("CARGO_BIN_EXE_presrs"))
-            .args(["experiment", "all", "--quick", "--out"])
+            .args(["lab", "experiment", "all", "--quick", "--out"])
             .arg(&dir)
             .env("XDG_CACHE_HOME", dir.join("cache")),
     );
@@ -97,13 +97,14 @@ fn experiment_runs_on_a_user_dataset_given_with_data() {
     // Any directory of class sub-directories; here, 25 static presses per terrain as PGM.
     common::output_ok(
         Command::new(bin)
-            .args(["dataset", "static", "--n", "25", "--out"])
+            .args(["lab", "dataset", "static", "--n", "25", "--out"])
             .arg(&data),
     );
     let out = dir.join("out");
     common::output_ok(
         Command::new(bin)
             .args([
+                "lab",
                 "experiment",
                 "damage",
                 "--quick",
@@ -131,7 +132,7 @@ fn experiment_runs_on_a_user_dataset_given_with_data() {
 
     // A directory that is not a dataset: an error naming it, no panic.
     let bad = Command::new(bin)
-        .args(["experiment", "static", "--data"])
+        .args(["lab", "experiment", "static", "--data"])
         .arg(dir.join("nope"))
         .arg("--out")
         .arg(&out)
@@ -155,7 +156,7 @@ fn open_set_takes_the_models_split_and_rate_and_refuses_ones_that_cannot_work() 
     let refused = |extra: &[&str], why: &str| {
         let out = dir.join("bad");
         let o = Command::new(env!("CARGO_BIN_EXE_presrs"))
-            .args(["experiment", "open-set", "--quick", "--out"])
+            .args(["lab", "experiment", "open-set", "--quick", "--out"])
             .arg(&out)
             .args(extra)
             .output()
@@ -176,7 +177,7 @@ fn open_set_takes_the_models_split_and_rate_and_refuses_ones_that_cannot_work() 
         let out = dir.join(name);
         common::output_ok(
             Command::new(env!("CARGO_BIN_EXE_presrs"))
-                .args(["experiment", "open-set", "--quick", "--out"])
+                .args(["lab", "experiment", "open-set", "--quick", "--out"])
                 .arg(&out)
                 .args(extra),
         );

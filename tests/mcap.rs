@@ -217,7 +217,11 @@ fn stderr_of(cmd: &mut Command) -> (bool, String) {
 fn bad_paths_and_logs_are_named_and_a_live_run_goes_on_without_its_recording() {
     let dir = tempdir("bad");
     let log = dir.join("run.log");
-    common::output_ok(presrs().args(["sim", "--duration", "2", "--log"]).arg(&log));
+    common::output_ok(
+        presrs()
+            .args(["lab", "sim", "--duration", "2", "--log"])
+            .arg(&log),
+    );
     for (out, says) in [
         ("/nonexistent-presrs-dir/x.mcap", "folder does not exist"),
         ("/dev/full", "the disk is full"),

@@ -1,6 +1,6 @@
 //! The classifier against an independent implementation: `scripts/compare_numpy.py` runs the
 //! same pipeline in numpy (and scikit-learn's KernelDensity) from the same model file, and must
-//! pick the same terrain as `presrs classify` for every image. Needs numpy and scikit-learn
+//! pick the same terrain as `presrs lab classify` for every image. Needs numpy and scikit-learn
 //! (`tests/requirements.txt`); run with `--features interop`, as the README's test command does.
 //! Speed is not asserted here (debug build, noisy machine): the ratio is measured by running the
 //! script against the release binary (see the README).
@@ -24,7 +24,9 @@ fn numpy_and_sklearn_pick_the_same_terrains_as_presrs() {
     };
     let d = data.to_str().expect("utf-8 temp path");
     let m = model.to_str().expect("utf-8 temp path");
-    run(&["dataset", "static", "--out", d, "--n", "30", "--seed", "5"]);
+    run(&[
+        "lab", "dataset", "static", "--out", d, "--n", "30", "--seed", "5",
+    ]);
     run(&[
         "train", "--data", d, "--out", m, "--crop", "2,2,2,2", "--dims", "52",
     ]);

@@ -2,7 +2,7 @@
 //! of the `jiku-data` package's SpeedPP2D set (10 subjects as classes, written by
 //! `scripts/speedpp2d.py` from the installed package; needs `--features interop`, as the
 //! README's test command runs), and the simulator on sensors, seeds and gaits the model never
-//! saw. Each asserts the figures `presrs experiment open-set` measured (docs/results.md), with
+//! saw. Each asserts the figures `presrs lab experiment open-set` measured (docs/results.md), with
 //! a margin, so that a change that loses them fails here.
 
 // Without `--features interop` the tests that need Python's packages are left out, and the
@@ -300,7 +300,7 @@ fn speedpp2d_a_left_out_subject_is_unknown_more_often_than_not_and_known_ones_ra
     );
     let out = stdout(common::output_ok(
         std::process::Command::new(env!("CARGO_BIN_EXE_presrs"))
-            .args(["classify", "--json", "--model"])
+            .args(["lab", "classify", "--json", "--model"])
             .arg(&model)
             .arg("--terrains")
             .arg(dir.join("terrains.toml"))

@@ -31,7 +31,7 @@ fn tempdir(name: &str) -> PathBuf {
 
 fn dbc(dir: &Path) -> PathBuf {
     let p = dir.join("presrs.dbc");
-    common::output_ok(presrs().args(["dbc", "--out"]).arg(&p));
+    common::output_ok(presrs().args(["lab", "dbc", "--out"]).arg(&p));
     p
 }
 

@@ -226,6 +226,7 @@ fn a_lab_terrain_from_a_terrains_file_trains_classifies_switches_and_decodes() {
     // a TerrainClass frame of id 20 back as "asphalt".
     let dbc_path = dir.join("presrs.dbc");
     common::output_ok(Command::new(env!("CARGO_BIN_EXE_presrs")).args([
+        "lab",
         "dbc",
         "--terrains",
         terrains_s,
@@ -260,7 +261,7 @@ fn a_lab_terrain_from_a_terrains_file_trains_classifies_switches_and_decodes() {
 
     // A catalog that clashes with a default names both entries.
     std::fs::write(&terrains, "[[terrain]]\nid = 8\nname = \"asphalt\"\n").unwrap();
-    let out = presrs(&["dbc", "--terrains", terrains_s]);
+    let out = presrs(&["lab", "dbc", "--terrains", terrains_s]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
     assert!(

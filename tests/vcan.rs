@@ -143,7 +143,7 @@ fn spawn(args: &[&str]) -> Proc {
     )
 }
 
-/// Steps whose classified terrain is the true one, and all steps, of a `presrs sim` report.
+/// Steps whose classified terrain is the true one, and all steps, of a `presrs lab sim` report.
 fn accuracy(r: &serde_json::Value) -> (usize, usize) {
     let steps = r["steps"].as_array().unwrap();
     let correct = steps
@@ -195,11 +195,18 @@ fn system_speed() -> f64 {
         .unwrap_or(1.0)
 }
 
-/// `presrs sim` on `iface` for `sim_s` of robot time; returns its per-step report.
+/// `presrs lab sim` on `iface` for `sim_s` of robot time; returns its per-step report.
 fn sim_report(iface: &str, extra: &[&str], sim_s: f64, seed: u64, name: &str) -> serde_json::Value {
     let report = std::env::temp_dir().join(format!("presrs-{name}-{}.json", std::process::id()));
     let status = std::process::Command::new(presrs())
-        .args(["sim", "--iface", iface, "--duration", &sim_s.to_string()])
+        .args([
+            "lab",
+            "sim",
+            "--iface",
+            iface,
+            "--duration",
+            &sim_s.to_string(),
+        ])
         .args([
             "--seed",
             &seed.to_string(),
@@ -212,7 +219,7 @@ fn sim_report(iface: &str, extra: &[&str], sim_s: f64, seed: u64, name: &str) ->
         .env("RUST_LOG", "warn")
         .status()
         .unwrap();
-    assert!(status.success(), "presrs sim {extra:?}: {status}");
+    assert!(status.success(), "presrs lab sim {extra:?}: {status}");
     let r = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
     let _ = std::fs::remove_file(&report);
     r

@@ -1,7 +1,7 @@
 //! The closed loop in lock-step simulated time: the simulated hopper, the node and the
 //! controller on one in-process bus, advanced one millisecond at a time, as fast as the machine
 //! runs. Each step the node decides becomes a [`StepRecord`] with the ground truth beside it,
-//! the same record `presrs sim` keeps on a real bus.
+//! the same record `presrs lab sim` keeps on a real bus.
 //!
 //! The three parties talk only through CAN frames on the bus, as they do as processes on
 //! vcan; lock-step only fixes the order within a millisecond (robot, node, controller, robot),
@@ -173,7 +173,7 @@ pub struct LoopRecording<'a> {
     pub stop: &'a std::sync::atomic::AtomicBool,
 }
 
-/// The interface name in a [`LoopRecording::log`], as in `presrs sim --log`'s: the robot's
+/// The interface name in a [`LoopRecording::log`], as in `presrs lab sim --log`'s: the robot's
 /// bus (`canplayer vcan0=can0 -I FILE` replays it onto vcan0).
 pub const LOG_IFACE: &str = "can0";
 
@@ -194,7 +194,7 @@ pub struct DemoOutputs<'a> {
     /// Gets every frame and foot 0's truth, stamped on the wall clock.
     pub live: Option<&'a record::LiveRecorder>,
     /// Every frame as a candump log ([`LoopRecording::log`]). Without `live` it is stamped as
-    /// `presrs sim --log` stamps its own: simulated time from [`sim::runner::LOG_EPOCH_US`].
+    /// `presrs lab sim --log` stamps its own: simulated time from [`sim::runner::LOG_EPOCH_US`].
     pub log: Option<&'a mut dyn std::io::Write>,
     /// Paced to real time, so that a live view has something to watch.
     pub paced: bool,
@@ -239,16 +239,7 @@ pub fn run_recorded(
     rec: Option<LoopRecording>,
 ) -> Result<LoopRun, LabError> {
     let wall = std::time::Instant::now();
-    let mut sim_cfg = SimConfig {
-        track: track.clone(),
-        ..Default::default()
-    };
-    if let Some(g) = p.fixed_gait {
-        sim_cfg.gait = g;
-    }
-    sim_cfg.faults.initial_damage_pct = p.damage_pct;
-    sim_cfg.payload_kg = p.payload_kg;
-    sim_cfg.leg = p.leg.clone();
+    let sim_cfg = sim_config(track, p);
     let mut bridge = p.leg.clone().map(|l| leg::LegService::new(l, false));
     let mut node_cfg = p.node.clone();
     // Lock-step simulated time: a refit lands at the step that asked for it, as in a replay.
@@ -321,18 +312,7 @@ pub fn run_recorded(
         if stop.is_some_and(|s| s.load(std::sync::atomic::Ordering::Relaxed)) {
             break;
         }
-        if let Some(pace) = pace.filter(|p| *p > 0.0) {
-            let due = Duration::from_secs_f64(t_us as f64 * 1e-6 / pace);
-            if let Some(wait) = due.checked_sub(wall.elapsed()) {
-                std::thread::sleep(wait);
-            }
-        } else if let Some(tap) = tap {
-            // Simulated time has no real time to keep: the loop waits for its recorder (a
-            // slower disk or network) rather than have it drop frames.
-            while tap.backlog() > 0.5 {
-                std::thread::sleep(Duration::from_millis(1));
-            }
-        }
+        keep_pace(pace, tap, t_us, wall);
         bus.set_link(!during(p.link_down, t_us));
         // Killed processes, and new ones started after their windows: a new one knows only
         // what the bus says from then on.
@@ -388,6 +368,49 @@ pub fn run_recorded(
     if let Some(e) = log_error.take() {
         return Err(LabError::Log(e));
     }
+    Ok(finish(sim, bridge, epoch_us))
+}
+
+/// The simulated robot of a loop run: the track, and what the parameters change of it.
+fn sim_config(track: &Track, p: &LoopParams) -> SimConfig {
+    let mut cfg = SimConfig {
+        track: track.clone(),
+        ..Default::default()
+    };
+    if let Some(g) = p.fixed_gait {
+        cfg.gait = g;
+    }
+    cfg.faults.initial_damage_pct = p.damage_pct;
+    cfg.payload_kg = p.payload_kg;
+    cfg.leg = p.leg.clone();
+    cfg
+}
+
+/// Waits, before simulated millisecond `t_us`, for the wall clock (a paced run) or for the
+/// recorder's tap to catch up.
+fn keep_pace(
+    pace: Option<f64>,
+    tap: Option<&dyn protocol::bus::Tap>,
+    t_us: u64,
+    wall: std::time::Instant,
+) {
+    if let Some(pace) = pace.filter(|p| *p > 0.0) {
+        let due = Duration::from_secs_f64(t_us as f64 * 1e-6 / pace);
+        if let Some(wait) = due.checked_sub(wall.elapsed()) {
+            std::thread::sleep(wait);
+        }
+    } else if let Some(tap) = tap {
+        // Simulated time has no real time to keep: the loop waits for its recorder (a
+        // slower disk or network) rather than have it drop frames.
+        while tap.backlog() > 0.5 {
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
+}
+
+/// The run's result: its steps, the robot's truth on the recording's clock, its falls and the
+/// leg's figures.
+fn finish(sim: SimService<'_>, bridge: Option<leg::LegService>, epoch_us: u64) -> LoopRun {
     let truth = sim
         .robot()
         .steps
@@ -397,13 +420,13 @@ pub fn run_recorded(
             ..*s
         })
         .collect();
-    Ok(LoopRun {
+    LoopRun {
         truth,
         fall_times_us: sim.robot().falls.clone(),
         leg_state: sim.leg_state_check(),
         leg_counters: bridge.map(|b| b.counters()),
         rows: sim.into_records(),
-    })
+    }
 }
 
 /// What the simulator knows of leg `foot` and the robot does not, for a recording's

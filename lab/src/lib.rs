@@ -12,13 +12,12 @@
 //! Also here: [`study`] (the damage study, the per-gait tables, speeds: data, not text),
 //! [`open_set`] (unknown ground: leave one class out per source of images, judged on a fresh
 //! run),
-//! [`model`] (the simulator model the demo caches), [`load`] (the load `presrs bench-node`
+//! [`model`] (the simulator model the demo caches), [`load`] (the load `presrs lab bench-node`
 //! plays: feet at 100 Hz on a known schedule, the node under it in this process or as a
-//! process, and `/proc` CPU and memory readers), [`replay`] (a candump log to a recording, with
-//! a model's decisions beside the node's) and, with the
-//! default `report` feature, [`report`] (the paper's experiments as Markdown and PNG figures,
-//! on the simulator or on a lab's own dataset) and [`view`] (a recording's pressure image,
-//! terrain, gait and speed in one PNG, the panels of `docs/foxglove-layout.json`).
+//! process, and `/proc` CPU and memory readers) and, with the default `report` feature,
+//! [`report`] (the paper's experiments as Markdown and PNG figures, on the simulator or on a
+//! lab's own dataset). The lab's tools for a real robot (`eval`, a candump log to MCAP, the
+//! recording's picture) are the `presrs-tools` crate, which needs no simulator.
 //!
 //! ```no_run
 //! use presrs_lab::{closed_loop, model, score};
@@ -42,18 +41,16 @@ pub mod closed_loop;
 pub mod load;
 pub mod model;
 pub mod open_set;
-pub mod replay;
 #[cfg(feature = "report")]
 pub mod report;
 pub mod score;
 pub mod simdata;
 pub mod study;
-#[cfg(feature = "report")]
-pub mod view;
 
 pub use closed_loop::{LoopParams, LoopRun};
-pub use score::{Confusion, Summary};
+pub use score::Summary;
 pub use sim::service::StepRecord;
+pub use tools::eval::Confusion;
 
 /// Why a lab run could not run.
 #[derive(Debug, thiserror::Error)]

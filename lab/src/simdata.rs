@@ -83,7 +83,7 @@ pub fn means(samples: &[Sample], terrains: &[Terrain]) -> Vec<(Terrain, usize, [
         .collect()
 }
 
-/// A generated set at a glance, as `presrs dataset` prints it: a line per terrain with its
+/// A generated set at a glance, as `presrs lab dataset` prints it: a line per terrain with its
 /// count and mean load (dynamic sets: also stance time and speed).
 pub fn describe(samples: &[Sample], kind: sim::dataset::Kind) -> String {
     let mut out = String::new();

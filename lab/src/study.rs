@@ -1,6 +1,6 @@
 //! The studies behind the paper's tables, as functions that return data: the damage study
 //! (Figure 16, Table 6), classifiers trained per gait and tested on every gait (Table 5), and
-//! speed per gait and terrain (Table 3). `presrs experiment` turns them into Markdown and plots.
+//! speed per gait and terrain (Table 3). `presrs lab experiment` turns them into Markdown and plots.
 
 use node::classifier::Model;
 use node::classifier::image::{Crop, PressureImage};
@@ -13,8 +13,8 @@ use rand::seq::SliceRandom;
 use sim::dataset::{Kind, Options, Sample, generate};
 
 use crate::LabError;
-use crate::score::{Confusion, confusion};
 use crate::simdata::TrainingSet;
+use tools::eval::{Confusion, confusion};
 
 /// Stances in a row before the history repair calls a line dead (the node's default).
 pub const DEAD_AFTER_STANCES: u32 = 5;

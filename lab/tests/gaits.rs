@@ -12,7 +12,7 @@ use sim::runner::Track;
 
 /// The vcan suite's model (tests/vcan/run.sh): 60 G2 stances per terrain, 45 used and 30 of
 /// them trained, load-normalised, the foot's crop; its rejection calibrated on another run of
-/// the same foot (here a second dataset, seed 22, as run.sh's is a second `presrs sim`).
+/// the same foot (here a second dataset, seed 22, as run.sh's is a second `presrs lab sim`).
 fn g2_model() -> node::classifier::Model {
     let set = |seed: u64, n: usize| {
         let samples = generate(&Options {

@@ -1,5 +1,5 @@
 //! `presrs demo --candump`'s path: a lock-step run recorded to a candump log
-//! (`closed_loop::run_to`), stamped as `presrs sim --log` stamps its own when no live recording
+//! (`closed_loop::run_to`), stamped as `presrs lab sim --log` stamps its own when no live recording
 //! sets the wall clock, and ended by its stop flag.
 
 use std::sync::atomic::AtomicBool;

@@ -15,7 +15,7 @@
 //!   protocol, each with the motor's side the simulator answers with;
 //! - [`bridge`]: [`LegService`], the component: impedance at `rate_hz`, the damped stop on a
 //!   stale command or a driver fault, LegState and LegStatus;
-//! - [`simulated`]: a simulated leg's two motors, for `presrs sim --leg`.
+//! - [`simulated`]: a simulated leg's two motors, for `presrs lab sim --leg`.
 #![forbid(unsafe_code)]
 
 pub mod bridge;

@@ -1,5 +1,5 @@
 //! A simulated leg's two motors: the simulator presents its hopper's leg as the drivers of
-//! a leg config (`presrs sim --leg moteus|odrive|mit --leg-config leg.toml`).
+//! a leg config (`presrs lab sim --leg moteus|odrive|mit --leg-config leg.toml`).
 //!
 //! The motors read the bridge's commands as a real driver would (each protocol's `Server`),
 //! and the commanded impedance goes back through the same kinematics to the hopper: the length

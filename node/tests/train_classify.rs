@@ -762,9 +762,9 @@ fn the_texture_check_holds_each_image_to_its_best_classs_band() {
 }
 
 /// A model file of format version 1, written by `presrs train` before version 2 (the build at
-/// 27d1bca: `presrs dataset static --n 16 --seed 3`, `presrs train --crop 2,2,2,2 --downsample 4
+/// 27d1bca: `presrs lab dataset static --n 16 --seed 3`, `presrs train --crop 2,2,2,2 --downsample 4
 /// --per-class 10 --train 6`), loads and decides every image as that build did
-/// (`decisions.jsonl` is its `presrs classify --json`): the same terrain, unknown where it was,
+/// (`decisions.jsonl` is its `presrs lab classify --json`): the same terrain, unknown where it was,
 /// the same novelty and threshold.
 #[test]
 fn a_version_1_model_file_decides_as_the_build_that_wrote_it() {
@@ -776,7 +776,7 @@ fn a_version_1_model_file_decides_as_the_build_that_wrote_it() {
 /// format-2 build from the demo's runs: `presrs capture` of two 160-step demos (seeds 3 and 4,
 /// `--candump --truth`), `presrs train --crop 0,3,6,0 --downsample 4 --unknown-checks
 /// knn-residual,load,texture` (calibrated on the second run: references and nuisance
-/// directions), `presrs energy` on both runs; the images are the second run's and a sand run's
+/// directions), `presrs lab energy` on both runs; the images are the second run's and a sand run's
 /// stances. It loads into format 3's `unknown` section and decides every image as it did, its
 /// energy maps kept.
 #[test]

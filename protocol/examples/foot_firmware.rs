@@ -1,7 +1,7 @@
 //! A foot board's firmware, written as it would run on the microcontroller, with two host
 //! drivers standing in for its CAN peripheral.
 //!
-//! The firmware part (`firmware` below) uses only what the `no_std` build of the crate has:
+//! The firmware part (`firmware` below) uses only the `no_std` crate `presrs-wire`:
 //! [`Foot`] over an [`embedded_can::blocking::Can`] driver, a stack image buffer, a µs clock. On
 //! a board, `Board` would read the switch's GPIO and scan the tactile array; here it is a
 //! synthetic foot that hops (240 ms stance, 200 ms flight) and presses its whole sole.
@@ -21,9 +21,9 @@ use presrs_protocol::{CanFrame, Stamped};
 
 /// What would be the firmware's crate: no heap, no std, one loop.
 mod firmware {
-    use presrs_protocol::foot::{Foot, FootError};
-    use presrs_protocol::ids::IdConfig;
-    use presrs_protocol::tactile::{ImageRef, Variant};
+    use wire::foot::{Foot, FootError};
+    use wire::ids::IdConfig;
+    use wire::tactile::{ImageRef, Variant};
 
     pub const ROWS: usize = 44;
     pub const COLS: usize = 44;

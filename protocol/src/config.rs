@@ -18,9 +18,11 @@
 use std::fmt::Display;
 use std::path::Path;
 
+use serde::Deserialize as _;
 use serde::de::DeserializeOwned;
 use thiserror::Error;
 
+use crate::ids::IdConfig;
 use crate::terrain::CatalogError;
 
 /// A config value outside what works, or a file that does not fit together.
@@ -126,6 +128,39 @@ pub fn read_text(path: &Path) -> Result<(String, String), ConfigFileError> {
 pub fn read<T: DeserializeOwned>(path: &Path) -> Result<T, ConfigFileError> {
     let (text, name) = read_text(path)?;
     parse(&text, &name)
+}
+
+/// The `[ids]` table of a config file (the node's, the controller's, or one of its own),
+/// checked; the defaults when the file has no `[ids]` table.
+pub fn ids_from_file(path: &Path) -> Result<IdConfig, ConfigFileError> {
+    // Only the [ids] table is read: the rest of the file is another tool's business.
+    #[derive(serde::Deserialize)]
+    struct Toml {
+        ids: Option<toml::Value>,
+    }
+    #[derive(serde::Deserialize)]
+    struct Json {
+        ids: Option<serde_json::Value>,
+    }
+    let (text, name) = read_text(path)?;
+    let parse_error = |reason: String| ConfigFileError::Parse {
+        path: name.clone(),
+        reason: format!("[ids]: {reason}"),
+    };
+    let ids = if name.ends_with(".json") {
+        match parse::<Json>(&text, &name)?.ids {
+            Some(v) => IdConfig::deserialize(v).map_err(|e| parse_error(e.to_string()))?,
+            None => IdConfig::default(),
+        }
+    } else {
+        match parse::<Toml>(&text, &name)?.ids {
+            Some(v) => IdConfig::deserialize(v).map_err(|e| parse_error(e.to_string()))?,
+            None => IdConfig::default(),
+        }
+    };
+    ids.validate()
+        .map_err(|e| ConfigFileError::invalid(&name, Invalid::new("ids", format!("ids: {e}"))))?;
+    Ok(ids)
 }
 
 #[cfg(test)]

@@ -1,6 +1,5 @@
-#![cfg_attr(not(feature = "std"), no_std)]
 #![warn(missing_docs)]
-//! # presrs-protocol: the CAN protocol of the PreSRS terrain node
+//! # presrs-protocol: the PreSRS terrain node's CAN protocol on a computer (std)
 //!
 //! A legged robot's foot carries PreSRS, a 44x44 tactile array sampled at 100 Hz. The foot
 //! broadcasts its micro-switch ([`messages::FootContact`]) and its pressure images
@@ -25,11 +24,10 @@
 //!
 //! ## On the foot's microcontroller
 //!
-//! Without its default `std` feature the crate is `#![no_std]` and allocates nothing: [`frame`],
-//! [`ids`], [`messages`], the CRC and [`tactile::Segmenter`] are what a foot's firmware needs
-//! to speak the protocol through any [`embedded_can`] driver. The test command builds it with
-//! `cargo build -p presrs-protocol --no-default-features --target thumbv7em-none-eabihf`;
-//! `examples/foot_firmware.rs` is a foot written that way.
+//! The wire format (frames, identifiers, messages, tactile segments, the foot's sender, the
+//! errors) is the `no_std` crate `presrs-wire`, re-exported here module by module: a foot's
+//! firmware links that crate alone (`examples/foot_firmware.rs` is a foot written that way);
+//! this one is the std runtime around it.
 //!
 //! ```
 //! use presrs_protocol::{bus::{CanBus, InProcBus}, ids::IdConfig, messages::*};
@@ -42,36 +40,20 @@
 //! assert_eq!(decode(&rx.frame, &ids).unwrap(), Some((0, touchdown)));
 //! ```
 
-#[cfg(feature = "std")]
 pub mod bus;
-#[cfg(feature = "std")]
 pub mod candump;
-#[cfg(feature = "std")]
 pub mod clock;
-#[cfg(feature = "std")]
 pub mod component;
-#[cfg(feature = "std")]
 pub mod config;
-#[cfg(feature = "std")]
 pub mod dbc;
-pub mod emit;
 pub mod error;
-pub mod foot;
-pub mod frame;
-pub mod ids;
-pub mod messages;
-pub mod quantile;
-pub mod tactile;
-#[cfg(feature = "std")]
 pub mod terrain;
-#[cfg(feature = "std")]
 pub mod traffic;
 
-#[cfg(feature = "std")]
-pub use error::BusError;
-pub use error::{ConfigError, DecodeError};
+pub use wire::{emit, foot, frame, ids, messages, quantile, tactile};
+
+pub use error::{BusError, ConfigError, DecodeError};
 pub use frame::{CanFrame, Stamped};
 pub use ids::{IdConfig, MessageKind};
 pub use messages::Message;
-#[cfg(feature = "std")]
 pub use terrain::{Terrain, TerrainCatalog, TerrainsArg};

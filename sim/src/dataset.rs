@@ -179,7 +179,7 @@ pub fn stances(
     let mut last_td: Option<(f64, f64)> = None;
     // A sample's stance time is known at its liftoff: the hopper goes on until the last one's.
     // (It stopped at the last image, which then read a stance of 0 s, and the first sample's
-    // speed read 0, its previous touchdown being a settling step: `presrs dataset dynamic`'s
+    // speed read 0, its previous touchdown being a settling step: `presrs lab dataset dynamic`'s
     // means were low by one sample in n.)
     let done = |out: &[Sample]| out.len() >= n && out.last().is_none_or(|s| s.stance_s > 0.0);
     while !done(&out) && steps < 20 + 4 * n {

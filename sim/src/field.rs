@@ -52,7 +52,7 @@ impl Field {
         scratch.resize(self.v.len(), 0.0);
         // Each output sums its taps in kernel order, as a tap-by-tap loop per output would
         // (the same f32 result to the bit), but one tap at a time across a whole row, which
-        // the compiler vectorises: 0.46 s -> 0.07 s of `presrs sim --log F --duration 20`
+        // the compiler vectorises: 0.46 s -> 0.07 s of `presrs lab sim --log F --duration 20`
         // (perf), where the simulator spent most of its time once the contact solve was fast.
         for (src, out) in self
             .v

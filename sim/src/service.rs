@@ -112,7 +112,7 @@ impl LegStateCheck {
     }
 }
 
-/// What one run of the simulator saw (`presrs sim --report`'s file).
+/// What one run of the simulator saw (`presrs lab sim --report`'s file).
 #[derive(Debug, serde::Serialize)]
 pub struct SimReport {
     /// Robot time run, s.
@@ -376,7 +376,7 @@ pub fn run(
     observe: &mut dyn FnMut(u64, &SimRobot),
 ) -> SimReport {
     let start = Instant::now();
-    tracing::info!(iface = %source.label(), feet = cfg.feet, speed = opts.speed, gait = cfg.gait, "presrs sim running");
+    tracing::info!(iface = %source.label(), feet = cfg.feet, speed = opts.speed, gait = cfg.gait, "presrs lab sim running");
     let mut sim = SimService::new(cfg, opts.seed, opts.duration_s, catalog, observe);
     let run_opts = component::RunOptions {
         time_scale: opts.speed,

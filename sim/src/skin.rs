@@ -308,7 +308,7 @@ impl Skin {
             // k_lo * rim * max(0, z_i - z) (z_i: the depth where it starts to bear), so the
             // force is piecewise linear, convex and falling in z: Newton's method from a depth
             // with too much force never overshoots and is exact once in the root's segment
-            // (a few passes over the cells where a 40-step bisection took about 50): `presrs sim
+            // (a few passes over the cells where a 40-step bisection took about 50): `presrs lab sim
             // --log F --duration 20` 1.80 s -> 0.80 s on the host, the same images to the bit.
             // (In the vcan VM the simulator's pace is set by its loop, not by this: unchanged.)
             self.hinges.clear();

@@ -1,8 +1,8 @@
-//! `presrs bench-node` on a real interface: latency, CPU and memory.
+//! `presrs lab bench-node` on a real interface: latency, CPU and memory.
 
 use super::*;
 
-/// The speed figures on a real SocketCAN interface: `presrs bench-node` plays 6 feet at
+/// The speed figures on a real SocketCAN interface: `presrs lab bench-node` plays 6 feet at
 /// 100 Hz to `presrs node` as a separate process. The report is printed for the note (labelled
 /// emulated when run.sh runs it in the VM); the test asserts that the node answered the steps,
 /// not a timing: the figures belong to the benchmark.
@@ -34,6 +34,7 @@ fn node_bench_on_vcan_reports_latency_cpu_and_memory() {
     let out = common::output_ok(
         std::process::Command::new(presrs())
             .args([
+                "lab",
                 "bench-node",
                 "--iface",
                 &iface,
@@ -47,7 +48,7 @@ fn node_bench_on_vcan_reports_latency_cpu_and_memory() {
             .env("RUST_LOG", "warn"),
     );
     let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    eprintln!("presrs bench-node on {iface}: {j}");
+    eprintln!("presrs lab bench-node on {iface}: {j}");
     let steps = j["steps"].as_u64().unwrap();
     let answered = j["terrain_class"].as_u64().unwrap();
     // A step every 300 ms per foot, 5 s measured: 100 steps for 6 feet, 95 or more played.

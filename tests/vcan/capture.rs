@@ -4,7 +4,7 @@
 use super::*;
 
 /// Over real SocketCAN, the path of docs/real-robot.md with the simulator
-/// standing in for the robot: `presrs sim` on one terrain at a time while candump records,
+/// standing in for the robot: `presrs lab sim` on one terrain at a time while candump records,
 /// `presrs capture` builds the set from the logs, `presrs train`, and the node with that model
 /// classifies a fresh run over all four terrains as a process on the bus (>= 95% of steps).
 /// Then a model captured without grass meets grass with the controller on the bus: the node

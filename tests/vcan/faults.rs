@@ -69,6 +69,7 @@ fn sim_node_and_controller_as_processes_classify_steps_and_survive_bus_and_proce
     std::thread::sleep(Duration::from_millis(1500));
     let sim_s = 40.0;
     let mut sim = spawn(&[
+        "lab",
         "sim",
         "--iface",
         &iface,
@@ -227,10 +228,13 @@ fn sim_node_and_controller_as_processes_classify_steps_and_survive_bus_and_proce
             }
         }
         if let Ok(Some(status)) = sim.0.try_wait() {
-            assert!(status.success(), "presrs sim exited with {status}");
+            assert!(status.success(), "presrs lab sim exited with {status}");
             sim_done = true;
         }
-        assert!(t0.elapsed() < wall(sim_s) * 3, "presrs sim did not finish");
+        assert!(
+            t0.elapsed() < wall(sim_s) * 3,
+            "presrs lab sim did not finish"
+        );
     }
     assert!(
         node.0.try_wait().unwrap().is_none() && controller.0.try_wait().unwrap().is_none(),

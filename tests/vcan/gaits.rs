@@ -2,7 +2,7 @@
 
 use super::*;
 
-/// One `presrs sim` run against a fresh `presrs node` (G2 model): the per-step report.
+/// One `presrs lab sim` run against a fresh `presrs node` (G2 model): the per-step report.
 fn sim_run(iface: &str, gait: &str, damage: f64, seed: u64, sim_s: f64) -> serde_json::Value {
     let model = system_model();
     let _node = spawn(&["node", "--iface", iface, "--model", model.to_str().unwrap()]);
@@ -125,7 +125,7 @@ fn node_classifies_every_gait_with_a_g2_model_survives_damage_and_ignores_a_floo
 
     // Issue 5's targets: 95% per gait (the paper's Table 5: 98.6-99.3%), 90% at 50% damage,
     // the learning stances included. The node's model comes from the sensor the simulated foot
-    // wears (`presrs dataset` and `presrs sim` default to the same sensor serial), as a robot's
+    // wears (`presrs lab dataset` and `presrs lab sim` default to the same sensor serial), as a robot's
     // model comes from its own foot.
     for (gait, c, n, bound) in per_gait {
         let p_low = binomial_cdf(c, n, bound);

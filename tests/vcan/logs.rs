@@ -58,7 +58,16 @@ fn sim_traffic_is_recorded_by_candump_and_decoded_by_cantools() {
     let iface = fd_iface();
     let log_path = candump_during(&iface, "simdump", || {
         let status = std::process::Command::new(presrs())
-            .args(["sim", "--iface", &iface, "--duration", "3", "--seed", "2"])
+            .args([
+                "lab",
+                "sim",
+                "--iface",
+                &iface,
+                "--duration",
+                "3",
+                "--seed",
+                "2",
+            ])
             .status()
             .unwrap();
         assert!(status.success());
@@ -66,7 +75,7 @@ fn sim_traffic_is_recorded_by_candump_and_decoded_by_cantools() {
     let dbc = root().join("protocol/presrs.dbc");
     let out = python(&["log", dbc.to_str().unwrap(), log_path.to_str().unwrap()]);
     let v: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
-    eprintln!("presrs sim, 3 s simulated, as candump logged and cantools decoded it: {v}");
+    eprintln!("presrs lab sim, 3 s simulated, as candump logged and cantools decoded it: {v}");
     // 100 Hz for 3 s: 300 images, each a header + 32 pixel segments; LegState at 100 Hz.
     let images = v["tactile_headers"].as_u64().unwrap();
     assert!((295..=301).contains(&images), "{images} tactile images");

@@ -41,7 +41,7 @@ fn first_gains(proto: &str, frames: &[protocol::CanFrame]) -> [Option<(f64, f64)
     out
 }
 
-/// On real SocketCAN, per motor protocol: `presrs sim --leg P` (the hopper's leg as two
+/// On real SocketCAN, per motor protocol: `presrs lab sim --leg P` (the hopper's leg as two
 /// motors of that protocol), `presrs leg` (the bridge), the node and the controller as
 /// processes. The hopper hops with no fall and the gait adapts per terrain within 3 steps; the
 /// bridge's LegState (from the encoders) agrees with the truth within 0.01 rad and 2 mm (95th
@@ -153,7 +153,14 @@ fn leg_bridge_drives_each_protocols_simulated_motors_as_processes() {
         let report = dir.join(format!("{proto}-report.json"));
         let mut sim = Proc(
             std::process::Command::new(presrs())
-                .args(["sim", "--iface", &iface, "--duration", &sim_s.to_string()])
+                .args([
+                    "lab",
+                    "sim",
+                    "--iface",
+                    &iface,
+                    "--duration",
+                    &sim_s.to_string(),
+                ])
                 .args(["--seed", "5", "--speed", &speed_s, "--track"])
                 .arg(&track)
                 .args(["--leg", proto, "--leg-config", cfg_s])
@@ -188,7 +195,7 @@ fn leg_bridge_drives_each_protocols_simulated_motors_as_processes() {
         drop(controller);
         let killed = Instant::now();
         let status = sim.0.wait().unwrap();
-        assert!(status.success(), "{proto}: presrs sim: {status}");
+        assert!(status.success(), "{proto}: presrs lab sim: {status}");
         stop.store(true, Ordering::Relaxed);
         watcher.join().unwrap();
         let r: serde_json::Value =

@@ -3,7 +3,7 @@
 use super::*;
 
 /// On real SocketCAN: `presrs node --mcap --foxglove` records and serves the robot's
-/// traffic while it classifies, and `presrs sim --mcap` records the same run with its truth.
+/// traffic while it classifies, and `presrs lab sim --mcap` records the same run with its truth.
 /// An independent WebSocket client receives an image and a TerrainClass live; after SIGTERM
 /// Python's `mcap` reads both files whole: a schema on every channel, time going forward, one
 /// RawImage per complete image candump saw, one TerrainClass per step the simulator heard.

@@ -42,18 +42,18 @@ prepare() {
   PRESRS_BIN=$(scripts/test-exe.sh presrs bin)
   PRESRS_FIRMWARE=$(scripts/test-exe.sh foot_firmware example)
 
-  # The system tests run `presrs sim/node/controller` as processes; the node needs a model
+  # The system tests run `presrs lab sim/node/controller` as processes; the node needs a model
   # trained on simulated G2 stances.
   echo "vcan suite: training the system tests' G2 model (at $SECONDS s)"
   if [ ! -s "$work/g2-model.json" ] || [ "$PRESRS_BIN" -nt "$work/g2-model.json" ]; then
     rm -rf "$work" && mkdir -p "$work"
-    "$PRESRS_BIN" dataset dynamic --gait G2 --n 60 --seed 21 --out "$work/g2" >/dev/null
+    "$PRESRS_BIN" lab dataset dynamic --gait G2 --n 60 --seed 21 --out "$work/g2" >/dev/null
     # Its unknown-terrain rejection calibrated on a second run of the robot (30 s of the closed
     # loop, captured as a lab would): calibrated on the training set's own unused images, the
     # closed loop's stances after a terrain change fell outside often enough that G3 was 62/67
     # right in the VM (measured; the host replica with this calibration: 57-59/59 G1, 58-61/61
     # G2, 66-68/68 G3 over sim seeds 5-8).
-    "$PRESRS_BIN" sim --gait G2 --log "$work/cal.log" --truth "$work/cal.csv" --duration 30 \
+    "$PRESRS_BIN" lab sim --gait G2 --log "$work/cal.log" --truth "$work/cal.csv" --duration 30 \
       --seed 22 >/dev/null 2>&1
     "$PRESRS_BIN" capture --replay "$work/cal.log" --labels "$work/cal.csv" --out "$work/cal" >/dev/null
     # Its checks fixed (`--unknown-checks`), not chosen: these tests' bounds (steps to a gait,

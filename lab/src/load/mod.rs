@@ -1,4 +1,4 @@
-//! The load `presrs bench-node` puts on a node: feet at 100 Hz on a known schedule.
+//! The load `presrs lab bench-node` puts on a node: feet at 100 Hz on a known schedule.
 //!
 //! [`Feet`] plays `n` feet on the foot clock: a step every 300 ms (150 ms stance), a CAN FD
 //! tactile image every 10 ms per foot, the stance images being the simulator's skin images of

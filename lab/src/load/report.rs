@@ -2,7 +2,7 @@
 
 use super::*;
 
-/// `presrs bench-node`'s report of one measurement.
+/// `presrs lab bench-node`'s report of one measurement.
 pub struct BenchReport<'a> {
     /// The bus measured on ("inproc", "vcan0").
     pub bus: &'a str,
@@ -61,7 +61,7 @@ impl BenchReport<'_> {
 
     /// `--json`'s object.
     pub fn to_json(&self) -> serde_json::Value {
-        use crate::score::percentile;
+        use tools::eval::percentile;
         let (t, lat) = (self.tally, self.latencies());
         let mut bus = t.bus_latencies_us.clone();
         bus.sort_by(f64::total_cmp);
@@ -110,7 +110,7 @@ impl BenchReport<'_> {
 
 impl std::fmt::Display for BenchReport<'_> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        use crate::score::percentile;
+        use tools::eval::percentile;
         let (t, lat) = (self.tally, self.latencies());
         let n = |v: Option<f64>| v.map_or("n/a".to_string(), |v| format!("{v:.1}"));
         writeln!(

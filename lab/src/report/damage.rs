@@ -26,7 +26,7 @@ pub(super) fn damage(ctx: &Report) -> Result<(String, Curves), ReportError> {
     };
     // Without load normalisation: with it, a dead line also lowers the image's total and so
     // brightens every live sensel (0% damage: 89.4% against 94.4%, 50%: 73.3% against 78.7%
-    // with the paper's filter, measured with `presrs experiment damage`).
+    // with the paper's filter, measured with `presrs lab experiment damage`).
     let (model, test) = train_on(set, crop, 1, ctx.seed, false)?;
     let levels: Vec<f64> = if ctx.quick {
         vec![0.0, 20.0, 50.0, 80.0]

@@ -17,7 +17,7 @@ pub(super) fn gaits(ctx: &Report) -> Result<String, ReportError> {
     let mut md = String::from("## Table 5: classifiers trained per gait, tested on every gait\n\n");
     let _ = writeln!(
         md,
-        "`presrs dataset dynamic --gait G_i` ({n} stances per terrain), cropped 0,3,6,0; C_i \
+        "`presrs lab dataset dynamic --gait G_i` ({n} stances per terrain), cropped 0,3,6,0; C_i \
          trained on G_i with the paper's 13/7 split and its load normalisation (the intensity \
          scaling factor; the node's models use it too). Ours (paper).\n"
     );

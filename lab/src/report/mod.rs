@@ -21,9 +21,9 @@ use sim::dataset::Kind;
 use sim::terrain::Terrain;
 
 use crate::LabError;
-use crate::score::confusion;
 use crate::simdata::TrainingSet;
 use crate::study::{Curves, DEAD_AFTER_STANCES, dataset, train_on};
+use tools::eval::confusion;
 
 /// One section of the report.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -47,7 +47,7 @@ pub enum Experiment {
 }
 
 /// The experiments a command asks for: one by its name, or `all` (parsed from the command
-/// line: `presrs experiment open-set`).
+/// line: `presrs lab experiment open-set`).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Selection(pub Vec<Experiment>);
 
@@ -135,8 +135,8 @@ pub enum ReportError {
     #[error(transparent)]
     Lab(#[from] LabError),
     /// Drawing or writing a figure.
-    #[error("drawing a figure: {0}")]
-    Draw(String),
+    #[error(transparent)]
+    Plot(#[from] tools::plot::PlotError),
     /// The figures folder.
     #[error("creating {path}: {source}")]
     Folder {
@@ -145,9 +145,6 @@ pub enum ReportError {
         /// Why.
         source: std::io::Error,
     },
-    /// The bundled font.
-    #[error("the bundled font lab/assets/fonts/DejaVuSans.ttf is unreadable")]
-    Font,
     /// The simulated hopper fell while measuring its cadence.
     #[error("the G2 hopper fell")]
     Fell,
@@ -433,8 +430,11 @@ mod tests {
 
     #[test]
     fn the_command_line_quotes_what_a_shell_would_split() {
-        let args = ["experiment", "all", "--out", "my docs"].map(String::from);
-        assert_eq!(command_line(args), "presrs experiment all --out 'my docs'");
+        let args = ["lab", "experiment", "all", "--out", "my docs"].map(String::from);
+        assert_eq!(
+            command_line(args),
+            "presrs lab experiment all --out 'my docs'"
+        );
         assert_eq!(command_line([]), "presrs");
     }
 }

@@ -7,19 +7,7 @@ use plotters::prelude::*;
 
 use super::ReportError;
 
-/// Registers the bundled font as "sans-serif" (plotters has no system fonts here).
-pub(crate) fn register_font() -> Result<(), ReportError> {
-    plotters::style::register_font(
-        "sans-serif",
-        FontStyle::Normal,
-        include_bytes!("../../assets/fonts/DejaVuSans.ttf"),
-    )
-    .map_err(|_| ReportError::Font)
-}
-
-pub(crate) fn pe(e: impl std::fmt::Display) -> ReportError {
-    ReportError::Draw(e.to_string())
-}
+pub(crate) use tools::plot::{pe, register_font};
 
 /// A figure of feature vectors, one line per series.
 pub(super) fn feature_plot(
@@ -30,7 +18,7 @@ pub(super) fn feature_plot(
     let root = BitMapBackend::new(path, (1000, 560)).into_drawing_area();
     root.fill(&WHITE).map_err(pe)?;
     draw_features(&root, title, 22, 1e6, series)?;
-    root.present().map_err(pe)
+    Ok(root.present().map_err(pe)?)
 }
 
 /// Feature vectors (bins 0-1024 of the 2048-point FFT) on a log axis up to `y_max`, one line
@@ -83,11 +71,11 @@ pub(crate) fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
 where
     DB::ErrorType: 'static,
 {
-    chart
+    Ok(chart
         .configure_series_labels()
         .position(position)
         .background_style(WHITE.mix(0.9))
         .border_style(BLACK)
         .draw()
-        .map_err(pe)
+        .map_err(pe)?)
 }

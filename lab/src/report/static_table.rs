@@ -12,7 +12,9 @@ pub(super) fn static_table(ctx: &Report) -> Result<String, ReportError> {
             (
                 &sim_set,
                 STATIC_CROP,
-                format!("`presrs dataset static` ({n} presses per terrain at the platform load)"),
+                format!(
+                    "`presrs lab dataset static` ({n} presses per terrain at the platform load)"
+                ),
             )
         }
     };

@@ -1,5 +1,5 @@
 //! The outcome of classifying one image: the terrain (or why it is unknown), the best class,
-//! its confidence and the novelty score against its threshold; printed by `presrs classify`.
+//! its confidence and the novelty score against its threshold; printed by `presrs lab classify`.
 
 use crate::unknown::Reason;
 
@@ -57,7 +57,7 @@ impl Decision {
         }
     }
 
-    /// The decision as `presrs classify --json` prints it: `file`, `terrain` ([`Self::label`]),
+    /// The decision as `presrs lab classify --json` prints it: `file`, `terrain` ([`Self::label`]),
     /// `contact`, `best` (the nearest class, also when unknown), `confidence`, `novelty` and
     /// `threshold` (null without contact: JSON has no infinity), so that anyone can draw the
     /// novelty's ROC on their own images.

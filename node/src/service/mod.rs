@@ -391,7 +391,7 @@ impl NodeService {
     }
 
     /// [`NodeService::start_with_tap`] on `threads` (the default is the one measured faster:
-    /// `presrs bench-node --node-threads` measures both).
+    /// `presrs lab bench-node --node-threads` measures both).
     pub fn start_on(
         self,
         bus: BusSource,

@@ -25,7 +25,7 @@ pub(super) struct Shared {
 /// Where the node's time goes, summed since it started: every frame's work, and of the frames
 /// that ended a step with its TerrainClass, their work and how long they waited between the
 /// bus's receive stamp and the pipeline. Kept per frame in plain integers, published with each
-/// NodeStatus; `presrs bench-node --json` reports the means.
+/// NodeStatus; `presrs lab bench-node --json` reports the means.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct StageTimes {
     /// Frames the pipeline took.

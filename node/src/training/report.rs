@@ -250,7 +250,7 @@ pub fn no_training_run_images_note() -> String {
     format!(
         "unknown terrain: the calibration holds none of the training run's images (fewer than \
          {} per terrain were left out of the model by --per-class), only the held-out run's, \
-         and its check understates the next run: on the real SpeedPP2D maps (presrs experiment \
+         and its check understates the next run: on the real SpeedPP2D maps (presrs lab experiment \
          open-set --per-class 30 --train 20, seeds 1-10) the next run's known images were \
          called unknown 5.9% (median; 5.1-6.4%) against 2.4% (1.9-3.6%) at the default \
          --per-class 20, which leaves 10 of each person's 30 out. Draw fewer images per terrain \

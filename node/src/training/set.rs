@@ -279,7 +279,7 @@ impl TrainingSet {
     /// has runs to spare (the first run always trains). Images without a run are one run.
     ///
     /// `presrs train` sets one run aside (`roles` 1: calibration on the next recording);
-    /// `presrs experiment open-set` two (calibrate on one, judge on a run nobody saw).
+    /// `presrs lab experiment open-set` two (calibrate on one, judge on a run nobody saw).
     pub fn split_runs(&self, roles: usize) -> RunSplit {
         let (mut t, mut c, mut f) = (Vec::new(), Vec::new(), Vec::new());
         for k in 0..self.classes.len() {

@@ -136,7 +136,7 @@ impl Checks {
                 "unknown.energy",
                 format!(
                     "want one return map (or null) per class ({n_classes}), finite, residual_s \
-                     low <= high; fit it again with `presrs energy`"
+                     low <= high; fit it again with `presrs lab energy`"
                 ),
             ));
         }

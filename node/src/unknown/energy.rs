@@ -5,7 +5,7 @@
 //! flight before a stance says how fast it came down. On one terrain (and the stance law the
 //! robot runs) the flight after a stance follows from the flight before it, a return map
 //! `after = intercept + slope * before`, learned per class from the robot's own closed-loop
-//! runs on known ground (`presrs energy`). Ground that looks like a known terrain to the
+//! runs on known ground (`presrs lab energy`). Ground that looks like a known terrain to the
 //! texture but takes more energy out of a hop (or gives more back) shows as a flight after its
 //! stance that the class's map does not predict.
 //!
@@ -229,7 +229,7 @@ impl Balance {
 ///
 /// On a run over ground known to be the model's terrains, a terrain with more stances outside
 /// than the model's unknown rate has a map that no longer fits the robot: fit the maps again
-/// (`presrs energy`). What moved them on the simulator: a payload put clay's stances outside
+/// (`presrs lab energy`). What moved them on the simulator: a payload put clay's stances outside
 /// and left the others' in (docs/real-robot.md), as sand does; so a run over unknown ground
 /// cannot tell the two apart.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]

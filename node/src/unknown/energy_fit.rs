@@ -1,5 +1,5 @@
 //! Fitting a model's energy check ([`crate::unknown::energy`]) from the robot's closed-loop runs
-//! on known ground (`presrs energy`): each run's candump log goes through the node's own stance
+//! on known ground (`presrs lab energy`): each run's candump log goes through the node's own stance
 //! logic and classifier; each stance whose label and texture agree gives its class one
 //! (flight before, flight after) pair.
 //!

@@ -10,7 +10,7 @@
 //! | [`novelty`] | the image is unlike every known terrain | `train` (calibration) |
 //! | load | the image's load lies outside its terrain's band | `train` (when chosen) |
 //! | texture | the image's roughness lies outside its terrain's band | `train` (when chosen) |
-//! | [`energy`] | the terrain took energy out of the last hop that it does not | `train` (a candidate, from the flights), `presrs energy` |
+//! | [`energy`] | the terrain took energy out of the last hop that it does not | `train` (a candidate, from the flights), `presrs lab energy` |
 //!
 //! A model carries them in one section, [`checks::Checks`] (model format 3; a version 2 file's
 //! keys are moved there on load, with identical decisions), and every threshold is held by one

@@ -217,7 +217,7 @@ impl CanBus for SocketCanBus {
         // read. SO_RCVTIMEO rounds a wait up to a scheduler tick (4 ms on a HZ=250 kernel: a
         // simulator ticking every 300 us ran at half speed), and the socketcan crate sets it in
         // whole microseconds, so that a wait under 1 us read as 0, "wait forever" (measured in
-        // the vcan VM: `presrs sim` blocked in recv for minutes on a bus with no frame for it).
+        // the vcan VM: `presrs lab sim` blocked in recv for minutes on a bus with no frame for it).
         if !self.nonblocking {
             self.sock
                 .set_nonblocking(true)

@@ -35,7 +35,7 @@ pub struct RunOptions {
     /// After the stop, go on reading what reached the socket, until it has been quiet for
     /// [`DRAIN_QUIET`] or for at most this long: for a recorder beside a process that stops
     /// it when done, whose last frames are otherwise in the socket and lost to the recording
-    /// (measured on vcan under emulation: 799 of the 800 images `presrs sim --mcap` sent).
+    /// (measured on vcan under emulation: 799 of the 800 images `presrs lab sim --mcap` sent).
     /// `None` (the default): the run ends at the stop.
     pub drain_on_stop: Option<Duration>,
     /// Without frames, wake to tick only after this long, not every `tick`: a component whose
@@ -164,105 +164,28 @@ pub(crate) fn run_with<C: Component + ?Sized>(
             failed(&e, &mut backoff, &mut stats);
             continue 'open;
         }
-        let mut next_tick = Instant::now();
-        let mut wake = Wake::default();
-        // The last burst took `max_burst` frames: more may be queued.
-        let mut backlog = false;
-        // Error frames of this handle already in `bus_errors`.
-        let mut counted = 0u64;
-        while !stopping() && !component.done() {
-            between(component);
-            // Everything queued (up to a burst), then the tick: a burst never waits one tick
-            // per frame, and a stream never holds the tick back.
-            let tick_wait = match opts.idle_wait {
-                // Ticks come after frames; with none, after `idle_wait`.
-                Some(idle) => (next_tick + idle).saturating_duration_since(Instant::now()),
-                None => next_tick.saturating_duration_since(Instant::now()),
-            };
-            let Waiting {
-                mut wait,
-                poll_until,
-                woken_for,
-                coalesce,
-            } = waiting(component, &mut wake, tick_wait, &now_us, scale);
-            // Not while frames are left from the last batch: a stream faster than a burst per
-            // batch (classic frames on vcan, which has no bit rate) would fall behind.
-            if coalesce && !backlog && !wait.is_zero() {
-                std::thread::sleep(wait.min(Duration::from_micros(COALESCE_US)));
-                wait = Duration::ZERO;
-            }
-            let mut taken = 0;
-            while taken < opts.max_burst.max(1) {
-                match b.recv(wait) {
-                    Ok(Some(st)) => {
-                        taken += 1;
-                        deliver(component, &st, opts, &link, now_us(), &mut out);
-                        wait = Duration::ZERO;
-                        // An answer goes out at once, not after the rest of the burst.
-                        if !out.is_empty()
-                            && let Err(e) = flush(&mut out, b.as_mut(), opts, &link, now_us(), name)
-                        {
-                            failed(&e, &mut backoff, &mut stats);
-                            continue 'open;
-                        }
-                    }
-                    // Polling for the expected frame (a tick waits for the poll: at most
-                    // POLL_LEAD_US plus the oversleep plus POLL_AFTER_US). A yield, not a spin:
-                    // a spin kept a sender on the core from running (node-wake.md), and on a
-                    // robot the controller shares the core.
-                    Ok(None) if taken == 0 && poll_until.is_some_and(|u| Instant::now() < u) => {
-                        std::thread::yield_now();
-                    }
-                    Ok(None) => {
-                        // A sleep before a poll that ran out: how late did it end?
-                        if taken == 0
-                            && let Some(until) = woken_for
-                        {
-                            wake.slept(until, now_us());
-                        }
-                        break;
-                    }
-                    Err(e) => {
-                        failed(&e, &mut backoff, &mut stats);
-                        continue 'open;
-                    }
-                }
-            }
-            backlog = taken >= opts.max_burst.max(1);
-            let now = now_us();
-            let health = b.health();
-            if health.error_frames != counted {
-                LinkStats::add(
-                    &link.bus_errors,
-                    health.error_frames.saturating_sub(counted),
-                );
-                counted = health.error_frames;
-            }
-            if let Some(state) = watch.update(name, &iface, &health) {
-                link.set_controller(state);
-                component.on_health(state, now);
-            }
-            if Instant::now() >= next_tick {
-                component.tick(now, &mut out);
-                next_tick = Instant::now() + opts.tick;
-            }
-            if let Err(e) = flush(&mut out, b.as_mut(), opts, &link, now, name) {
-                failed(&e, &mut backoff, &mut stats);
-                continue 'open;
-            }
+        let served = serve(
+            component,
+            b.as_mut(),
+            &Served {
+                opts,
+                link: &link,
+                name,
+                iface: &iface,
+                stop,
+                now_us: &now_us,
+                scale,
+            },
+            &mut out,
+            &mut watch,
+            between,
+        );
+        if let Err(e) = served {
+            failed(&e, &mut backoff, &mut stats);
+            continue 'open;
         }
         if let Some(limit) = opts.drain_on_stop {
-            let until = Instant::now() + limit;
-            loop {
-                let left = until.saturating_duration_since(Instant::now());
-                let Ok(Some(st)) = b.recv(DRAIN_QUIET.min(left)) else {
-                    break;
-                };
-                deliver(component, &st, opts, &link, now_us(), &mut out);
-                if left.is_zero() {
-                    break;
-                }
-            }
+            drain(component, b.as_mut(), limit, opts, &link, &now_us, &mut out);
         }
         bus = Some(b);
         break;
@@ -280,6 +203,137 @@ pub(crate) fn run_with<C: Component + ?Sized>(
     stats.send_errors = load(&link.tx_dropped) - dropped0;
     stats.end_us = end;
     stats
+}
+
+/// What [`serve`] needs of its run: the options, the link's counters, the names its logs and
+/// health reports use, the stop flag and the run's clock.
+struct Served<'a> {
+    opts: &'a RunOptions,
+    link: &'a LinkStats,
+    name: &'a str,
+    iface: &'a str,
+    stop: &'a AtomicBool,
+    now_us: &'a dyn Fn() -> u64,
+    scale: f64,
+}
+
+/// One opened bus served until the run stops or the component is done (`Ok`), or until the
+/// bus fails (the error: [`run_with`] reopens it). Each pass takes a burst of frames (or
+/// polls for the one the component expects), then the bus's health, then the tick.
+fn serve<C: Component + ?Sized>(
+    component: &mut C,
+    b: &mut dyn CanBus,
+    c: &Served<'_>,
+    out: &mut Outbox,
+    watch: &mut HealthWatch,
+    between: &mut dyn FnMut(&mut C),
+) -> Result<(), BusError> {
+    let mut next_tick = Instant::now();
+    let mut wake = Wake::default();
+    // The last burst took `max_burst` frames: more may be queued.
+    let mut backlog = false;
+    // Error frames of this handle already in `bus_errors`.
+    let mut counted = 0u64;
+    while !c.stop.load(Ordering::Relaxed) && !component.done() {
+        between(component);
+        // Everything queued (up to a burst), then the tick: a burst never waits one tick
+        // per frame, and a stream never holds the tick back.
+        let tick_wait = match c.opts.idle_wait {
+            // Ticks come after frames; with none, after `idle_wait`.
+            Some(idle) => (next_tick + idle).saturating_duration_since(Instant::now()),
+            None => next_tick.saturating_duration_since(Instant::now()),
+        };
+        let Waiting {
+            mut wait,
+            poll_until,
+            woken_for,
+            coalesce,
+        } = waiting(component, &mut wake, tick_wait, c.now_us, c.scale);
+        // Not while frames are left from the last batch: a stream faster than a burst per
+        // batch (classic frames on vcan, which has no bit rate) would fall behind.
+        if coalesce && !backlog && !wait.is_zero() {
+            std::thread::sleep(wait.min(Duration::from_micros(COALESCE_US)));
+            wait = Duration::ZERO;
+        }
+        let mut taken = 0;
+        while taken < c.opts.max_burst.max(1) {
+            match b.recv(wait) {
+                Ok(Some(st)) => {
+                    taken += 1;
+                    deliver(component, &st, c.opts, c.link, (c.now_us)(), out);
+                    wait = Duration::ZERO;
+                    // An answer goes out at once, not after the rest of the burst.
+                    if !out.is_empty()
+                        && let Err(e) = flush(out, b, c.opts, c.link, (c.now_us)(), c.name)
+                    {
+                        return Err(e);
+                    }
+                }
+                // Polling for the expected frame (a tick waits for the poll: at most
+                // POLL_LEAD_US plus the oversleep plus POLL_AFTER_US). A yield, not a spin:
+                // a spin kept a sender on the core from running (node-wake.md), and on a
+                // robot the controller shares the core.
+                Ok(None) if taken == 0 && poll_until.is_some_and(|u| Instant::now() < u) => {
+                    std::thread::yield_now();
+                }
+                Ok(None) => {
+                    // A sleep before a poll that ran out: how late did it end?
+                    if taken == 0
+                        && let Some(until) = woken_for
+                    {
+                        wake.slept(until, (c.now_us)());
+                    }
+                    break;
+                }
+                Err(e) => {
+                    return Err(e);
+                }
+            }
+        }
+        backlog = taken >= c.opts.max_burst.max(1);
+        let now = (c.now_us)();
+        let health = b.health();
+        if health.error_frames != counted {
+            LinkStats::add(
+                &c.link.bus_errors,
+                health.error_frames.saturating_sub(counted),
+            );
+            counted = health.error_frames;
+        }
+        if let Some(state) = watch.update(c.name, c.iface, &health) {
+            c.link.set_controller(state);
+            component.on_health(state, now);
+        }
+        if Instant::now() >= next_tick {
+            component.tick(now, out);
+            next_tick = Instant::now() + c.opts.tick;
+        }
+        flush(out, b, c.opts, c.link, now, c.name)?;
+    }
+    Ok(())
+}
+
+/// After a stop, the frames still queued (until `limit`, or a quiet gap of `DRAIN_QUIET`).
+fn drain<C: Component + ?Sized>(
+    component: &mut C,
+    b: &mut dyn CanBus,
+    limit: Duration,
+    opts: &RunOptions,
+    link: &LinkStats,
+    now_us: &dyn Fn() -> u64,
+    out: &mut Outbox,
+) {
+    let until = Instant::now() + limit;
+    loop {
+        let left = until.saturating_duration_since(Instant::now());
+        let Ok(Some(st)) = b.recv(DRAIN_QUIET.min(left)) else {
+            break;
+        };
+        deliver(component, &st, opts, link, now_us(), out);
+        if left.is_zero() {
+            break;
+        }
+    }
 }
 
 /// How one pass of [`run_with`]'s loop waits before it takes frames.
@@ -301,7 +355,7 @@ fn waiting<C: Component + ?Sized>(
     component: &mut C,
     wake: &mut Wake,
     wait: Duration,
-    now_us: &impl Fn() -> u64,
+    now_us: &dyn Fn() -> u64,
     scale: f64,
 ) -> Waiting {
     let mut w = Waiting {

@@ -4,7 +4,7 @@
 //! The node runs this way. Its receive thread only reads the socket into a queue, so that
 //! while the component classifies one foot's image (a millisecond or more) the socket's
 //! buffer does not overflow with the other feet's tactile streams; its send thread only
-//! writes, so that a bus that pushes back never stalls a decision. `presrs bench-node --feet
+//! writes, so that a bus that pushes back never stalls a decision. `presrs lab bench-node --feet
 //! 6` measures what this buys. The component itself sees the same calls as under [`run`]
 //! (frames, ticks, health, stop) on its own thread.
 //!

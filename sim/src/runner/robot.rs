@@ -21,7 +21,7 @@ pub struct SimConfig {
     /// The CAN identifiers.
     pub ids: IdConfig,
     /// Leg `foot` of this config speaks to the bus as two motors (its drivers' protocols)
-    /// instead of taking LegCommand and sending LegState: `presrs sim --leg`.
+    /// instead of taking LegCommand and sending LegState: `presrs lab sim --leg`.
     pub leg: Option<leg::LegConfig>,
     /// A leg of motors: its length joint's driver goes silent at this robot time, s (a fault
     /// drill: the bridge must stop the leg and name the joint).

@@ -6,6 +6,9 @@
 //! and bulk tactile data last. On a bus shared with CANopen devices the defaults overlap some
 //! predefined CANopen ranges (see `docs/protocol.md`); move them with an [`IdConfig`].
 
+#[cfg(feature = "alloc")]
+use alloc::vec::Vec;
+
 use serde::{Deserialize, Serialize};
 
 use crate::error::ConfigError;
@@ -129,42 +132,6 @@ impl Default for IdConfig {
 }
 
 impl IdConfig {
-    /// The `[ids]` table of a config file (the node's, the controller's, or one of its own),
-    /// checked; the defaults when the file has no `[ids]` table.
-    #[cfg(feature = "std")]
-    pub fn from_file(path: &std::path::Path) -> Result<Self, crate::config::ConfigFileError> {
-        use crate::config::{ConfigFileError, Invalid};
-        // Only the [ids] table is read: the rest of the file is another tool's business.
-        #[derive(Deserialize)]
-        struct Toml {
-            ids: Option<toml::Value>,
-        }
-        #[derive(Deserialize)]
-        struct Json {
-            ids: Option<serde_json::Value>,
-        }
-        let (text, name) = crate::config::read_text(path)?;
-        let parse_error = |reason: String| ConfigFileError::Parse {
-            path: name.clone(),
-            reason: format!("[ids]: {reason}"),
-        };
-        let ids = if name.ends_with(".json") {
-            match crate::config::parse::<Json>(&text, &name)?.ids {
-                Some(v) => IdConfig::deserialize(v).map_err(|e| parse_error(e.to_string()))?,
-                None => IdConfig::default(),
-            }
-        } else {
-            match crate::config::parse::<Toml>(&text, &name)?.ids {
-                Some(v) => IdConfig::deserialize(v).map_err(|e| parse_error(e.to_string()))?,
-                None => IdConfig::default(),
-            }
-        };
-        ids.validate().map_err(|e| {
-            ConfigFileError::invalid(&name, Invalid::new("ids", format!("ids: {e}")))
-        })?;
-        Ok(ids)
-    }
-
     /// A map for buses shared with CANopen devices (CiA 301 predefined connection set): the
     /// control and sensing messages move to the unused 0x040-0x07F block (high priority, below
     /// SYNC 0x080), the tactile stream to the unused 0x6C0 block and classic tactile to 0x6E0.
@@ -264,7 +231,7 @@ impl IdConfig {
     }
 
     /// The receive filter `(id, mask)` list that passes exactly the given messages.
-    #[cfg(feature = "std")]
+    #[cfg(feature = "alloc")]
     pub fn filters(&self, kinds: &[MessageKind]) -> Vec<(u32, u32)> {
         let width = self.id_mask();
         let mut out = Vec::new();

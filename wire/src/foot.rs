@@ -10,7 +10,7 @@
 //! the node debounces (a switch's bounce is information the node's rule is built for).
 //!
 //! ```
-//! use presrs_protocol::{foot::Foot, ids::IdConfig, tactile::{ImageRef, Variant}, CanFrame};
+//! use presrs_wire::{foot::Foot, ids::IdConfig, tactile::{ImageRef, Variant}, CanFrame};
 //! # struct Sink(Vec<CanFrame>);
 //! # impl embedded_can::blocking::Can for Sink {
 //! #     type Frame = CanFrame;

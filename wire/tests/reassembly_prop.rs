@@ -4,9 +4,9 @@
 
 use std::collections::HashMap;
 
-use presrs_protocol::CanFrame;
-use presrs_protocol::ids::IdConfig;
-use presrs_protocol::tactile::{ImageRef, Reassembler, Segmenter, Variant};
+use presrs_wire::CanFrame;
+use presrs_wire::ids::IdConfig;
+use presrs_wire::tactile::{ImageRef, Reassembler, Segmenter, Variant};
 use proptest::prelude::*;
 use rand::rngs::StdRng;
 use rand::seq::SliceRandom;

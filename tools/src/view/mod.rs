@@ -20,7 +20,7 @@ use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use record::read::Recorded;
 
-use crate::report::{ReportError, pe, register_font};
+use crate::plot::{PlotError, pe, register_font};
 pub use plan::{FootData, Layout, PanelKind, Shown};
 
 /// What the view shows, for the caller to print.
@@ -99,7 +99,7 @@ pub fn render(
     at_s: Option<f64>,
     title: &str,
     png: &Path,
-) -> Result<ViewSummary, ReportError> {
+) -> Result<ViewSummary, PlotError> {
     register_font()?;
     let d = FootData::of(recording, foot);
     let layout = plan::plan(&d, at_s);
@@ -168,7 +168,7 @@ fn draw_image(
     t: f64,
     m: &Recorded,
     decided: Option<&Recorded>,
-) -> Result<(), ReportError> {
+) -> Result<(), PlotError> {
     let Some((w, h, px)) = record::read::mono8_image(&m.json) else {
         return Ok(());
     };
@@ -257,7 +257,7 @@ fn draw_panel(
     d: &FootData<'_>,
     cursor: Option<f64>,
     last: bool,
-) -> Result<Vec<Mark>, ReportError> {
+) -> Result<Vec<Mark>, PlotError> {
     let p = PanelArea {
         area,
         span: d.span,
@@ -275,7 +275,7 @@ fn draw_panel(
 
 /// Terrain: one row per name seen; the truth as a line, the bus's decisions as dots, a
 /// model's as crosses.
-fn terrain_panel(p: &PanelArea<'_, '_>, d: &FootData<'_>) -> Result<Vec<Mark>, ReportError> {
+fn terrain_panel(p: &PanelArea<'_, '_>, d: &FootData<'_>) -> Result<Vec<Mark>, PlotError> {
     // One row per terrain name seen, in the order met.
     let mut names: BTreeMap<String, usize> = BTreeMap::new();
     for (_, m) in d.truth.iter().chain(&d.classes).chain(&d.model) {
@@ -344,7 +344,7 @@ fn terrain_panel(p: &PanelArea<'_, '_>, d: &FootData<'_>) -> Result<Vec<Mark>, R
 }
 
 /// The foot switch as a step line: stance or flight.
-fn contact_panel(p: &PanelArea<'_, '_>, d: &FootData<'_>) -> Result<Vec<Mark>, ReportError> {
+fn contact_panel(p: &PanelArea<'_, '_>, d: &FootData<'_>) -> Result<Vec<Mark>, PlotError> {
     let mut c = time_chart(p.area, p.span, -0.2f64..1.2f64, p.x_area)?;
     c.configure_mesh()
         .y_labels(2)
@@ -375,7 +375,7 @@ fn contact_panel(p: &PanelArea<'_, '_>, d: &FootData<'_>) -> Result<Vec<Mark>, R
 }
 
 /// The gait in force.
-fn gait_panel(p: &PanelArea<'_, '_>, d: &FootData<'_>) -> Result<Vec<Mark>, ReportError> {
+fn gait_panel(p: &PanelArea<'_, '_>, d: &FootData<'_>) -> Result<Vec<Mark>, PlotError> {
     let pts: Vec<(f64, f64)> = d
         .gait
         .iter()
@@ -396,7 +396,7 @@ fn gait_panel(p: &PanelArea<'_, '_>, d: &FootData<'_>) -> Result<Vec<Mark>, Repo
 }
 
 /// The simulator's true speed.
-fn speed_panel(p: &PanelArea<'_, '_>, d: &FootData<'_>) -> Result<Vec<Mark>, ReportError> {
+fn speed_panel(p: &PanelArea<'_, '_>, d: &FootData<'_>) -> Result<Vec<Mark>, PlotError> {
     let pts: Vec<(f64, f64)> = d
         .truth
         .iter()
@@ -420,7 +420,7 @@ fn time_chart<'a, 'b>(
     x_label_area: u32,
 ) -> Result<
     ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
-    ReportError,
+    PlotError,
 > {
     ChartBuilder::on(area)
         .margin(8)
@@ -435,7 +435,7 @@ fn draw_legend(
     area: &DrawingArea<BitMapBackend<'_>, Shift>,
     p: &plan::Panel,
     marks: &[Mark],
-) -> Result<(), ReportError> {
+) -> Result<(), PlotError> {
     area.draw(&Text::new(p.kind.title(), (12, 14), ("sans-serif", 17)))
         .map_err(pe)?;
     for (k, (s, m)) in p.series.iter().zip(marks).enumerate() {

@@ -8,7 +8,7 @@
 //! component's outbox, without a callback shape per layer.
 //!
 //! ```
-//! use presrs_protocol::emit::Emit;
+//! use presrs_wire::emit::Emit;
 //! fn count_to(n: u32, out: &mut (impl Emit<u32> + ?Sized)) {
 //!     for i in 1..=n { out.emit(i); }
 //! }
@@ -38,8 +38,8 @@ impl<T, F: FnMut(T)> Emit<T> for F {
 }
 
 /// Collects, oldest first.
-#[cfg(feature = "std")]
-impl<T> Emit<T> for std::vec::Vec<T> {
+#[cfg(feature = "alloc")]
+impl<T> Emit<T> for alloc::vec::Vec<T> {
     fn emit(&mut self, item: T) {
         self.push(item)
     }

@@ -85,7 +85,7 @@ impl Variant {
             Variant::Classic => MessageKind::TactileFrameClassic,
         }
     }
-    #[cfg(feature = "std")]
+    #[cfg(feature = "alloc")]
     fn index(self, p: &[u8]) -> usize {
         match self {
             Variant::Fd => p[1] as usize,
@@ -179,8 +179,8 @@ impl TactileImage {
     /// The pixels as a viewer's image bytes, into `out` (cleared): `mono8` for 8-bit images,
     /// `mono16` little-endian otherwise. Returns the encoding and the bytes per pixel. The
     /// MCAP recording and the ROS 2 image both show them so.
-    #[cfg(feature = "std")]
-    pub fn mono_bytes(&self, out: &mut std::vec::Vec<u8>) -> (&'static str, u32) {
+    #[cfg(feature = "alloc")]
+    pub fn mono_bytes(&self, out: &mut alloc::vec::Vec<u8>) -> (&'static str, u32) {
         out.clear();
         if self.bits == 8 {
             out.extend(self.pixels().iter().map(|&p| p as u8));
@@ -221,11 +221,11 @@ pub fn pixel_crc(pixels: &[u16], bits: u8) -> u32 {
     h.finalize()
 }
 
-#[cfg(feature = "std")]
+#[cfg(feature = "alloc")]
 mod reassemble;
 mod segment;
 
-#[cfg(feature = "std")]
+#[cfg(feature = "alloc")]
 pub use reassemble::Reassembler;
 pub use segment::{ImageRef, SegmentError, Segmenter};
 

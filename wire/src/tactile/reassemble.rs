@@ -1,6 +1,10 @@
 //! The receiver's side: images rebuilt from segments that may be lost, duplicated, reordered,
 //! interleaved between feet or garbage; buffers allocated once.
 
+use alloc::boxed::Box;
+use alloc::vec;
+use alloc::vec::Vec;
+
 use super::*;
 use crate::ids::MAX_FEET;
 
