@@ -61,6 +61,7 @@
 
 mod lockstep;
 mod run;
+mod serve;
 mod signals;
 mod threaded;
 mod wake;
