@@ -14,49 +14,12 @@
 //!
 //! The figures go to a report (`--json`), not to a timed test: the machines are noisy.
 
-use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::{Context, Result};
 use lab::load::{self, Feet, SIDE, WARMUP_US};
+use presrs_cli::bench_node::BenchNodeArgs;
 use protocol::ids::IdConfig;
-
-#[derive(clap::Args)]
-pub struct BenchNodeArgs {
-    /// Run `presrs node` as a child process on this CAN interface (vcan0). Default: the node's
-    /// threads on an in-process bus in this process.
-    #[arg(long)]
-    pub iface: Option<String>,
-    /// Model file; default: the demo's model (trained on first run, then cached).
-    #[arg(long)]
-    pub model: Option<PathBuf>,
-    /// Feet served, each at 100 Hz; a list (`1,4,8`) measures each count in turn (`--json`:
-    /// an array of reports).
-    #[arg(long, value_delimiter = ',', default_value = "6")]
-    pub feet: Vec<u8>,
-    /// Measured seconds, after 1 s of warm-up.
-    #[arg(long, default_value_t = 10.0)]
-    pub seconds: f64,
-    /// A label carried into the report (say "emulated" for a VM).
-    #[arg(long)]
-    pub label: Option<String>,
-    /// Print the report as one JSON object.
-    #[arg(long)]
-    pub json: bool,
-    /// Record the node's traffic to this MCAP file while measuring (`presrs node --mcap`):
-    /// the report adds the recorder's CPU, what it wrote and what it dropped.
-    #[arg(long, value_name = "FILE")]
-    pub mcap: Option<PathBuf>,
-    /// The in-process node's threads: 1 (the default, as `presrs node` runs) or 3 (receive,
-    /// pipeline and send), to measure one against the other (docs/decisions/node-threads.md).
-    #[arg(long, default_value = "1")]
-    pub node_threads: node::NodeThreads,
-    /// `--ros2`: measure each feet count twice in one run, without and then with the ROS 2
-    /// bridge beside the node on the same bus (publishing on Zenoh, as `presrs bridge` does);
-    /// the report adds the bridge's CPU and drops.
-    #[command(flatten)]
-    pub ros2: ros2::Ros2Options,
-}
 
 pub fn run(a: BenchNodeArgs) -> Result<ExitCode> {
     anyhow::ensure!(
@@ -75,27 +38,25 @@ pub fn run(a: BenchNodeArgs) -> Result<ExitCode> {
         !(a.ros2.any() && (a.mcap.is_some() || a.iface.is_some())),
         "--ros2 measures the in-process node with and without the bridge; drop --mcap and --iface"
     );
-    let runs: &[bool] = if a.ros2.any() {
-        &[false, true]
-    } else {
-        &[false]
+    anyhow::ensure!(
+        !(a.keep_unknown.is_some() && (a.ros2.any() || a.iface.is_some())),
+        "--keep-unknown measures the in-process node with and without keeping; drop --ros2 and --iface"
+    );
+    // Each feet count alone, then with the part measured beside it.
+    let runs: &[Beside] = match (a.ros2.any(), a.keep_unknown.is_some()) {
+        (true, _) => &[Beside::Nothing, Beside::Bridge],
+        (_, true) => &[Beside::Nothing, Beside::Keep],
+        _ => &[Beside::Nothing],
     };
     let mut reports = Vec::new();
-    for (&n, &bridge) in a.feet.iter().flat_map(|n| runs.iter().map(move |b| (n, b))) {
-        let (text, json) = bench_one(&a, n, &model, bridge)?;
+    for (&n, &beside) in a.feet.iter().flat_map(|n| runs.iter().map(move |b| (n, b))) {
+        let (text, json) = bench_one(&a, n, &model, beside)?;
         if !a.json {
-            if a.feet.len() > 1 || bridge {
+            if a.feet.len() > 1 || runs.len() > 1 {
                 println!();
             }
-            if a.ros2.any() {
-                println!(
-                    "{}",
-                    if bridge {
-                        "with the ROS 2 bridge:"
-                    } else {
-                        "without the ROS 2 bridge:"
-                    }
-                );
+            if let Some(heading) = beside.heading(runs.len()) {
+                println!("{heading}");
             }
             print!("{text}");
         }
@@ -110,13 +71,34 @@ pub fn run(a: BenchNodeArgs) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// What runs beside the node in one measurement.
+#[derive(Clone, Copy, PartialEq)]
+enum Beside {
+    Nothing,
+    /// The ROS 2 bridge (`--ros2`).
+    Bridge,
+    /// The unknown stances kept (`--keep-unknown`).
+    Keep,
+}
+
+impl Beside {
+    fn heading(self, runs: usize) -> Option<&'static str> {
+        match (self, runs) {
+            (_, 1) => None,
+            (Beside::Bridge, _) => Some("with the ROS 2 bridge:"),
+            (Beside::Keep, _) => Some("keeping unknown stances:"),
+            (Beside::Nothing, _) => Some("alone:"),
+        }
+    }
+}
+
 /// One measurement with `feet_n` feet (the node in this process, or as a process on
 /// `--iface`): its report as text and as JSON.
 fn bench_one(
     a: &BenchNodeArgs,
     feet_n: u8,
     model: &node::classifier::Model,
-    bridge: bool,
+    beside: Beside,
 ) -> Result<(String, serde_json::Value)> {
     let feet = Feet::new(feet_n, load::image_pool(), IdConfig::default()).context("--feet")?;
     let total_us = WARMUP_US + (a.seconds * 1e6) as u64;
@@ -129,7 +111,7 @@ fn bench_one(
                 total_us,
                 a.mcap.as_deref(),
                 a.node_threads,
-                if bridge {
+                if beside == Beside::Bridge {
                     let out = a
                         .ros2
                         .start(
@@ -142,6 +124,7 @@ fn bench_one(
                 } else {
                     None
                 },
+                a.keep_unknown.as_deref().filter(|_| beside == Beside::Keep),
             )?,
         ),
         Some(iface) => (
@@ -173,6 +156,12 @@ fn bench_one(
             "ROS 2 bridge beside it: CPU {:.1}% of one core, {} frames dropped\n",
             b["cpu_pct_of_one_core"].as_f64().unwrap_or(f64::NAN),
             b["dropped"]
+        ));
+    }
+    if let Some(k) = r.extra.get("kept_unknown").filter(|k| !k.is_null()) {
+        text.push_str(&format!(
+            "kept {} unknown stances, {} dropped\n",
+            k["written"], k["dropped"]
         ));
     }
     Ok((text, r.to_json()))

@@ -4,31 +4,14 @@
 //! node's heartbeat stops, and sends GaitStatus at every switch and at `status_hz`
 //! ([`controller::service::run`]).
 
-use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::{Context, Result};
 use controller::ControllerConfig;
+use presrs_cli::controller::ControllerArgs;
 
 use protocol::bus::BusSource;
 use protocol::component::Signals;
-
-#[derive(clap::Args)]
-pub struct ControllerArgs {
-    /// CAN interface (can0, vcan0).
-    #[arg(long)]
-    pub iface: String,
-    /// Gaits and policy (TOML or JSON by extension); see `examples/controller.toml`.
-    #[arg(long)]
-    pub config: Option<PathBuf>,
-    /// The controller's clock rate relative to the wall clock; match `presrs lab sim --speed` when
-    /// the simulator runs slower or faster than real time (on a robot: 1).
-    #[arg(long, default_value_t = 1.0)]
-    pub time_scale: f64,
-    /// Overrides the config's `terrains` key.
-    #[command(flatten)]
-    pub terrains: protocol::TerrainsArg,
-}
 
 pub fn load_config(path: Option<&std::path::Path>) -> Result<ControllerConfig> {
     match path {

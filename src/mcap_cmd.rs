@@ -2,42 +2,13 @@
 //! which `presrs node` and `presrs lab sim` record live. The channels and the writing are
 //! [`record`]'s; this module reads arguments and says what happened.
 
-use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::{Context, Result};
 use node::NodeService;
 use node::classifier::Model;
+use presrs_cli::mcap::{McapArgs, ViewArgs};
 use record::{McapFile, Recorder, Sink};
-
-#[derive(clap::Args)]
-pub struct McapArgs {
-    /// candump log (`candump -L` format, as `candump -L any > run.log` writes it).
-    pub log: PathBuf,
-    /// The MCAP file to write (with --ros2: the rosbag2 directory, which must not exist).
-    #[arg(long)]
-    pub out: PathBuf,
-    /// Write a ROS 2 bag instead: `--out DIR` becomes a rosbag2 directory (MCAP with CDR
-    /// messages and `metadata.yaml`), the same messages `presrs bridge` publishes.
-    #[arg(long)]
-    pub ros2: bool,
-    /// With --ros2: the robot's ROS 2 namespace in the bag's topic names.
-    #[arg(long, value_name = "NS", default_value = "", requires = "ros2")]
-    pub namespace: String,
-    /// Also run the node with this model on the way: its TerrainClass per step goes on
-    /// `/footN/terrain/model` (with --ros2: `footN/terrain/model` in the bag), beside any
-    /// TerrainClass already in the log; the same decisions `presrs node --replay --csv` lists.
-    #[arg(long)]
-    pub model: Option<PathBuf>,
-    /// Node config (TOML): identifiers, feet, stance timing (see `examples/node.toml`).
-    #[arg(long)]
-    pub config: Option<PathBuf>,
-    /// Print the counts as JSON.
-    #[arg(long)]
-    pub json: bool,
-    #[command(flatten)]
-    pub terrains: protocol::TerrainsArg,
-}
 
 pub fn run(a: McapArgs) -> Result<ExitCode> {
     let mut cfg =
@@ -97,23 +68,6 @@ pub fn run(a: McapArgs) -> Result<ExitCode> {
     }
     eprintln!("{} frames -> {}: {s}", file.records, a.out.display());
     Ok(ExitCode::SUCCESS)
-}
-
-#[derive(clap::Args)]
-pub struct ViewArgs {
-    /// An MCAP recording (`presrs mcap`, or `--mcap` of node, sim or demo).
-    pub recording: PathBuf,
-    /// The PNG to write.
-    #[arg(long)]
-    pub out: PathBuf,
-    /// The foot to show.
-    #[arg(long, default_value_t = 0)]
-    pub foot: u8,
-    /// Show the image nearest this time, s from the start. Default: the stance that says most
-    /// about the run, its first step called unknown (the model's decisions first), else its
-    /// middle step; the title names it.
-    #[arg(long, value_name = "S")]
-    pub at: Option<f64>,
 }
 
 /// `presrs view`: a recording's pressure image beside a panel per kind of data it holds.

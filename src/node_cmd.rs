@@ -2,53 +2,17 @@
 //! log. The node itself is [`node::NodeService`]; this module reads the arguments, maps SIGHUP
 //! to a model reload and SIGINT/SIGTERM to a stop, and prints a replay's decisions.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::ExitCode;
 use std::time::Duration;
 
 use anyhow::{Context, Result};
 use node::NodeService;
 use node::classifier::Model;
+use presrs_cli::node::NodeArgs;
 use protocol::bus::BusSource;
 
 use protocol::component::Signals;
-
-#[derive(clap::Args)]
-pub struct NodeArgs {
-    /// CAN interface (can0, vcan0).
-    #[arg(long, required_unless_present = "replay", conflicts_with = "replay")]
-    pub iface: Option<String>,
-    /// Run the pipeline on a candump log (`candump -L` format) instead of a bus, with the log's
-    /// timestamps, and print the TerrainClass stream.
-    #[arg(long)]
-    pub replay: Option<PathBuf>,
-    /// Model file from `presrs train`.
-    #[arg(long)]
-    pub model: PathBuf,
-    /// Node config (TOML); see `examples/node.toml`.
-    #[arg(long)]
-    pub config: Option<PathBuf>,
-    /// Replay: print each TerrainClass as a JSON line (`t_us`: when the node decided the step,
-    /// on the log's clock, µs; `step`: the foot's step counter, as on the bus).
-    #[arg(long)]
-    pub json: bool,
-    /// One CSV row per step and foot, live or on a replay: foot, step (the bus's counter,
-    /// numbered as `capture`'s manifest), touchdown_s (the debounced touchdown) and
-    /// decision_s (when the node decided), both on the log's clock (its timestamps; live, the
-    /// bus's receive clock), terrain, unknown_reason, confidence_pct (empty for unknown
-    /// ground: no terrain was chosen) and gait (the controller's, empty before its first
-    /// GaitStatus).
-    #[arg(long, value_name = "FILE")]
-    pub csv: Option<PathBuf>,
-    /// Overrides the config's `terrains` key.
-    #[command(flatten)]
-    pub terrains: protocol::TerrainsArg,
-    #[command(flatten)]
-    pub live: record::LiveOptions,
-    /// `--ros2`: the node's bus as ROS 2 topics on Zenoh; `--ros2-bag DIR`: as a rosbag2.
-    #[command(flatten)]
-    pub ros2: ros2::Ros2Options,
-}
 
 pub fn run(a: NodeArgs) -> Result<ExitCode> {
     let mut cfg =
@@ -67,9 +31,12 @@ pub fn run(a: NodeArgs) -> Result<ExitCode> {
             );
             // The same decisions on every replay: a refit lands at the step that asked for it.
             cfg.refit = cfg.refit.reproducible();
-            let node = NodeService::new(cfg, model)
+            let mut node = NodeService::new(cfg, model)
                 .with_context(|| format!("--model {}", a.model.display()))?;
-            replay(node, log, a.json, a.csv.as_deref())
+            let keep = keep_unknown(&a, &mut node, &log.display().to_string(), true)?;
+            let code = replay(node, log, a.json, a.csv.as_deref())?;
+            finish_keep(keep, &a)?;
+            Ok(code)
         }
         (None, Some(iface)) => {
             let signals = Signals::install()?;
@@ -94,6 +61,7 @@ pub fn run(a: NodeArgs) -> Result<ExitCode> {
             if let Some(s) = steps.as_ref().and_then(|s| s.sender()) {
                 node.set_step_log(s);
             }
+            let keep = keep_unknown(&a, &mut node, iface, false)?;
             let outputs = crate::ros2_cmd::LiveOutputs::start(
                 &a.live,
                 &a.ros2,
@@ -122,10 +90,44 @@ pub fn run(a: NodeArgs) -> Result<ExitCode> {
                 let (rows, dropped) = s.finish().context("--csv")?;
                 tracing::info!(rows, dropped, path = %path.display(), "step table written");
             }
+            finish_keep(keep, &a)?;
             Ok(ExitCode::SUCCESS)
         }
         (None, None) => anyhow::bail!("give --iface IFACE or --replay FILE.log"),
     }
+}
+
+/// `--keep-unknown DIR`: the keeper on the node, its writer here.
+fn keep_unknown(
+    a: &NodeArgs,
+    node: &mut NodeService,
+    source: &str,
+    replay: bool,
+) -> Result<Option<node::unknown::keep::KeepWriter>> {
+    let Some(dir) = &a.keep_unknown else {
+        return Ok(None);
+    };
+    let (keeper, writer) = node::unknown::keep::UnknownKeeper::create(dir, source)
+        .with_context(|| format!("--keep-unknown {}", dir.display()))?;
+    node.set_keep_unknown(if replay { keeper.waiting() } else { keeper });
+    Ok(Some(writer))
+}
+
+/// Waits for the kept stances to be written (the node dropped) and says where they are.
+fn finish_keep(keep: Option<node::unknown::keep::KeepWriter>, a: &NodeArgs) -> Result<()> {
+    if let (Some(w), Some(dir)) = (keep, &a.keep_unknown) {
+        let c = w
+            .finish()
+            .with_context(|| format!("--keep-unknown {}", dir.display()))?;
+        eprintln!(
+            "kept {} unknown stances in {} ({} already there, {} dropped: the writer fell behind)",
+            c.written,
+            dir.display(),
+            c.duplicates,
+            c.dropped
+        );
+    }
+    Ok(())
 }
 
 /// The log through the node on the log's own clock ([`node::replay`]), each decision printed.

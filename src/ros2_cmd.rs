@@ -6,24 +6,10 @@ use std::process::ExitCode;
 use std::sync::{Arc, Mutex};
 
 use anyhow::{Context, Result};
+use presrs_cli::bridge::BridgeArgs;
 use protocol::bus::BusSource;
 use protocol::component::Signals;
 use protocol::{IdConfig, TerrainCatalog};
-
-#[derive(clap::Args)]
-pub struct BridgeArgs {
-    /// The robot's CAN interface (can0, vcan0).
-    #[arg(long)]
-    pub iface: String,
-    /// Node config (TOML): the identifiers and terrains the bus uses (`examples/node.toml`).
-    #[arg(long)]
-    pub config: Option<std::path::PathBuf>,
-    #[command(flatten)]
-    pub terrains: protocol::TerrainsArg,
-    /// Where to publish (`--ros2` is implied: the bridge always publishes on Zenoh).
-    #[command(flatten)]
-    pub ros2: ros2::Ros2Options,
-}
 
 /// A process's live outputs: the recorder thread and what its ROS 2 output delivered.
 pub struct LiveOutputs {

@@ -1,6 +1,8 @@
 //! The node's hot path allocates nothing, with or without the ROS 2 bridge beside it on the
-//! same bus: a counting allocator counts every allocation made on the node's thread
+//! same bus, and keeping its unknown stances: a counting allocator counts every allocation made on the node's thread
 //! (`pipeline`) while four feet stream at 100 Hz, after the warm-up.
+
+mod common;
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
@@ -57,8 +59,14 @@ unsafe impl GlobalAlloc for Counting {
 static A: Counting = Counting;
 
 /// Allocations on the node's thread from 2 s into a 5 s run (1 s of it warm-up).
-fn node_allocations(bridge: bool, dir: &std::path::Path) -> u64 {
-    let model = node::classifier::Model::load(&small_model(dir)).unwrap();
+fn node_allocations(bridge: bool, keep: bool, dir: &std::path::Path) -> u64 {
+    let model = if keep {
+        common::model_without("clay")
+    } else {
+        node::classifier::Model::load(&small_model(dir)).unwrap()
+    };
+    let kept = dir.join(format!("kept-{}", std::process::id()));
+    let keep = keep.then_some(kept.as_path());
     let feet =
         lab::load::Feet::new(4, lab::load::image_pool(), protocol::IdConfig::default()).unwrap();
     let beside = bridge.then(|| {
@@ -83,10 +91,22 @@ fn node_allocations(bridge: bool, dir: &std::path::Path) -> u64 {
         std::thread::sleep(Duration::from_secs(2));
         ARMED.store(false, Ordering::Relaxed);
     });
-    let run = lab::load::bench_inproc(model, feet, 5_000_000, None, node::NodeThreads::One, beside)
-        .unwrap();
+    let run = lab::load::bench_inproc(
+        model,
+        feet,
+        5_000_000,
+        None,
+        node::NodeThreads::One,
+        beside,
+        keep,
+    )
+    .unwrap();
     arm.join().unwrap();
     assert!(run.tally.steps > 0, "the node decided no step");
+    if keep.is_some() {
+        let written = run.extra["kept_unknown"]["written"].as_u64().unwrap();
+        assert!(written > 0, "nothing kept: {}", run.extra);
+    }
     COUNT.load(Ordering::Relaxed)
 }
 
@@ -100,7 +120,7 @@ fn small_model(dir: &std::path::Path) -> std::path::PathBuf {
 }
 
 #[test]
-fn the_node_allocates_nothing_per_frame_with_or_without_the_bridge() {
+fn the_node_allocates_nothing_per_frame_with_or_without_the_bridge_or_keeping_unknown_stances() {
     let dir = std::env::temp_dir().join(format!("presrs-node-alloc-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     // The counter itself: it sees an allocation on a thread of the node's name.
@@ -116,9 +136,17 @@ fn the_node_allocates_nothing_per_frame_with_or_without_the_bridge() {
         COUNT.load(Ordering::Relaxed) > 0,
         "the counting allocator counts nothing"
     );
-    let without = node_allocations(false, &dir);
-    let with = node_allocations(true, &dir);
-    eprintln!("allocations on the node's thread over 2 s: {without} alone, {with} with the bridge");
+    let without = node_allocations(false, false, &dir);
+    let with = node_allocations(true, false, &dir);
+    let keeping = node_allocations(false, true, &dir);
+    eprintln!(
+        "allocations on the node's thread over 2 s: {without} alone, {with} with the bridge, \
+         {keeping} keeping unknown stances"
+    );
+    assert_eq!(
+        keeping, 0,
+        "the node's hot path allocates keeping unknown stances"
+    );
     assert_eq!(without, 0, "the node's hot path allocates");
     assert_eq!(
         with, 0,

@@ -202,3 +202,99 @@ fn the_firmware_examples_log_is_a_run_the_node_decides() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `--keep-unknown DIR` over a replay: a model that knows three of the track's four terrains
+/// keeps exactly the steps it calls unknown on their image, as images `train` reads and a
+/// `kept.csv` that says why; keeping the same log again adds nothing.
+#[test]
+fn keep_unknown_keeps_each_step_called_unknown_on_its_image_and_nothing_twice() {
+    let dir = std::env::temp_dir().join(format!("presrs-keep-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    // Trained without clay (the default track's third segment).
+    let model = common::model_without("clay");
+    let model_path = dir.join("model.json");
+    model.save(&model_path).unwrap();
+    let mut robot = SimRobot::new(SimConfig::default(), 5);
+    let log = dir.join("run.log");
+    let mut w = std::io::BufWriter::new(std::fs::File::create(&log).unwrap());
+    let mut t = 0;
+    while t < 40_000_000 {
+        t += 1000;
+        robot.advance_to(t, &mut |frame| {
+            protocol::candump::write_record(&mut w, "vcan0", &Stamped { t_us: t, frame }).unwrap()
+        });
+    }
+    drop(w);
+    let kept = dir.join("kept");
+    let keep = |args: &[&str]| {
+        common::output_ok(
+            Command::new(env!("CARGO_BIN_EXE_presrs"))
+                .args(["node", "--replay", log.to_str().unwrap()])
+                .args(["--model", model_path.to_str().unwrap(), "--keep-unknown"])
+                .arg(&kept)
+                .args(args),
+        )
+    };
+    let out = keep(&["--json"]);
+    let on_image: Vec<serde_json::Value> = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
+        .filter(|v| {
+            ["novelty", "load", "texture", "energy"]
+                .contains(&v["unknown_reason"].as_str().unwrap_or(""))
+        })
+        .collect();
+    assert!(on_image.len() >= 3, "only {} unknown steps", on_image.len());
+    // Each kept step's true terrain: the robot's last touchdown before the decision.
+    let truth = |t_us: u64| {
+        robot
+            .steps
+            .iter()
+            .rev()
+            .find(|s| s.touchdown_us <= t_us)
+            .map(|s| s.terrain.name().to_string())
+    };
+    let on_clay = on_image
+        .iter()
+        .filter(|v| truth(v["t_us"].as_u64().unwrap()).as_deref() == Some("clay"))
+        .count();
+    let clay_steps = robot
+        .steps
+        .iter()
+        .filter(|s| s.terrain.name() == "clay")
+        .count();
+    eprintln!(
+        "kept {} unknown steps, {on_clay} of them on clay (of {clay_steps} clay steps)",
+        on_image.len()
+    );
+    let table = std::fs::read_to_string(kept.join("kept.csv")).unwrap();
+    let rows: Vec<&str> = table.lines().skip(1).collect();
+    assert_eq!(rows.len(), on_image.len(), "{table}");
+    for (row, v) in rows.iter().zip(&on_image) {
+        let cols: Vec<&str> = row.split(',').collect();
+        assert_eq!(cols[1], v["foot"].to_string());
+        assert_eq!(cols[2], v["step"].to_string());
+        assert_eq!(cols[3], v["unknown_reason"].as_str().unwrap());
+        let img = node::classifier::dataset::read_image(&kept.join(cols[0])).unwrap();
+        assert_eq!((img.rows, img.cols), (44, 44));
+        assert!(
+            img.pixels.iter().any(|&p| p > 0),
+            "{}: a blank image",
+            cols[0]
+        );
+    }
+    // The same log again: everything is there already.
+    let out = keep(&[]);
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(said.contains("kept 0 unknown stances"), "{said}");
+    assert!(
+        said.contains(&format!("{} already there", rows.len())),
+        "{said}"
+    );
+    assert_eq!(
+        std::fs::read_to_string(kept.join("kept.csv")).unwrap(),
+        table
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -10,7 +10,9 @@
 #![cfg_attr(not(feature = "interop"), allow(unused_imports, dead_code))]
 mod common;
 
-use lab::open_set::{OpenSetMeans, OpenSetRow, OpenSetSource, leave_one_class_out};
+use lab::open_set::{
+    OpenSetMeans, OpenSetRow, OpenSetSource, leave_class_out, leave_one_class_out,
+};
 use lab::simdata::TrainingSet;
 use lab::study::dataset_on;
 use node::classifier::image::Crop;
@@ -239,18 +241,25 @@ fn speedpp2d_a_left_out_subject_is_unknown_more_often_than_not_and_known_ones_ra
     let rows = leave_one_class_out(&src).unwrap();
     let m = means(&rows);
     // The texture check: people differ in shape, not in roughness. Measured (seeds 1-10):
-    // every figure the same with it as without; asserted here on every row, the choice fixed.
+    // every figure the same with it as without; asserted here on three subjects left out, the
+    // choice fixed (all ten cost two minutes of the test command).
     let plain = Candidate {
         normalize_load: true,
         ..Candidate::PLAIN
     };
+    let some_out = |src: &OpenSetSource| -> Vec<OpenSetRow> {
+        [0, 4, 8]
+            .iter()
+            .map(|&k| leave_class_out(src, k).unwrap())
+            .collect()
+    };
     src.opts.unknown_checks = UnknownChecks::Fixed(plain);
-    let without = leave_one_class_out(&src).unwrap();
+    let without = some_out(&src);
     src.opts.unknown_checks = UnknownChecks::Fixed(Candidate {
         texture: true,
         ..plain
     });
-    for (a, b) in without.iter().zip(&leave_one_class_out(&src).unwrap()) {
+    for (a, b) in without.iter().zip(&some_out(&src)) {
         assert_eq!(
             (a.unknown_held_out, a.unknown_known, a.known_accuracy),
             (b.unknown_held_out, b.unknown_known, b.known_accuracy),
@@ -268,11 +277,12 @@ fn speedpp2d_a_left_out_subject_is_unknown_more_often_than_not_and_known_ones_ra
     // against 1.9%: more new ground found for more known ground called unknown, within the
     // issue's 5%.
     let w = means(&without);
+    let chosen = means(&[0, 4, 8].map(|k| rows[k].clone()));
     assert!(m.auroc >= 0.97, "{rows:?}");
     assert!(
-        m.auroc >= w.auroc - 0.005,
-        "chosen {} plain {}",
-        m.auroc,
+        chosen.auroc >= w.auroc - 0.005,
+        "chosen {} plain {} (subjects 0, 4, 8 left out)",
+        chosen.auroc,
         w.auroc
     );
     assert!(m.auroc >= m.nn_auroc, "{rows:?}");

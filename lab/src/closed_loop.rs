@@ -293,16 +293,10 @@ pub fn run_recorded(
     // commands, then moves), the node, the controller; with a leg of motors, its bridge last
     // (it hears the motors' replies and the controller's command of this millisecond).
     let mut bus = LockStep::new(4, 1 << 16);
-    bus.start(0, &mut sim, &mut sent)?;
-    if let Some(n) = node.as_mut() {
-        bus.start(1, n, &mut sent)?;
-    }
-    if let Some(c) = ctrl.as_mut() {
-        bus.start(2, c, &mut sent)?;
-    }
-    if let Some(b) = bridge.as_mut() {
-        bus.start(3, b, &mut sent)?;
-    }
+    bus.start_all(
+        &mut parts_of(&mut sim, &mut node, &mut ctrl, bridge.as_mut()),
+        &mut sent,
+    )?;
     let mut t_us = 0u64;
     let limit_us = (p.steps as u64 + 20) * 1_000_000;
     let mut reported = 0;
@@ -327,11 +321,11 @@ pub fn run_recorded(
         }
         if during(p.controller_restart, t_us) {
             ctrl = None;
-        } else if ctrl.is_none()
-            && let Some(mut c) = new_controller()?
-        {
-            bus.start(2, &mut c, &mut sent)?;
-            ctrl = Some(c);
+        } else if ctrl.is_none() {
+            ctrl = new_controller()?;
+            if let Some(c) = ctrl.as_mut() {
+                bus.start(2, c, &mut sent)?;
+            }
         }
         let mut stalled = bridge.as_mut().map(|b| Stalled {
             inner: b,
@@ -355,20 +349,29 @@ pub fn run_recorded(
     }
     // The same lifecycle as the other runners: each part stops, the leg bridge's motors first
     // (their stop frames go on the bus and into the log, as `presrs leg` sends them).
-    if let Some(b) = bridge.as_mut() {
-        bus.stop(3, b, &mut sent)?;
-    }
-    if let Some(c) = ctrl.as_mut() {
-        bus.stop(2, c, &mut sent)?;
-    }
-    if let Some(n) = node.as_mut() {
-        bus.stop(1, n, &mut sent)?;
-    }
-    bus.stop(0, &mut sim, &mut sent)?;
+    bus.stop_all(
+        &mut parts_of(&mut sim, &mut node, &mut ctrl, bridge.as_mut()),
+        &mut sent,
+    )?;
     if let Some(e) = log_error.take() {
         return Err(LabError::Log(e));
     }
     Ok(finish(sim, bridge, epoch_us))
+}
+
+/// The loop's parts in their bus order: the robot, the node, the controller, the leg bridge.
+fn parts_of<'a>(
+    sim: &'a mut SimService<'_>,
+    node: &'a mut Option<NodeService>,
+    ctrl: &'a mut Option<ControllerService>,
+    bridge: Option<&'a mut leg::LegService>,
+) -> [Option<&'a mut dyn Component>; 4] {
+    [
+        Some(sim),
+        node.as_mut().map(|n| n as &mut dyn Component),
+        ctrl.as_mut().map(|c| c as &mut dyn Component),
+        bridge.map(|b| b as &mut dyn Component),
+    ]
 }
 
 /// The simulated robot of a loop run: the track, and what the parameters change of it.

@@ -88,6 +88,9 @@ pub enum LabError {
     /// Writing a run's candump log ([`closed_loop::LoopRecording::log`]).
     #[error("writing the candump log: {0}")]
     Log(std::io::Error),
+    /// A class index past the source's classes ([`open_set::leave_class_out`]).
+    #[error("class {0} left out, but the source has only {1} classes")]
+    NoSuchClass(usize, usize),
     /// A thread of the loop panicked.
     #[error("the {0} thread panicked")]
     Panicked(&'static str),

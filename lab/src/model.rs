@@ -83,9 +83,7 @@ pub const ENERGY_FIT_STEPS: usize = 400;
 /// that stances are entered at several energies), labelled with the simulator's truth.
 ///
 /// The map is the leg's as much as the ground's: `leg` the leg of motors the robot runs (none:
-/// the simulator's direct leg). Measured: fitted on the direct leg, the demo through MIT,
-/// moteus and ODrive legs called 5.3-10.3% of the default track's steps unknown (0.3-2.3%
-/// without the check); fitted on each leg, 0.3-2.3%, as without it (seed 2, 300 steps).
+/// the simulator's direct leg; docs/decisions/figures-behind-comments.md, energy-per-leg).
 pub fn fit_energy_on_sim(
     m: &mut Model,
     seed: u64,

@@ -151,10 +151,8 @@ impl OpenSetMeans {
 /// 95% interval.
 ///
 /// The range says how far one run can land from the rest; the mean's interval says what rate
-/// a lab can expect over its runs. A per-run bound and an expected rate are different targets:
-/// by counting alone (binomial), a fresh run of 150 known images at a true rate of 2.4% has 5
-/// or more unknown (above 3%) on 29% of runs, and at 1.5% on 8%; at 90 images (the simulated
-/// dynamic source's), 3 or more on 37% and 15%.
+/// a lab can expect over its runs. A per-run bound and an expected rate are different targets
+/// (docs/decisions/figures-behind-comments.md, spread-binomial).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Spread {
     /// The median (of an even count, the mean of the middle two).
@@ -367,95 +365,101 @@ pub(crate) fn mean_row(unknown_known: f64, known_accuracy: f64) -> OpenSetRow {
 /// the known test images. Every image goes through the crop and contact check as in the node
 /// (repair off); an image without contact counts as unknown.
 pub fn leave_one_class_out(src: &OpenSetSource) -> Result<Vec<OpenSetRow>, LabError> {
+    (0..src.train.classes.len())
+        .map(|k| leave_class_out(src, k))
+        .collect()
+}
+
+/// One row of [`leave_one_class_out`]: class `out_k` left out.
+pub fn leave_class_out(src: &OpenSetSource, out_k: usize) -> Result<OpenSetRow, LabError> {
     let set = &src.train;
-    let mut rows = Vec::new();
-    for (out_k, out_class) in set.classes.iter().enumerate() {
-        let keep: Vec<usize> = (0..set.classes.len()).filter(|&k| k != out_k).collect();
-        let without = |s: &TrainingSet| -> TrainingSet {
-            let idx: Vec<usize> = (0..s.labels.len())
-                .filter(|&i| s.labels[i] != out_k)
-                .collect();
-            let mut t = s.subset(&idx);
-            t.classes = keep.iter().map(|&k| s.classes[k].clone()).collect();
-            for l in t.labels.iter_mut() {
-                *l = keep.iter().position(|&k| k == *l).unwrap_or(0);
-            }
-            t
-        };
-        let known = without(set);
-        let cal = src.calibration.as_ref().map(|c| {
-            let c = without(c);
-            let names = c.run_names();
-            (c, names)
-        });
-        let trained =
-            known.train_calibrated(&src.opts, cal.as_ref().map(|(c, n)| (c, n.as_slice())))?;
-        let checks = trained.choice.candidate.to_string();
-        let (model, split) = (trained.model, trained.split);
-        let calibration_unknown = model
-            .unknown
-            .novelty
-            .as_ref()
-            .map_or(f64::NAN, |n| n.calibration.called_unknown);
-        let mut judge = Judge::new(model);
-        // The known test images: a fresh run's, or the training run's unused ones.
-        let fresh = src.fresh.as_ref().map(without);
-        let known_test: Vec<(&PressureImage, usize, Option<u8>)> = match &fresh {
-            Some(f) => (0..f.images.len())
-                .map(|i| (&f.images[i], f.labels[i], f.gaits[i]))
-                .collect(),
-            None => split
-                .test
-                .iter()
-                .map(|&i| (&known.images[i], known.labels[i], known.gaits[i]))
-                .collect(),
-        };
-        let mut scored: Vec<Scored> = Vec::new();
-        let (mut right, mut right_open, mut wrong_unknown) = (0usize, 0usize, 0usize);
-        let mut known_by_gait = Vec::new();
-        for &(img, truth, gait) in &known_test {
-            let s = judge.score(img, false);
-            if let Some(gait) = gait {
-                let unknown = s.class.is_none() as usize;
-                node::gait::add_count(&mut known_by_gait, Some(gait), 1, unknown);
-            }
-            right += (s.class == Some(truth)) as usize;
-            right_open += (s.best == Some(truth)) as usize;
-            wrong_unknown += (s.class.is_none() && s.best.is_some_and(|b| b != truth)) as usize;
-            scored.push(s);
+    let Some(out_class) = set.classes.get(out_k) else {
+        return Err(LabError::NoSuchClass(out_k, set.classes.len()));
+    };
+    let keep: Vec<usize> = (0..set.classes.len()).filter(|&k| k != out_k).collect();
+    let without = |s: &TrainingSet| -> TrainingSet {
+        let idx: Vec<usize> = (0..s.labels.len())
+            .filter(|&i| s.labels[i] != out_k)
+            .collect();
+        let mut t = s.subset(&idx);
+        t.classes = keep.iter().map(|&k| s.classes[k].clone()).collect();
+        for l in t.labels.iter_mut() {
+            *l = keep.iter().position(|&k| k == *l).unwrap_or(0);
         }
-        let n_known = scored.len();
-        // The left-out class as the robot meets it: in the fresh run when there is one (a
-        // score that only told runs apart would otherwise look good), else in the training run.
-        let novel_from = match &src.fresh {
-            Some(f) if f.labels.contains(&out_k) => f,
-            _ => set,
-        };
-        for i in (0..novel_from.images.len()).filter(|&i| novel_from.labels[i] == out_k) {
-            scored.push(judge.score(&novel_from.images[i], true));
+        t
+    };
+    let known = without(set);
+    let cal = src.calibration.as_ref().map(|c| {
+        let c = without(c);
+        let names = c.run_names();
+        (c, names)
+    });
+    let trained =
+        known.train_calibrated(&src.opts, cal.as_ref().map(|(c, n)| (c, n.as_slice())))?;
+    let checks = trained.choice.candidate.to_string();
+    let (model, split) = (trained.model, trained.split);
+    let calibration_unknown = model
+        .unknown
+        .novelty
+        .as_ref()
+        .map_or(f64::NAN, |n| n.calibration.called_unknown);
+    let mut judge = Judge::new(model);
+    // The known test images: a fresh run's, or the training run's unused ones.
+    let fresh = src.fresh.as_ref().map(without);
+    let known_test: Vec<(&PressureImage, usize, Option<u8>)> = match &fresh {
+        Some(f) => (0..f.images.len())
+            .map(|i| (&f.images[i], f.labels[i], f.gaits[i]))
+            .collect(),
+        None => split
+            .test
+            .iter()
+            .map(|&i| (&known.images[i], known.labels[i], known.gaits[i]))
+            .collect(),
+    };
+    let mut scored: Vec<Scored> = Vec::new();
+    let (mut right, mut right_open, mut wrong_unknown) = (0usize, 0usize, 0usize);
+    let mut known_by_gait = Vec::new();
+    for &(img, truth, gait) in &known_test {
+        let s = judge.score(img, false);
+        if let Some(gait) = gait {
+            let unknown = s.class.is_none() as usize;
+            node::gait::add_count(&mut known_by_gait, Some(gait), 1, unknown);
         }
-        let share = |novel: bool| {
-            let v: Vec<_> = scored.iter().filter(|s| s.novel == novel).collect();
-            v.iter().filter(|s| s.class.is_none()).count() as f64 / v.len().max(1) as f64
-        };
-        rows.push(OpenSetRow {
-            held_out: out_class.name.clone(),
-            unknown_held_out: share(true),
-            unknown_known: share(false),
-            unknown_known_misclassified: wrong_unknown as f64 / n_known.max(1) as f64,
-            auroc: auroc(&scored, |s| s.novelty),
-            density_auroc: auroc(&scored, |s| s.density),
-            nn_auroc: auroc(&scored, |s| s.nn),
-            known_accuracy: right as f64 / n_known.max(1) as f64,
-            known_accuracy_open: right_open as f64 / n_known.max(1) as f64,
-            calibration_unknown,
-            n_held_out: scored.len() - n_known,
-            n_known,
-            known_by_gait,
-            checks,
-        });
+        right += (s.class == Some(truth)) as usize;
+        right_open += (s.best == Some(truth)) as usize;
+        wrong_unknown += (s.class.is_none() && s.best.is_some_and(|b| b != truth)) as usize;
+        scored.push(s);
     }
-    Ok(rows)
+    let n_known = scored.len();
+    // The left-out class as the robot meets it: in the fresh run when there is one (a
+    // score that only told runs apart would otherwise look good), else in the training run.
+    let novel_from = match &src.fresh {
+        Some(f) if f.labels.contains(&out_k) => f,
+        _ => set,
+    };
+    for i in (0..novel_from.images.len()).filter(|&i| novel_from.labels[i] == out_k) {
+        scored.push(judge.score(&novel_from.images[i], true));
+    }
+    let share = |novel: bool| {
+        let v: Vec<_> = scored.iter().filter(|s| s.novel == novel).collect();
+        v.iter().filter(|s| s.class.is_none()).count() as f64 / v.len().max(1) as f64
+    };
+    Ok(OpenSetRow {
+        held_out: out_class.name.clone(),
+        unknown_held_out: share(true),
+        unknown_known: share(false),
+        unknown_known_misclassified: wrong_unknown as f64 / n_known.max(1) as f64,
+        auroc: auroc(&scored, |s| s.novelty),
+        density_auroc: auroc(&scored, |s| s.density),
+        nn_auroc: auroc(&scored, |s| s.nn),
+        known_accuracy: right as f64 / n_known.max(1) as f64,
+        known_accuracy_open: right_open as f64 / n_known.max(1) as f64,
+        calibration_unknown,
+        n_held_out: scored.len() - n_known,
+        n_known,
+        known_by_gait,
+        checks,
+    })
 }
 
 /// The single options the default (`train` choosing its checks) is compared with: the plain

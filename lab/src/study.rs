@@ -72,9 +72,8 @@ pub fn train_on(
         seed,
         normalize_load,
         // The paper's tables measure the classification; its classifier had no rejection.
-        // Calibrated to 2% false unknowns, a model also rejects what the damage study
-        // feeds it (at 5% dead lines without repair: 17% right instead of 67%), which is the
-        // open-set table's subject, not these.
+        // With rejection a model also rejects what the damage study feeds it, which is the
+        // open-set table's subject (docs/decisions/figures-behind-comments.md).
         unknown_rate: 0.0,
         ..Default::default()
     };

@@ -286,8 +286,8 @@ fn writer_loop(
     let mut dropped_logged = 0;
     loop {
         // Drains, then sleeps: a writer blocked in `recv` would make every `offer` wake it
-        // (a futex call per frame, 20,000 a second for six feet: +1-2% of a core on the node's
-        // pipeline thread, measured with bench-node). Polling keeps `offer` a plain store.
+        // (docs/decisions/figures-behind-comments.md, recorder-polling). Polling keeps
+        // `offer` a plain store.
         // Read before draining: whatever was offered before the stop is drained below.
         let stopping = stop.load(Ordering::Relaxed);
         let mut disconnected = false;

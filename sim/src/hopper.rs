@@ -251,16 +251,7 @@ impl Hopper {
                     let beta = cmd.touchdown_angle();
                     let lf = cmd.flight_length();
                     // Foot height: y - lf cos(beta); ballistic y(t) = y + vy t - g t^2 / 2.
-                    let target = lf * beta.cos();
-                    let (a, b, c) = (-0.5 * G, self.vy, self.y - target);
-                    let disc = b * b - 4.0 * a * c;
-                    let t_hit = if disc >= 0.0 {
-                        // Larger root: the descending crossing.
-                        let r = (-b - disc.sqrt()) / (2.0 * a);
-                        (r >= 0.0).then_some(r)
-                    } else {
-                        None
-                    };
+                    let t_hit = self.time_to_height(lf * beta.cos());
                     let step = match t_hit {
                         Some(th) if th <= h => th,
                         _ => h,
@@ -305,17 +296,7 @@ impl Hopper {
                     let f1 = self.leg_force(&s1, foot_x, rest);
                     let moving_up = (s1[0] - foot_x) * s1[2] + s1[1] * s1[3] > 0.0;
                     if f1 <= 0.0 && moving_up && self.t - t_touchdown > 0.01 {
-                        // Bisection on the step fraction for the zero of the leg force.
-                        let (mut lo, mut hi) = (0.0, h);
-                        for _ in 0..40 {
-                            let mid = 0.5 * (lo + hi);
-                            let sm = self.rk4(s0, mid, foot_x, rest);
-                            if self.leg_force(&sm, foot_x, rest) > 0.0 {
-                                lo = mid;
-                            } else {
-                                hi = mid;
-                            }
-                        }
+                        let hi = self.liftoff_within(s0, h, foot_x, rest);
                         let s = self.rk4(s0, hi, foot_x, rest);
                         [self.x, self.y, self.vx, self.vy] = s;
                         self.t += hi;
@@ -337,6 +318,34 @@ impl Hopper {
             }
         }
         None
+    }
+
+    /// Seconds until the body, ballistic, descends to `target` m: y(t) = y + vy t - g t^2 / 2
+    /// at its larger root (the descending crossing), if it is ahead.
+    fn time_to_height(&self, target: f64) -> Option<f64> {
+        let (a, b, c) = (-0.5 * G, self.vy, self.y - target);
+        let disc = b * b - 4.0 * a * c;
+        if disc < 0.0 {
+            return None;
+        }
+        let r = (-b - disc.sqrt()) / (2.0 * a);
+        (r >= 0.0).then_some(r)
+    }
+
+    /// The time within a stance step of `h` s from `s0` at which the leg force reaches zero:
+    /// bisection on the step fraction (40 halvings).
+    fn liftoff_within(&self, s0: [f64; 4], h: f64, foot_x: f64, rest: f64) -> f64 {
+        let (mut lo, mut hi) = (0.0, h);
+        for _ in 0..40 {
+            let mid = 0.5 * (lo + hi);
+            let sm = self.rk4(s0, mid, foot_x, rest);
+            if self.leg_force(&sm, foot_x, rest) > 0.0 {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        hi
     }
 
     /// Normal force under the foot including the touchdown impact, N.

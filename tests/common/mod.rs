@@ -315,3 +315,29 @@ pub fn small_model(dir: &std::path::Path) -> std::path::PathBuf {
     model.save(&path).unwrap();
     path
 }
+
+/// A model of the simulator's dynamic terrains but `left_out` (30 G2 images each, seed 4, the
+/// defaults' crop and checks): the left-out terrain is new ground to it.
+pub fn model_without(left_out: &str) -> node::classifier::Model {
+    let samples: Vec<_> = sim::dataset::generate(&sim::dataset::Options {
+        kind: sim::dataset::Kind::Dynamic,
+        n: Some(30),
+        gait: controller::Gait::g2(),
+        damage_pct: 0.0,
+        sensor: sim::DEFAULT_SENSOR,
+        seed: 4,
+    })
+    .into_iter()
+    .filter(|s| s.terrain.name() != left_out)
+    .collect();
+    let terrains: Vec<_> = sim::dataset::Kind::Dynamic
+        .terrains()
+        .into_iter()
+        .filter(|t| t.name() != left_out)
+        .collect();
+    let set = presrs::simdata::training_set(samples, &terrains);
+    let opts = node::classifier::train::TrainOptions::default();
+    node::classifier::train::train(&set.labelled(), &set.classes, &opts)
+        .unwrap()
+        .0
+}

@@ -17,7 +17,8 @@ use std::collections::BTreeMap;
 
 use protocol::emit::Emit;
 use protocol::messages::{
-    GaitReason, GaitStatus, LegCommand, LegMode, Message, Phase, TERRAIN_UNKNOWN,
+    FootContact, GaitReason, GaitStatus, LegCommand, LegMode, Message, Phase, TERRAIN_UNKNOWN,
+    TerrainClass,
 };
 use protocol::terrain::TerrainCatalog;
 
@@ -296,10 +297,9 @@ impl Controller {
 
     /// The controller's own bus handle (re)opened at `now_us`. A heartbeat gap while we were
     /// off the bus says nothing about the node (its NodeStatus frames were sent and lost to
-    /// us), so the node gets a whole timeout from now. Measured on vcan before: after a 2 s
-    /// link outage the controller declared the node lost 0.11 s after the link came back,
-    /// when the node's heartbeat had been back for 0.07 s; judged from the reopen, the first
-    /// heartbeat after it decides. A node already lost stays lost until it is heard.
+    /// us), so the node gets a whole timeout from now: the first heartbeat after the reopen
+    /// decides (docs/decisions/figures-behind-comments.md, bus-reopen). A node already lost
+    /// stays lost until it is heard.
     pub fn on_bus_open(&mut self, now_us: u64) {
         if self.reason != GaitReason::NodeLost {
             self.last_heartbeat_us = Some(now_us);
@@ -339,120 +339,134 @@ impl Controller {
                 self.leg_state(ls.timestamp_us, now_us);
                 self.leg_angle = ls.leg_angle_rad;
             }
-            Message::FootContact(fc) if foot == self.cfg.foot => {
-                let t = self.foot_time(fc.timestamp_us, now_us);
-                // Reports lost (a sequence number skipped) for longer than the shortest stance:
-                // a whole phase, its two edges, may be among them. A shorter loss holds one
-                // edge at most, taken at this report (up to that loss late); taking every loss
-                // as an unknown phase felled the hopper (docs/decisions/controller-takeover.md).
-                // Only a foot whose numbers have counted is judged (a foot that leaves them at
-                // 0 loses nothing).
-                let next = self
-                    .last_contact
-                    .map(|(seq, last)| (seq.wrapping_add(1), last));
-                if let Some((want, last)) = next {
-                    if fc.seq == want {
-                        self.contact_counts = true;
-                    } else if self.contact_counts && t.saturating_sub(last) > MIN_STANCE_US {
-                        self.phase_known = false;
-                    }
-                }
-                self.last_contact = Some((fc.seq, t));
-                if !self.phase_known {
-                    self.phase_known = true;
-                    self.stance = fc.stance;
-                    self.touchdown_known = false;
-                    self.last_edge_us = Some(t);
-                    return;
-                }
-                if fc.stance == self.stance {
-                    return;
-                }
-                if self
-                    .last_edge_us
-                    .is_some_and(|last| t.saturating_sub(last) < self.cfg.lockout_us)
-                {
-                    return; // bounce
-                }
-                self.last_edge_us = Some(t);
-                self.stance = fc.stance;
-                if fc.stance {
-                    self.touchdown_us = t;
-                    self.touchdown_known = true;
-                    self.beta_td = self.leg_angle;
-                    if let Some(l) = self.listen.as_mut() {
-                        if l.td.is_some() && l.lo.is_some() {
-                            self.take_over(true, now_us, out);
-                        } else {
-                            l.td = Some(self.leg_angle);
-                            l.lo = None;
-                        }
-                    }
-                } else if let Some(l) = self.listen.as_mut() {
-                    // The stance was another's: only heard.
-                    if l.td.is_some() {
-                        l.lo = Some(laws::liftoff_angle_from_signed(self.leg_angle));
-                    }
-                } else {
-                    let beta_lo = laws::liftoff_angle_from_signed(self.leg_angle);
-                    let g = &self.gait;
-                    let step = BETA_DES_STEP;
-                    self.beta_des += (g.beta_des - self.beta_des).clamp(-step, step);
-                    let b = self.beta_des;
-                    let stance_us = t.saturating_sub(self.touchdown_us);
-                    // Eq. (5) assumes the step was a step. After a stumble or a fall (a stance
-                    // far too short or long, the leg swept far from the gait's angle) it would
-                    // carry the bad angle into the next touchdown and the next fall: start the
-                    // gait afresh instead.
-                    let plausible = self.touchdown_known
-                        && (MIN_STANCE_US..=MAX_STANCE_US).contains(&stance_us)
-                        && (beta_lo - b).abs() <= MAX_ANGLE_FROM_DESIRED;
-                    self.next_beta_td = if plausible {
-                        laws::next_touchdown_angle(beta_lo, self.beta_td, g.c, b)
-                            .clamp(b - MAX_ANGLE_FROM_DESIRED, b + MAX_ANGLE_FROM_DESIRED)
-                    } else {
-                        self.gait_resets += 1;
-                        b
-                    };
-                    self.apply_pending(out);
-                }
-            }
-            Message::TerrainClass(tc) if foot == self.cfg.foot => {
-                if tc.terrain == TERRAIN_UNKNOWN {
-                    // Confirmed like a terrain: one unknown step among known ones (an unusual
-                    // stance, a gait transition) is not new ground, and each needless switch to
-                    // the safe gait and back costs steps at the wrong speed. Measured with
-                    // `presrs demo --steps 300 --json`, seeds 1-3 (a model calibrated to 2%
-                    // false unknowns): switching on every unknown step made 32, 23 and 31 gait
-                    // switches and took up to 3, 4 and 5 steps to reach a terrain's gait;
-                    // switching on the second in a row 21, 21, 21 and 3, 2, 3 (an unknown step
-                    // that also restarted the terrain's count: 3, 3, 4).
-                    self.unknown_run += 1;
-                    if self.unknown_run >= self.cfg.switch_after_steps {
-                        self.candidate = (TERRAIN_UNKNOWN, 0);
-                        self.request(self.cfg.safe_gait, GaitReason::Unknown, TERRAIN_UNKNOWN);
-                    }
-                } else if tc.confidence_pct >= self.cfg.min_confidence_pct {
-                    self.unknown_run = 0;
-                    if self.candidate.0 == tc.terrain {
-                        self.candidate.1 += 1;
-                    } else {
-                        self.candidate = (tc.terrain, 1);
-                    }
-                    if self.candidate.1 >= self.cfg.switch_after_steps {
-                        let gid = self
-                            .gait_of_terrain
-                            .get(&tc.terrain)
-                            .copied()
-                            .unwrap_or(self.cfg.safe_gait);
-                        self.request(gid, GaitReason::Terrain, tc.terrain);
-                    }
-                }
-                if !self.stance {
-                    self.apply_pending(out);
-                }
-            }
+            Message::FootContact(fc) if foot == self.cfg.foot => self.on_contact(&fc, now_us, out),
+            Message::TerrainClass(tc) if foot == self.cfg.foot => self.on_terrain(&tc, out),
             _ => {}
+        }
+    }
+
+    /// A foot-switch report: a touchdown or a liftoff once the phase is known and the edge is
+    /// not a bounce.
+    fn on_contact(
+        &mut self,
+        fc: &FootContact,
+        now_us: u64,
+        out: &mut (impl Emit<Message> + ?Sized),
+    ) {
+        let t = self.foot_time(fc.timestamp_us, now_us);
+        // Reports lost (a sequence number skipped) for longer than the shortest stance:
+        // a whole phase, its two edges, may be among them. A shorter loss holds one
+        // edge at most, taken at this report (up to that loss late); taking every loss
+        // as an unknown phase felled the hopper (docs/decisions/controller-takeover.md).
+        // Only a foot whose numbers have counted is judged (a foot that leaves them at
+        // 0 loses nothing).
+        let next = self
+            .last_contact
+            .map(|(seq, last)| (seq.wrapping_add(1), last));
+        if let Some((want, last)) = next {
+            if fc.seq == want {
+                self.contact_counts = true;
+            } else if self.contact_counts && t.saturating_sub(last) > MIN_STANCE_US {
+                self.phase_known = false;
+            }
+        }
+        self.last_contact = Some((fc.seq, t));
+        if !self.phase_known {
+            self.phase_known = true;
+            self.stance = fc.stance;
+            self.touchdown_known = false;
+            self.last_edge_us = Some(t);
+            return;
+        }
+        if fc.stance == self.stance {
+            return;
+        }
+        if self
+            .last_edge_us
+            .is_some_and(|last| t.saturating_sub(last) < self.cfg.lockout_us)
+        {
+            return; // bounce
+        }
+        self.last_edge_us = Some(t);
+        self.stance = fc.stance;
+        if fc.stance {
+            self.touchdown_us = t;
+            self.touchdown_known = true;
+            self.beta_td = self.leg_angle;
+            if let Some(l) = self.listen.as_mut() {
+                if l.td.is_some() && l.lo.is_some() {
+                    self.take_over(true, now_us, out);
+                } else {
+                    l.td = Some(self.leg_angle);
+                    l.lo = None;
+                }
+            }
+        } else if let Some(l) = self.listen.as_mut() {
+            // The stance was another's: only heard.
+            if l.td.is_some() {
+                l.lo = Some(laws::liftoff_angle_from_signed(self.leg_angle));
+            }
+        } else {
+            self.on_liftoff(t, out);
+        }
+    }
+
+    /// The controller's own liftoff: eq. (5) sets the next touchdown angle.
+    fn on_liftoff(&mut self, t: u64, out: &mut (impl Emit<Message> + ?Sized)) {
+        let beta_lo = laws::liftoff_angle_from_signed(self.leg_angle);
+        let g = &self.gait;
+        let step = BETA_DES_STEP;
+        self.beta_des += (g.beta_des - self.beta_des).clamp(-step, step);
+        let b = self.beta_des;
+        let stance_us = t.saturating_sub(self.touchdown_us);
+        // Eq. (5) assumes the step was a step. After a stumble or a fall (a stance
+        // far too short or long, the leg swept far from the gait's angle) it would
+        // carry the bad angle into the next touchdown and the next fall: start the
+        // gait afresh instead.
+        let plausible = self.touchdown_known
+            && (MIN_STANCE_US..=MAX_STANCE_US).contains(&stance_us)
+            && (beta_lo - b).abs() <= MAX_ANGLE_FROM_DESIRED;
+        self.next_beta_td = if plausible {
+            laws::next_touchdown_angle(beta_lo, self.beta_td, g.c, b)
+                .clamp(b - MAX_ANGLE_FROM_DESIRED, b + MAX_ANGLE_FROM_DESIRED)
+        } else {
+            self.gait_resets += 1;
+            b
+        };
+        self.apply_pending(out);
+    }
+
+    /// The node's verdict on a step: a terrain confirmed over `switch_after_steps` steps
+    /// requests its gait, unknown ground the safe gait.
+    fn on_terrain(&mut self, tc: &TerrainClass, out: &mut (impl Emit<Message> + ?Sized)) {
+        if tc.terrain == TERRAIN_UNKNOWN {
+            // Confirmed like a terrain: one unknown step among known ones (an unusual
+            // stance, a gait transition) is not new ground, and each needless switch to
+            // the safe gait and back costs steps at the wrong speed
+            // (docs/decisions/figures-behind-comments.md, unknown-confirmation).
+            self.unknown_run += 1;
+            if self.unknown_run >= self.cfg.switch_after_steps {
+                self.candidate = (TERRAIN_UNKNOWN, 0);
+                self.request(self.cfg.safe_gait, GaitReason::Unknown, TERRAIN_UNKNOWN);
+            }
+        } else if tc.confidence_pct >= self.cfg.min_confidence_pct {
+            self.unknown_run = 0;
+            if self.candidate.0 == tc.terrain {
+                self.candidate.1 += 1;
+            } else {
+                self.candidate = (tc.terrain, 1);
+            }
+            if self.candidate.1 >= self.cfg.switch_after_steps {
+                let gid = self
+                    .gait_of_terrain
+                    .get(&tc.terrain)
+                    .copied()
+                    .unwrap_or(self.cfg.safe_gait);
+                self.request(gid, GaitReason::Terrain, tc.terrain);
+            }
+        }
+        if !self.stance {
+            self.apply_pending(out);
         }
     }
 

@@ -88,6 +88,9 @@ pub enum LoadError {
     /// The part beside the node could not start.
     #[error("the part beside the node: {0}")]
     Beside(#[from] record::RecordError),
+    /// The kept unknown stances could not be written (`--keep-unknown`).
+    #[error("--keep-unknown: {0}")]
+    Keep(#[from] node::capture::CaptureError),
 }
 
 #[cfg(test)]

@@ -27,6 +27,7 @@ pub fn bench_inproc(
     mcap: Option<&std::path::Path>,
     threads: node::NodeThreads,
     beside: Option<Box<dyn record::FrameConsumer>>,
+    keep_unknown: Option<&std::path::Path>,
 ) -> Result<BenchRun, LoadError> {
     use protocol::bus::{BusSource, InProcBus};
     let ids = feet.ids.clone();
@@ -43,27 +44,23 @@ pub fn bench_inproc(
     if let (Some(p), None) = (mcap, &recording) {
         return Err(LoadError::Recording(p.display().to_string()));
     }
-    let node = node::NodeService::new(cfg, model)?.start_on(
+    let mut node = node::NodeService::new(cfg, model)?;
+    let keep = match keep_unknown {
+        Some(dir) => {
+            let (keeper, writer) = node::unknown::keep::UnknownKeeper::create(dir, "bench-node")?;
+            node.set_keep_unknown(keeper);
+            Some(writer)
+        }
+        None => None,
+    };
+    let node = node.start_on(
         BusSource::InProc(bus.clone()),
         recording.as_ref().map(|r| r.bus_tap()),
         threads,
     )?;
     let stop_beside = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     let beside = match beside {
-        Some(c) => {
-            let rec = record::LiveRecorder::start_with(
-                record::Recorder::new(ids.clone(), protocol::TerrainCatalog::paper()),
-                Vec::new(),
-                vec![("beside".into(), c)],
-                record::LIVE_QUEUE,
-            )?;
-            let listener = record::listen(
-                BusSource::InProc(bus.clone()),
-                rec.tap(),
-                stop_beside.clone(),
-            )?;
-            Some((rec, listener))
-        }
+        Some(c) => Some(start_beside(&bus, &ids, c, &stop_beside)?),
         None => None,
     };
     let rec_cpu_start = task_cpu_ns("self", Some(&["record"]));
@@ -89,6 +86,13 @@ pub fn bench_inproc(
     let rec_cpu_end = task_cpu_ns("self", Some(&["record"]));
     let beside_cpu_end = beside_cpu();
     let stats = node.stop();
+    let kept = match keep {
+        Some(w) => {
+            let c = w.finish()?;
+            serde_json::json!({"written": c.written, "dropped": c.dropped})
+        }
+        None => serde_json::Value::Null,
+    };
     let beside = beside.map(|(rec, listener)| {
         stop_beside.store(true, std::sync::atomic::Ordering::Relaxed);
         let _ = listener.join();
@@ -127,8 +131,31 @@ pub fn bench_inproc(
             "bus_overruns": bus.overruns(),
             "mcap": recorded,
             "beside": beside,
+            "kept_unknown": kept,
         }),
     })
+}
+
+/// A consumer beside the node: its own recorder and listener on the bus, as `presrs bridge`
+/// runs beside the node.
+fn start_beside(
+    bus: &protocol::bus::InProcBus,
+    ids: &protocol::IdConfig,
+    c: Box<dyn record::FrameConsumer>,
+    stop: &std::sync::Arc<std::sync::atomic::AtomicBool>,
+) -> Result<(record::LiveRecorder, std::thread::JoinHandle<()>), LoadError> {
+    let rec = record::LiveRecorder::start_with(
+        record::Recorder::new(ids.clone(), protocol::TerrainCatalog::paper()),
+        Vec::new(),
+        vec![("beside".into(), c)],
+        record::LIVE_QUEUE,
+    )?;
+    let listener = record::listen(
+        protocol::bus::BusSource::InProc(bus.clone()),
+        rec.tap(),
+        stop.clone(),
+    )?;
+    Ok((rec, listener))
 }
 
 /// `presrs node` started from the executable `exe` as a child process on `iface` (the model

@@ -25,8 +25,7 @@ pub(super) fn damage(ctx: &Report) -> Result<(String, Curves), ReportError> {
         }
     };
     // Without load normalisation: with it, a dead line also lowers the image's total and so
-    // brightens every live sensel (0% damage: 89.4% against 94.4%, 50%: 73.3% against 78.7%
-    // with the paper's filter, measured with `presrs lab experiment damage`).
+    // brightens every live sensel (docs/decisions/figures-behind-comments.md).
     let (model, test) = train_on(set, crop, 1, ctx.seed, false)?;
     let levels: Vec<f64> = if ctx.quick {
         vec![0.0, 20.0, 50.0, 80.0]
@@ -36,6 +35,42 @@ pub(super) fn damage(ctx: &Report) -> Result<(String, Curves), ReportError> {
     let sensors = if ctx.quick { 2 } else { 8 };
     let (wr, wc) = model.work_size().unwrap_or((0, 0));
     let curves = crate::study::damage(&model, set, &test, &levels, sensors, ctx.seed);
+    plot_damage(ctx, &curves)?;
+    let mut md = String::from("## Figure 16: accuracy against sensor damage\n\n");
+    let _ = writeln!(
+        md,
+        "{what} on the {n_test} test stances, seen by {sensors} damaged sensors per level: \
+         each sensor has its own random set of dead rows and columns of the {wr}x{wc} crop, up \
+         to the damage level (eq. 6), and walks the test stances in a \
+         random order. Every stance is classified four ways on the same damaged image: without \
+         repair, with the paper's per-image repair filter (section 8), with the node's \
+         history-based repair (`node::health::LineHealth`: a line is dead after reading zero \
+         inside the footprint, the image's and the model's training images', for \
+         {DEAD_AFTER_STANCES} stances in a row; it starts each sensor knowing no dead line, so \
+         a sensor's first stances go unrepaired), and with the history-based \
+         repair and the model refitted to the dead lines learned so far (`train::refit`: the \
+         stored training images get the same dead lines and repair, and PCA and kernel are \
+         fitted again; the node does this when a foot's dead lines change). Percentages are of \
+         all {sensors} x {n_test} stances.\n\n\
+         ![Figure 16](figures/fig16-damage.png)\n\n\
+         | damage | without repair | paper's filter | history-based repair | history + refit |\n|---|---|---|---|---|",
+        n_test = test.len(),
+    );
+    for (d, a) in &curves {
+        let _ = writeln!(
+            md,
+            "| {d:.0}% | {} | {} | {} | {} |",
+            pct(a[0]),
+            pct(a[1]),
+            pct(a[2]),
+            pct(a[3])
+        );
+    }
+    Ok((md, curves))
+}
+
+/// Figure 16's plot: accuracy against damage for each repair arm, and the 90% line.
+fn plot_damage(ctx: &Report, curves: &Curves) -> Result<(), ReportError> {
     let path = ctx.figures.join("fig16-damage.png");
     let root = BitMapBackend::new(&path, (900, 540)).into_drawing_area();
     root.fill(&WHITE).map_err(pe)?;
@@ -80,37 +115,7 @@ pub(super) fn damage(ctx: &Report) -> Result<(String, Curves), ReportError> {
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.stroke_width(3)));
     legend(&mut chart, SeriesLabelPosition::UpperRight)?;
     root.present().map_err(pe)?;
-    let mut md = String::from("## Figure 16: accuracy against sensor damage\n\n");
-    let _ = writeln!(
-        md,
-        "{what} on the {n_test} test stances, seen by {sensors} damaged sensors per level: \
-         each sensor has its own random set of dead rows and columns of the {wr}x{wc} crop, up \
-         to the damage level (eq. 6), and walks the test stances in a \
-         random order. Every stance is classified four ways on the same damaged image: without \
-         repair, with the paper's per-image repair filter (section 8), with the node's \
-         history-based repair (`node::health::LineHealth`: a line is dead after reading zero \
-         inside the footprint, the image's and the model's training images', for \
-         {DEAD_AFTER_STANCES} stances in a row; it starts each sensor knowing no dead line, so \
-         a sensor's first stances go unrepaired), and with the history-based \
-         repair and the model refitted to the dead lines learned so far (`train::refit`: the \
-         stored training images get the same dead lines and repair, and PCA and kernel are \
-         fitted again; the node does this when a foot's dead lines change). Percentages are of \
-         all {sensors} x {n_test} stances.\n\n\
-         ![Figure 16](figures/fig16-damage.png)\n\n\
-         | damage | without repair | paper's filter | history-based repair | history + refit |\n|---|---|---|---|---|",
-        n_test = test.len(),
-    );
-    for (d, a) in &curves {
-        let _ = writeln!(
-            md,
-            "| {d:.0}% | {} | {} | {} | {} |",
-            pct(a[0]),
-            pct(a[1]),
-            pct(a[2]),
-            pct(a[3])
-        );
-    }
-    Ok((md, curves))
+    Ok(())
 }
 
 pub(super) fn lifespan(ctx: &Report, curves: &Curves) -> Result<String, ReportError> {

@@ -134,6 +134,8 @@ pub struct CaptureSet {
     pub written_per_gait: std::collections::BTreeMap<Option<u8>, u64>,
     /// Steps already in the manifest.
     pub duplicates: u64,
+    /// The image the last [`CaptureSet::add`] wrote, relative to the folder.
+    pub last_written: Option<String>,
 }
 
 impl CaptureSet {
@@ -179,6 +181,7 @@ impl CaptureSet {
             written_per_terrain: Default::default(),
             written_per_gait: Default::default(),
             duplicates: 0,
+            last_written: None,
         })
     }
 
@@ -237,6 +240,7 @@ impl CaptureSet {
             .and_then(|_| self.manifest.flush())
             .map_err(|e| io("append to", &self.manifest_path, e))?;
         self.keys.insert(key);
+        self.last_written = Some(format!("{}/{name}", c.terrain.name()));
         self.written += 1;
         *self
             .written_per_terrain

@@ -82,7 +82,7 @@ pub enum CaptureError {
     },
 }
 
-fn io(what: &'static str, path: &Path, source: std::io::Error) -> CaptureError {
+pub(crate) fn io(what: &'static str, path: &Path, source: std::io::Error) -> CaptureError {
     let hint = match source.raw_os_error() {
         Some(28) => " (the disk is full: free space; what was written before is kept)",
         Some(13) | Some(30) => " (not writable: pick another --out)",

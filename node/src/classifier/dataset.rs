@@ -329,21 +329,10 @@ pub fn parse_asf(b: &[u8], path: &Path) -> Result<Vec<PressureImage>, ImageError
                 ));
             }
             for v in vals {
-                if v == "B" {
-                    px.push(0);
-                    mask.push(true);
-                } else {
-                    let x: f64 = v
-                        .parse()
-                        .map_err(|_| err(path, Some(n), format!("bad value `{v}`")))?;
-                    if !(0.0..=65535.0).contains(&x) {
-                        return Err(err(path, Some(n), format!("value {x} outside 0..=65535")));
-                    }
-                    let x = x.round() as u16;
-                    max = max.max(x as u32);
-                    px.push(x);
-                    mask.push(false);
-                }
+                let x = asf_value(v).map_err(|e| err(path, Some(n), e))?;
+                max = max.max(x.unwrap_or(0) as u32);
+                px.push(x.unwrap_or(0));
+                mask.push(x.is_none());
             }
         }
         let mut img = PressureImage::new(rows, cols, bits_for(max), px);
@@ -356,6 +345,19 @@ pub fn parse_asf(b: &[u8], path: &Path) -> Result<Vec<PressureImage>, ImageError
         return Err(err(path, None, "no frames"));
     }
     Ok(out)
+}
+
+/// One value of a TekScan frame: a reading, or `None` for `B` (a sensel outside the sensor's
+/// shape).
+fn asf_value(v: &str) -> Result<Option<u16>, String> {
+    if v == "B" {
+        return Ok(None);
+    }
+    let x: f64 = v.parse().map_err(|_| format!("bad value `{v}`"))?;
+    if !(0.0..=65535.0).contains(&x) {
+        return Err(format!("value {x} outside 0..=65535"));
+    }
+    Ok(Some(x.round() as u16))
 }
 
 /// Writes a binary PGM (P5), 8-bit when `img.bits` is 8 and every pixel fits, else 16-bit.

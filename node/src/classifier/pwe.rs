@@ -94,18 +94,8 @@ impl Classifier {
         let fx = FeatureExtractor::with_kernels(work_rows * work_cols, kernels);
         let avx2_fma = kernels.avx2_fma();
         let s = model.kernel_width;
-        let h = model.h as f64;
         let n_classes = model.classes.len();
-        let mut log_norm = vec![0.0; n_classes];
-        for (k, ln) in log_norm.iter_mut().enumerate() {
-            let n_k = model
-                .sample_classes
-                .iter()
-                .filter(|&&c| c == k)
-                .count()
-                .max(1) as f64;
-            *ln = -n_k.ln() - 0.5 * h * (2.0 * std::f64::consts::PI * s * s).ln();
-        }
+        let log_norm = log_norms(&model);
         let mut projected_mean = vec![0.0; model.h];
         let mut w16 = Vec::new();
         if model.pca_matrix.len() == model.h * model.pca_mean.len() {
@@ -123,50 +113,17 @@ impl Classifier {
             );
         }
         let stride = model.h.div_ceil(8) * 8;
-        // Padded to stride x stride with zeros, as the projection is.
         let gram_corr = if model.unknown.novelty.is_some() && !w16.is_empty() {
-            let h = model.h;
-            let g = gram_inverse(&model.pca_matrix, &w16, h);
-            let mut e = vec![0.0f32; stride * stride];
-            for a in 0..h {
-                for b in 0..h {
-                    e[a * stride + b] = (g[a * h + b] - if a == b { 1.0 } else { 0.0 }) as f32;
-                }
-            }
-            e
+            gram_correction(&model.pca_matrix, &w16, model.h, stride)
         } else {
             Vec::new()
         };
-        let mut samples = vec![0.0; stride * model.n_samples()];
-        if model.h > 0 {
-            for (dst, src) in samples
-                .chunks_exact_mut(stride)
-                .zip(model.samples.chunks_exact(model.h))
-            {
-                dst[..model.h].copy_from_slice(src);
-            }
-        }
-        let mut reference = Vec::new();
-        let mut reference_of = vec![0..0; n_classes];
-        let mut nuisance16 = Vec::new();
-        if let Some(nv) = model.unknown.novelty.as_ref().filter(|_| model.h > 0) {
-            for (k, range) in reference_of.iter_mut().enumerate() {
-                let start = reference.len() / stride;
-                for (src, _) in nv
-                    .reference
-                    .chunks_exact(model.h)
-                    .zip(&nv.reference_classes)
-                    .filter(|(_, c)| **c == k)
-                {
-                    reference.extend_from_slice(src);
-                    reference.resize(reference.len() + stride - model.h, 0.0);
-                }
-                *range = start..reference.len() / stride;
-            }
-            if avx2_fma && !w16.is_empty() {
-                nuisance16 = half_matrix(&nv.nuisance);
-            }
-        }
+        let samples = padded_rows(&model.samples, model.h, stride, model.n_samples());
+        let (reference, reference_of) = padded_references(&model, stride);
+        let nuisance16 = match &model.unknown.novelty {
+            Some(nv) if model.h > 0 && avx2_fma && !w16.is_empty() => half_matrix(&nv.nuisance),
+            _ => Vec::new(),
+        };
         let mut samples_of = vec![Vec::new(); n_classes];
         for (i, &c) in model.sample_classes.iter().enumerate() {
             if let Some(v) = samples_of.get_mut(c) {
@@ -679,4 +636,63 @@ fn insert_smallest(b: &mut [f64], d2: f64) {
         }
         b[j] = d2;
     }
+}
+
+/// Each class's Parzen normaliser: -ln n_k - h/2 ln(2 pi s^2), the kernel width s.
+fn log_norms(model: &Model) -> Vec<f64> {
+    let (s, h) = (model.kernel_width, model.h as f64);
+    (0..model.classes.len())
+        .map(|k| {
+            let n_k = model.sample_classes.iter().filter(|&&c| c == k).count();
+            -(n_k.max(1) as f64).ln() - 0.5 * h * (2.0 * std::f64::consts::PI * s * s).ln()
+        })
+        .collect()
+}
+
+/// The rounded projection's Gram inverse minus the identity, padded to stride x stride with
+/// zeros, as the projection is.
+fn gram_correction(pca: &[f32], w16: &[u16], h: usize, stride: usize) -> Vec<f32> {
+    let g = gram_inverse(pca, w16, h);
+    let mut e = vec![0.0f32; stride * stride];
+    for a in 0..h {
+        for b in 0..h {
+            e[a * stride + b] = (g[a * h + b] - if a == b { 1.0 } else { 0.0 }) as f32;
+        }
+    }
+    e
+}
+
+/// `n` rows of `width` values, each padded with zeros to `stride`.
+fn padded_rows(rows: &[f32], width: usize, stride: usize, n: usize) -> Vec<f32> {
+    let mut out = vec![0.0; stride * n];
+    if width > 0 {
+        for (dst, src) in out.chunks_exact_mut(stride).zip(rows.chunks_exact(width)) {
+            dst[..width].copy_from_slice(src);
+        }
+    }
+    out
+}
+
+/// The novelty check's references, padded to `stride` and grouped by class, with each class's
+/// row range.
+fn padded_references(model: &Model, stride: usize) -> (Vec<f32>, Vec<std::ops::Range<usize>>) {
+    let mut reference = Vec::new();
+    let mut reference_of = vec![0..0; model.classes.len()];
+    let Some(nv) = model.unknown.novelty.as_ref().filter(|_| model.h > 0) else {
+        return (reference, reference_of);
+    };
+    for (k, range) in reference_of.iter_mut().enumerate() {
+        let start = reference.len() / stride;
+        for (src, _) in nv
+            .reference
+            .chunks_exact(model.h)
+            .zip(&nv.reference_classes)
+            .filter(|(_, c)| **c == k)
+        {
+            reference.extend_from_slice(src);
+            reference.resize(reference.len() + stride - model.h, 0.0);
+        }
+        *range = start..reference.len() / stride;
+    }
+    (reference, reference_of)
 }

@@ -50,6 +50,7 @@ use crate::gait::{GaitTally, GaitTrack, describe_counts};
 use crate::stance::{Counters, Decided, StancePipeline};
 use crate::step_table::StepSender;
 use crate::unknown::energy::EnergyTally;
+use crate::unknown::keep::UnknownKeeper;
 
 /// Why the node cannot start, or cannot take a model.
 #[derive(Debug, Error)]
@@ -117,6 +118,22 @@ impl Output {
     }
 }
 
+/// Notes step `d` for the keeper when it is one to keep.
+#[inline]
+fn mark_keep(
+    keeping: bool,
+    due: &mut [Option<(Decided, Option<u8>)>],
+    d: &Decided,
+    gait: Option<u8>,
+) {
+    if keeping
+        && crate::unknown::keep::keepable(&d.class)
+        && let Some(slot) = due.get_mut(d.foot as usize)
+    {
+        *slot = Some((*d, gait));
+    }
+}
+
 /// Hands a decided step to the live step table, if there is one.
 #[inline]
 fn offer(steps: &Option<StepSender>, t_us: u64, o: &Output) {
@@ -149,6 +166,10 @@ pub struct NodeService {
     read_all: bool,
     /// Where each decided step also goes (`presrs node --csv`): a bounded queue, never waited on.
     steps: Option<StepSender>,
+    /// Where unknown stances go (`presrs node --keep-unknown`): a pool of slots, never waited on.
+    keep: Option<UnknownKeeper>,
+    /// Per foot, the unknown step the last call decided, to keep once the pipeline is free.
+    keep_due: [Option<(Decided, Option<u8>)>; protocol::ids::MAX_FEET as usize],
 }
 
 impl NodeService {
@@ -178,6 +199,8 @@ impl NodeService {
             tally: GaitTally::default(),
             last_logged_unknown: 0,
             steps: None,
+            keep: None,
+            keep_due: [None; protocol::ids::MAX_FEET as usize],
         })
     }
 
@@ -185,6 +208,26 @@ impl NodeService {
     /// [`crate::step_table::StepLog`]), off the node's thread.
     pub fn set_step_log(&mut self, steps: StepSender) {
         self.steps = Some(steps);
+    }
+
+    /// Keeps every stance called unknown from now on ([`crate::unknown::keep`]), off the
+    /// node's thread.
+    pub fn set_keep_unknown(&mut self, keep: UnknownKeeper) {
+        self.keep = Some(keep);
+    }
+
+    /// Hands the unknown stances the last call decided to the keeper: each foot's image stays
+    /// valid until its next touchdown, so after the call is soon enough.
+    fn keep_unknown(&mut self) {
+        let Some(k) = &self.keep else { return };
+        for due in self.keep_due.iter_mut() {
+            if let Some((d, gait)) = due.take()
+                && let Some(s) = self.pipeline.sample(d.foot)
+                && s.step == d.class.step
+            {
+                k.offer(&d, gait, &s);
+            }
+        }
     }
 
     /// Measures decisions' latency (TerrainClass `latency_us`) on `clock`, read when each
@@ -198,13 +241,16 @@ impl NodeService {
     pub fn process(&mut self, frame: &Stamped, out: &mut (impl Emit<Output> + ?Sized)) {
         self.gait.on_frame(frame, self.pipeline.ids());
         let (gait, tally, steps) = (self.gait.current(), &mut self.tally, &self.steps);
+        let (keeping, due) = (self.keep.is_some(), &mut self.keep_due);
         let t_us = frame.t_us;
         self.pipeline.on_frame(frame, &mut |d: Decided| {
             tally.add(gait, d.class.terrain == TERRAIN_UNKNOWN);
+            mark_keep(keeping, due, &d, gait);
             let o = Output::class(d, gait);
             offer(steps, t_us, &o);
             out.emit(o)
         });
+        self.keep_unknown();
     }
 
     /// A recorded run on its own clock: each frame's time ticks the node before the frame is
@@ -226,12 +272,15 @@ impl NodeService {
     /// has passed with no nearer frame possible, and NodeStatus when a status period is up.
     pub fn tick(&mut self, now_us: u64, out: &mut (impl Emit<Output> + ?Sized)) {
         let (gait, tally, steps) = (self.gait.current(), &mut self.tally, &self.steps);
+        let (keeping, due) = (self.keep.is_some(), &mut self.keep_due);
         self.pipeline.tick(now_us, &mut |d: Decided| {
             tally.add(gait, d.class.terrain == TERRAIN_UNKNOWN);
+            mark_keep(keeping, due, &d, gait);
             let o = Output::class(d, gait);
             offer(steps, now_us, &o);
             out.emit(o)
         });
+        self.keep_unknown();
         // A clock that jumped back (a new bus clock) must not silence the heartbeat.
         let due = self
             .next_status_us

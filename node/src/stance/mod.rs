@@ -766,8 +766,7 @@ impl StancePipeline {
         // send queue), saturated as the CAN field is; 0 when no frame was sampled (flag
         // NO_SAMPLE), so that a log and the bus say the same. Live, "now" is the bus clock's
         // reading here: the frame that completes a decision was received when the frame
-        // before it was (measured on vcan before: LatencyUs 0 in all 365 TerrainClass frames,
-        // also those sent 1-3 s late by a stopped node).
+        // before it was (docs/decisions/figures-behind-comments.md, latency-field).
         let now = self
             .clock
             .as_ref()

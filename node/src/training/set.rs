@@ -6,8 +6,8 @@ use protocol::terrain::TerrainCatalog;
 
 use super::report::Trained;
 use crate::classifier::dataset::Dataset;
-use crate::classifier::train::{CalibrateError, Labelled, TrainOptions, train};
-use crate::classifier::{ClassInfo, Crop, CropSpec, PressureImage};
+use crate::classifier::train::{CalibrateError, Labelled, Split, TrainOptions, train};
+use crate::classifier::{ClassInfo, Crop, CropSpec, Model, PressureImage};
 
 /// A dataset's class folder whose name is no terrain of the catalog.
 #[derive(Debug, thiserror::Error)]
@@ -199,9 +199,8 @@ impl TrainingSet {
     /// manifest's `gait`), and the terrains that lack one of them; `None` when no image has a
     /// gait (a folder not captured from a bus that carried GaitStatus).
     ///
-    /// Why it matters, measured (docs/real-robot.md, "A gait the model never saw"): a gait
-    /// between trained ones is known ground (real SpeedPP2D, a speed between two trained ones,
-    /// 2.5% unknown), one beyond them is not (a faster speed 34.5% unknown, a slower 19.5%).
+    /// Why it matters: a gait between trained ones is known ground, one beyond them is not
+    /// (docs/decisions/figures-behind-comments.md, gait-coverage).
     pub fn gait_note(&self) -> Option<String> {
         use std::collections::{BTreeMap, BTreeSet};
         use std::fmt::Write;
@@ -428,144 +427,159 @@ fn train_sets(
     opts: &TrainOptions,
     frame: Option<super::frame::FrameChoice>,
 ) -> Result<Trained, TrainCalibratedError> {
-    {
-        // The foot's own crop, measured once on every stance (a given one is checked).
-        let footprint = super::footprint::Footprint::of(
-            train_set
-                .images
-                .iter()
-                .chain(calibration.iter().flat_map(|(c, _)| &c.images)),
-        );
-        let crop = match (opts.crop, &footprint) {
-            (CropSpec::Fixed(c), _) => c,
-            (CropSpec::Auto, Some(f)) => f.crop(),
-            (CropSpec::Auto, None) => Crop::default(),
-        };
-        let crop_given = matches!(opts.crop, CropSpec::Fixed(_));
-        let opts = &TrainOptions {
-            crop: crop.into(),
-            ..opts.clone()
-        };
-        // Which unknown-ground checks this lab's ground needs, measured on its runs.
-        let cal_labelled: Vec<Labelled<'_>> = match calibration {
-            Some((cal, names)) => cal
-                .images
-                .iter()
-                .zip(&cal.labels)
-                .enumerate()
-                .map(|(i, (image, &l))| {
-                    let name = &cal.classes[l].name;
-                    let class = train_set
-                        .classes
-                        .iter()
-                        .position(|c| &c.name == name)
-                        .ok_or_else(|| CalibrateError::UnknownClass {
-                            run: names.join(", "),
-                            class: name.clone(),
-                        })?;
-                    Ok(Labelled {
-                        image,
-                        class,
-                        flights: cal.flights_of(i),
-                    })
-                })
-                .collect::<Result<_, CalibrateError>>()?,
-            None => Vec::new(),
-        };
-        let choice = crate::training::choice::choose(
-            &train_set.labelled(),
-            &cal_labelled,
-            &train_set.classes,
-            opts,
-        )?;
-        let opts = &opts.with_candidate(&choice.candidate);
-        let (mut model, split) = train(&train_set.labelled(), &train_set.classes, opts)?;
-        let mut unused_calibration = 0;
-        if let Some((cal, names)) = calibration {
-            cal.calibrate(&mut model, names)?;
-            let cap = crate::classifier::train::MAX_CALIBRATION_PER_CLASS;
-            unused_calibration = (0..cal.classes.len())
-                .map(|k| {
-                    cal.labels
-                        .iter()
-                        .filter(|&&l| l == k)
-                        .count()
-                        .saturating_sub(cap)
-                })
-                .sum();
-        }
-        // The load and texture bands over the calibration run too: the next run's spread, not
-        // only the training run's.
-        if (opts.check_texture || opts.check_load)
-            && let Some((cal, _)) = calibration
-        {
-            let index = |set: &TrainingSet, l: usize| {
-                let name = &set.classes[l].name;
-                model.classes.iter().position(|c| &c.name == name)
-            };
-            let images: Vec<(&PressureImage, usize)> = [train_set, cal]
-                .into_iter()
-                .flat_map(|set| {
-                    set.images
-                        .iter()
-                        .zip(&set.labels)
-                        .filter_map(move |(img, &l)| index(set, l).map(|k| (img, k)))
-                })
-                .collect();
-            if opts.check_texture {
-                crate::classifier::train::add_texture_check(&mut model, images.iter().copied());
-            }
-            if opts.check_load {
-                crate::classifier::train::add_load_check_on(&mut model, images);
-            }
-        }
-        // The energy check, when chosen: a return map per terrain over every stance's flights.
-        if choice.candidate.energy {
-            let stances: Vec<(usize, f64, f64)> = train_set
-                .labelled()
-                .iter()
-                .chain(&cal_labelled)
-                .filter_map(|l| {
-                    let (before, after) = crate::unknown::energy::plausible_flights_s(l.flights)?;
-                    Some((l.class, before, after))
-                })
-                .collect();
-            let maps =
-                crate::unknown::energy::fit(&stances, model.classes.len(), model.unknown.rate);
-            model.unknown.energy = maps.iter().any(Option::is_some).then_some(maps);
-        }
-        // The gaits the model has seen: its stored samples' and its calibration run's.
-        let mut gaits: Vec<u8> = split
-            .train
+    // The foot's own crop, measured once on every stance (a given one is checked).
+    let footprint = super::footprint::Footprint::of(
+        train_set
+            .images
             .iter()
-            .chain(&split.validation)
-            .filter_map(|&i| train_set.gaits.get(i).copied().flatten())
-            .chain(
-                calibration
-                    .iter()
-                    .flat_map(|(c, _)| c.gaits.iter().flatten().copied()),
-            )
-            .collect();
-        gaits.sort_unstable();
-        gaits.dedup();
-        model.gaits = (!gaits.is_empty()).then_some(gaits);
-        model.unknown.choice = (opts.unknown_rate > 0.0).then(|| choice.record());
-        let mut sessions = train_set.session_counts("trained");
-        if let Some((cal, _)) = calibration {
-            sessions.extend(cal.session_counts("calibration"));
-        }
-        Ok(Trained {
-            model,
-            footprint,
-            crop_given,
-            sessions,
-            frame,
-            split,
-            train_images: train_set.images.len(),
-            unused_calibration,
-            choice,
-        })
+            .chain(calibration.iter().flat_map(|(c, _)| &c.images)),
+    );
+    let crop = match (opts.crop, &footprint) {
+        (CropSpec::Fixed(c), _) => c,
+        (CropSpec::Auto, Some(f)) => f.crop(),
+        (CropSpec::Auto, None) => Crop::default(),
+    };
+    let crop_given = matches!(opts.crop, CropSpec::Fixed(_));
+    let opts = &TrainOptions {
+        crop: crop.into(),
+        ..opts.clone()
+    };
+    // Which unknown-ground checks this lab's ground needs, measured on its runs.
+    let cal_labelled = calibration_labelled(train_set, calibration)?;
+    let choice = crate::training::choice::choose(
+        &train_set.labelled(),
+        &cal_labelled,
+        &train_set.classes,
+        opts,
+    )?;
+    let opts = &opts.with_candidate(&choice.candidate);
+    let (mut model, split) = train(&train_set.labelled(), &train_set.classes, opts)?;
+    let mut unused_calibration = 0;
+    if let Some((cal, names)) = calibration {
+        cal.calibrate(&mut model, names)?;
+        let cap = crate::classifier::train::MAX_CALIBRATION_PER_CLASS;
+        unused_calibration = (0..cal.classes.len())
+            .map(|k| {
+                let n = cal.labels.iter().filter(|&&l| l == k).count();
+                n.saturating_sub(cap)
+            })
+            .sum();
     }
+    if let Some((cal, _)) = calibration {
+        add_bands(&mut model, train_set, cal, opts);
+    }
+    // The energy check, when chosen: a return map per terrain over every stance's flights.
+    if choice.candidate.energy {
+        let stances: Vec<(usize, f64, f64)> = train_set
+            .labelled()
+            .iter()
+            .chain(&cal_labelled)
+            .filter_map(|l| {
+                let (before, after) = crate::unknown::energy::plausible_flights_s(l.flights)?;
+                Some((l.class, before, after))
+            })
+            .collect();
+        let maps = crate::unknown::energy::fit(&stances, model.classes.len(), model.unknown.rate);
+        model.unknown.energy = maps.iter().any(Option::is_some).then_some(maps);
+    }
+    model.gaits = seen_gaits(train_set, &split, calibration);
+    model.unknown.choice = (opts.unknown_rate > 0.0).then(|| choice.record());
+    let mut sessions = train_set.session_counts("trained");
+    if let Some((cal, _)) = calibration {
+        sessions.extend(cal.session_counts("calibration"));
+    }
+    Ok(Trained {
+        model,
+        footprint,
+        crop_given,
+        sessions,
+        frame,
+        split,
+        train_images: train_set.images.len(),
+        unused_calibration,
+        choice,
+    })
+}
+
+/// The calibration run's images with the training set's class indices (a class the training
+/// set lacks is refused by name).
+fn calibration_labelled<'a>(
+    train_set: &TrainingSet,
+    calibration: Option<(&'a TrainingSet, &[String])>,
+) -> Result<Vec<Labelled<'a>>, CalibrateError> {
+    let Some((cal, names)) = calibration else {
+        return Ok(Vec::new());
+    };
+    cal.images
+        .iter()
+        .zip(&cal.labels)
+        .enumerate()
+        .map(|(i, (image, &l))| {
+            let name = &cal.classes[l].name;
+            let class = train_set
+                .classes
+                .iter()
+                .position(|c| &c.name == name)
+                .ok_or_else(|| CalibrateError::UnknownClass {
+                    run: names.join(", "),
+                    class: name.clone(),
+                })?;
+            Ok(Labelled {
+                image,
+                class,
+                flights: cal.flights_of(i),
+            })
+        })
+        .collect()
+}
+
+/// The load and texture bands, when chosen, over the calibration run too: the next run's
+/// spread, not only the training run's.
+fn add_bands(model: &mut Model, train_set: &TrainingSet, cal: &TrainingSet, opts: &TrainOptions) {
+    if !(opts.check_texture || opts.check_load) {
+        return;
+    }
+    let index = |set: &TrainingSet, l: usize| {
+        let name = &set.classes[l].name;
+        model.classes.iter().position(|c| &c.name == name)
+    };
+    let images: Vec<(&PressureImage, usize)> = [train_set, cal]
+        .into_iter()
+        .flat_map(|set| {
+            set.images
+                .iter()
+                .zip(&set.labels)
+                .filter_map(move |(img, &l)| index(set, l).map(|k| (img, k)))
+        })
+        .collect();
+    if opts.check_texture {
+        crate::classifier::train::add_texture_check(model, images.iter().copied());
+    }
+    if opts.check_load {
+        crate::classifier::train::add_load_check_on(model, images);
+    }
+}
+
+/// The gaits the model has seen: its stored samples' and its calibration run's.
+fn seen_gaits(
+    train_set: &TrainingSet,
+    split: &Split,
+    calibration: Option<(&TrainingSet, &[String])>,
+) -> Option<Vec<u8>> {
+    let mut gaits: Vec<u8> = split
+        .train
+        .iter()
+        .chain(&split.validation)
+        .filter_map(|&i| train_set.gaits.get(i).copied().flatten())
+        .chain(
+            calibration
+                .iter()
+                .flat_map(|(c, _)| c.gaits.iter().flatten().copied()),
+        )
+        .collect();
+    gaits.sort_unstable();
+    gaits.dedup();
+    (!gaits.is_empty()).then_some(gaits)
 }
 
 #[cfg(test)]

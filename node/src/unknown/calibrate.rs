@@ -225,32 +225,8 @@ pub(crate) fn set_novelty(
     held_out: usize,
     score: NoveltyScore,
 ) {
-    let n_classes = model.classes.len();
-    let k = NOVELTY_K;
-    let spread = class_spreads(model, k);
     let rate = model.unknown.rate;
-    let provisional = Novelty {
-        score,
-        k,
-        class_spread: spread,
-        residual_scale: vec![1.0; n_classes],
-        thresholds: vec![f64::MAX; n_classes],
-        calibration: Calibration {
-            source,
-            runs,
-            images: 0,
-            rate,
-            margin,
-            called_unknown: 0.0,
-            misclassified: 0.0,
-            pixels: Vec::new(),
-            classes: Vec::new(),
-            held_out_images: 0,
-        },
-        reference: Vec::new(),
-        reference_classes: Vec::new(),
-        nuisance: Vec::new(),
-    };
+    let provisional = provisional(model, score, source, runs, margin);
     if source == CalibrationSource::TimeBlocks {
         let measured = cross_fit(model, &pixels, &classes, &provisional);
         finish_novelty(
@@ -317,6 +293,39 @@ pub(crate) fn set_novelty(
     finish_novelty(model, provisional, measured, margin, kept, rate);
 }
 
+/// The novelty check before its thresholds are measured: every threshold open, no references.
+fn provisional(
+    model: &Model,
+    score: NoveltyScore,
+    source: CalibrationSource,
+    runs: Vec<String>,
+    margin: f64,
+) -> Novelty {
+    let n_classes = model.classes.len();
+    Novelty {
+        score,
+        k: NOVELTY_K,
+        class_spread: class_spreads(model, NOVELTY_K),
+        residual_scale: vec![1.0; n_classes],
+        thresholds: vec![f64::MAX; n_classes],
+        calibration: Calibration {
+            source,
+            runs,
+            images: 0,
+            rate: model.unknown.rate,
+            margin,
+            called_unknown: 0.0,
+            misclassified: 0.0,
+            pixels: Vec::new(),
+            classes: Vec::new(),
+            held_out_images: 0,
+        },
+        reference: Vec::new(),
+        reference_classes: Vec::new(),
+        nuisance: Vec::new(),
+    }
+}
+
 /// What calibration images measured: per image in contact and classified right, (best class,
 /// kNN distance, residual); the images taken for another class; and a held-out run's
 /// references and residual vectors.
@@ -339,7 +348,6 @@ fn finish_novelty(
     kept: (Vec<Vec<u16>>, Vec<usize>, usize),
     rate: f64,
 ) {
-    let n_classes = model.classes.len();
     let Parts {
         parts,
         wrong,
@@ -360,65 +368,12 @@ fn finish_novelty(
         (rate * HELD_OUT_RATE_FACTOR).min(crate::classifier::model::MAX_UNKNOWN_RATE)
     };
     let mut nv = provisional;
-    let of_class = |k: usize, f: &dyn Fn(&(usize, f64, f64)) -> f64| -> Vec<f64> {
-        parts.iter().filter(|p| p.0 == k).map(f).collect()
-    };
-    let mut all_res: Vec<f64> = parts.iter().map(|p| p.2).collect();
-    let pooled_res = median(&mut all_res);
-    for kk in 0..n_classes {
-        let mut r = of_class(kk, &|p| p.2);
-        let m = if r.len() >= 3 {
-            median(&mut r)
-        } else {
-            pooled_res
-        };
-        nv.residual_scale[kk] = positive(m, pooled_res);
-    }
-    // Each part's unit is then stretched to its own tail, so that the `1 - rate` quantile of
-    // either part alone is 1: neither decides by its tail alone
-    // (docs/decisions/unknown-calibration.md).
-    {
-        let q = 1.0 - cal_rate;
-        let mut zk: Vec<f64> = parts
-            .iter()
-            .map(|&(b, knn, _)| knn / nv.class_spread[b])
-            .collect();
-        let mut zr: Vec<f64> = parts
-            .iter()
-            .map(|&(b, _, r)| r / nv.residual_scale[b])
-            .collect();
-        let (qk, qr) = (upper_quantile(&mut zk, q), upper_quantile(&mut zr, q));
-        for v in nv.class_spread.iter_mut() {
-            *v *= positive(qk, 1.0);
-        }
-        for v in nv.residual_scale.iter_mut() {
-            *v *= positive(qr, 1.0);
-        }
-    }
+    set_units(&mut nv, &parts, cal_rate);
     let scores: Vec<f64> = parts
         .iter()
         .map(|&(b, knn, res)| nv.score_of(b, knn, res))
         .collect();
-    let q = 1.0 - cal_rate;
-    let pooled = upper_quantile(&mut scores.clone(), q);
-    for kk in 0..n_classes {
-        let mut v: Vec<f64> = parts
-            .iter()
-            .zip(&scores)
-            .filter(|(p, _)| p.0 == kk)
-            .map(|(_, s)| *s)
-            .collect();
-        // The class's own quantile, shrunk toward the pooled one by its count: with 30
-        // images, the 98% quantile is the largest one, and a class's threshold was then as
-        // noisy as its one most unusual image (docs/decisions/unknown-calibration.md).
-        let t = if v.is_empty() {
-            pooled
-        } else {
-            let w = v.len() as f64 / (v.len() as f64 + SHRINK_IMAGES);
-            w * upper_quantile(&mut v, q) + (1.0 - w) * pooled
-        };
-        nv.thresholds[kk] = margin * positive(t, 1.0);
-    }
+    set_thresholds(&mut nv, &parts, &scores, 1.0 - cal_rate, margin);
     let above = parts
         .iter()
         .zip(&scores)
@@ -437,6 +392,69 @@ fn finish_novelty(
     nv.reference_classes = reference_classes;
     nv.nuisance = nuisance_directions(&residuals, NUISANCE_DIRECTIONS);
     model.unknown.novelty = Some(nv);
+}
+
+/// The novelty check's units: each class's residual scale (its median, the pooled one for a
+/// class of fewer than 3 images), then each part stretched to its own tail, so that the
+/// `1 - rate` quantile of either part alone is 1: neither decides by its tail alone
+/// (docs/decisions/unknown-calibration.md).
+fn set_units(nv: &mut Novelty, parts: &[(usize, f64, f64)], cal_rate: f64) {
+    let mut all_res: Vec<f64> = parts.iter().map(|p| p.2).collect();
+    let pooled_res = median(&mut all_res);
+    for (kk, scale) in nv.residual_scale.iter_mut().enumerate() {
+        let mut r: Vec<f64> = parts.iter().filter(|p| p.0 == kk).map(|p| p.2).collect();
+        let m = if r.len() >= 3 {
+            median(&mut r)
+        } else {
+            pooled_res
+        };
+        *scale = positive(m, pooled_res);
+    }
+    let q = 1.0 - cal_rate;
+    let mut zk: Vec<f64> = parts
+        .iter()
+        .map(|&(b, knn, _)| knn / nv.class_spread[b])
+        .collect();
+    let mut zr: Vec<f64> = parts
+        .iter()
+        .map(|&(b, _, r)| r / nv.residual_scale[b])
+        .collect();
+    let (qk, qr) = (upper_quantile(&mut zk, q), upper_quantile(&mut zr, q));
+    for v in nv.class_spread.iter_mut() {
+        *v *= positive(qk, 1.0);
+    }
+    for v in nv.residual_scale.iter_mut() {
+        *v *= positive(qr, 1.0);
+    }
+}
+
+/// Each class's threshold: its own `q` quantile of the scores, shrunk toward the pooled one by
+/// its count, times the margin. With 30 images the 98% quantile is the largest one, and a
+/// class's threshold was then as noisy as its one most unusual image
+/// (docs/decisions/unknown-calibration.md).
+fn set_thresholds(
+    nv: &mut Novelty,
+    parts: &[(usize, f64, f64)],
+    scores: &[f64],
+    q: f64,
+    margin: f64,
+) {
+    let pooled = upper_quantile(&mut scores.to_vec(), q);
+    for (kk, threshold) in nv.thresholds.iter_mut().enumerate() {
+        let mut v: Vec<f64> = parts
+            .iter()
+            .zip(scores)
+            .filter(|(p, _)| p.0 == kk)
+            .map(|(_, s)| *s)
+            .collect();
+        let t = if v.is_empty() {
+            pooled
+        } else {
+            let w = v.len() as f64 / (v.len() as f64 + SHRINK_IMAGES);
+            w * upper_quantile(&mut v, q) + (1.0 - w) * pooled
+        };
+        *threshold = margin * positive(t, 1.0);
+    }
 }
 
 /// Time blocks a session is cut into to calibrate on itself ([`CalibrationSource::TimeBlocks`]).

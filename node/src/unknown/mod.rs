@@ -32,6 +32,7 @@ pub mod calibrate;
 pub mod checks;
 pub mod energy;
 pub mod energy_fit;
+pub mod keep;
 pub mod novelty;
 
 pub use protocol::messages::UnknownReason as Reason;

@@ -74,6 +74,35 @@ impl LockStep {
         self.send(i, sent)
     }
 
+    /// Every part present [`LockStep::start`]s, in order (part `i` at index `i`).
+    pub fn start_all(
+        &mut self,
+        parts: &mut [Option<&mut dyn Component>],
+        sent: &mut dyn Emit<Stamped>,
+    ) -> Result<(), BusError> {
+        for (i, part) in parts.iter_mut().enumerate() {
+            if let Some(p) = part {
+                self.start(i, *p, sent)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Every part present [`LockStep::stop`]s, the last first: the parts nearest the motors
+    /// stop before those that command them.
+    pub fn stop_all(
+        &mut self,
+        parts: &mut [Option<&mut dyn Component>],
+        sent: &mut dyn Emit<Stamped>,
+    ) -> Result<(), BusError> {
+        for (i, part) in parts.iter_mut().enumerate().rev() {
+            if let Some(p) = part {
+                self.stop(i, *p, sent)?;
+            }
+        }
+        Ok(())
+    }
+
     /// While the link is down every frame sent is lost, as on an interface that is down (the
     /// observer of [`LockStep::step`] still sees it: the sender did send it).
     pub fn set_link(&mut self, up: bool) {

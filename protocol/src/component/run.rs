@@ -34,7 +34,7 @@ pub struct RunOptions {
     /// After the stop, go on reading what reached the socket, until it has been quiet for
     /// [`DRAIN_QUIET`] or for at most this long: for a recorder beside a process that stops
     /// it when done, whose last frames are otherwise in the socket and lost to the recording
-    /// (measured on vcan under emulation: 799 of the 800 images `presrs lab sim --mcap` sent).
+    /// (docs/decisions/figures-behind-comments.md, drain-after-stop).
     /// `None` (the default): the run ends at the stop.
     pub drain_on_stop: Option<Duration>,
     /// Without frames, wake to tick only after this long, not every `tick`: a component whose

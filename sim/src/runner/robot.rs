@@ -381,7 +381,12 @@ impl SimRobot {
                 None => {}
             }
         }
-        // Switch edges due by now.
+        self.send_due_edges(foot, t_us, emit);
+    }
+
+    /// The foot switch's edges due by `t_us`, as FootContact reports.
+    fn send_due_edges(&mut self, foot: usize, t_us: u64, emit: &mut dyn Emit<CanFrame>) {
+        let ids = &self.cfg.ids;
         let leg = &mut self.legs[foot];
         leg.edges.sort_by_key(|e| e.0);
         while let Some(&(t, state)) = leg.edges.first() {

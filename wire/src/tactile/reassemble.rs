@@ -130,46 +130,10 @@ impl Reassembler {
         }
         let seq = payload[0];
         let index = variant.index(payload);
-        let timeout = self.timeout_us;
         let stats = &mut self.stats;
         let pair = &mut self.slots[foot as usize];
-        for s in pair.iter_mut() {
-            let age = rx_us.saturating_sub(s.first_rx_us);
-            s.state = match s.state {
-                SlotState::Assembling if age > timeout => {
-                    stats.incomplete += 1;
-                    SlotState::Abandoned
-                }
-                SlotState::Done if age > timeout => SlotState::Empty,
-                SlotState::Abandoned if age > 2 * timeout => SlotState::Empty,
-                s => s,
-            };
-        }
-        let slot_i = match pair
-            .iter()
-            .position(|s| s.state != SlotState::Empty && s.seq == seq)
-        {
-            Some(i) => i,
-            None => {
-                // Evict an empty slot first, then a finished one, then the older assembly.
-                let rank = |s: &Slot| match s.state {
-                    SlotState::Empty => (0, 0),
-                    SlotState::Abandoned | SlotState::Done => (1, s.first_rx_us),
-                    SlotState::Assembling => (2, s.first_rx_us),
-                };
-                let i = if rank(&pair[0]) <= rank(&pair[1]) {
-                    0
-                } else {
-                    1
-                };
-                if pair[i].state == SlotState::Assembling {
-                    stats.incomplete += 1;
-                }
-                pair[i].start(seq, rx_us);
-                i
-            }
-        };
-        let slot = &mut pair[slot_i];
+        age(pair, rx_us, self.timeout_us, stats);
+        let slot = &mut pair[slot_for(pair, seq, rx_us, stats)];
         match slot.state {
             SlotState::Done => {
                 stats.duplicates += 1;
@@ -181,70 +145,129 @@ impl Reassembler {
             }
             _ => {}
         }
-        let first = variant.first_data_index();
-        if index < first {
-            if !absorb_header(variant, index, payload, slot, stats) {
-                return None;
-            }
+        let taken = if index < variant.first_data_index() {
+            absorb_header(variant, index, payload, slot, stats)
         } else {
-            let d = index - first;
-            let limit = if slot.header_parts == full_header(variant) {
-                slot.header.segments as usize
-            } else {
-                variant.max_data_segments()
-            };
-            if d >= limit {
-                stats.out_of_range += 1;
-                return None;
-            }
-            if slot.test_and_set(index) {
-                stats.duplicates += 1;
-                return None;
-            }
-            let dps = variant.data_per_segment();
-            let start = d * dps;
-            let end = (start + dps).min(MAX_BYTES);
-            slot.buf[start..end]
-                .copy_from_slice(&payload[variant.prefix()..variant.prefix() + (end - start)]);
-            if slot.header_parts == full_header(variant) {
-                slot.n_data += 1;
-            }
-        }
-        if slot.header_parts != full_header(variant) || slot.n_data != slot.header.segments as usize
+            absorb_data(variant, index, payload, slot, stats)
+        };
+        if !taken
+            || slot.header_parts != full_header(variant)
+            || slot.n_data != slot.header.segments as usize
         {
             return None;
         }
         // Complete: check the CRC over exactly the header's byte count.
         slot.state = SlotState::Done;
-        let h = slot.header;
-        let n = h.n_bytes();
-        if crc32fast::hash(&slot.buf[..n]) != h.crc {
+        let n = slot.header.n_bytes();
+        if crc32fast::hash(&slot.buf[..n]) != slot.header.crc {
             stats.crc_failures += 1;
             return None;
         }
-        let out = &mut *self.out;
-        out.foot = foot;
-        out.seq = seq;
-        out.rows = h.rows;
-        out.cols = h.cols;
-        out.bits = h.bits;
-        out.timestamp_us = h.timestamp_us;
-        out.completed_us = rx_us;
-        let n_px = h.rows as usize * h.cols as usize;
-        if h.bits == 8 {
-            for (p, b) in out.pixels[..n_px].iter_mut().zip(&slot.buf[..n]) {
-                *p = *b as u16;
-            }
-        } else {
-            for (p, b) in out.pixels[..n_px]
-                .iter_mut()
-                .zip(slot.buf[..n].chunks_exact(2))
-            {
-                *p = u16::from_le_bytes([b[0], b[1]]);
-            }
-        }
+        deliver(&mut self.out, slot, foot, seq, rx_us);
         stats.delivered += 1;
         Some(&*self.out)
+    }
+}
+
+/// Ages a foot's two slots at `rx_us`: an assembly past the timeout is abandoned (counted
+/// incomplete), a finished or abandoned one is freed later.
+fn age(pair: &mut [Slot; 2], rx_us: u64, timeout: u64, stats: &mut ReassemblyStats) {
+    for s in pair.iter_mut() {
+        let age = rx_us.saturating_sub(s.first_rx_us);
+        s.state = match s.state {
+            SlotState::Assembling if age > timeout => {
+                stats.incomplete += 1;
+                SlotState::Abandoned
+            }
+            SlotState::Done if age > timeout => SlotState::Empty,
+            SlotState::Abandoned if age > 2 * timeout => SlotState::Empty,
+            s => s,
+        };
+    }
+}
+
+/// The slot of image `seq`: the one holding it, else a new one (an empty slot first, then a
+/// finished one, then the older assembly, counted incomplete).
+fn slot_for(pair: &mut [Slot; 2], seq: u8, rx_us: u64, stats: &mut ReassemblyStats) -> usize {
+    if let Some(i) = pair
+        .iter()
+        .position(|s| s.state != SlotState::Empty && s.seq == seq)
+    {
+        return i;
+    }
+    let rank = |s: &Slot| match s.state {
+        SlotState::Empty => (0, 0),
+        SlotState::Abandoned | SlotState::Done => (1, s.first_rx_us),
+        SlotState::Assembling => (2, s.first_rx_us),
+    };
+    let i = if rank(&pair[0]) <= rank(&pair[1]) {
+        0
+    } else {
+        1
+    };
+    if pair[i].state == SlotState::Assembling {
+        stats.incomplete += 1;
+    }
+    pair[i].start(seq, rx_us);
+    i
+}
+
+/// Takes one data segment into the slot. False when it is dropped (out of range or a
+/// duplicate).
+fn absorb_data(
+    v: Variant,
+    index: usize,
+    payload: &[u8],
+    slot: &mut Slot,
+    stats: &mut ReassemblyStats,
+) -> bool {
+    let d = index - v.first_data_index();
+    let limit = if slot.header_parts == full_header(v) {
+        slot.header.segments as usize
+    } else {
+        v.max_data_segments()
+    };
+    if d >= limit {
+        stats.out_of_range += 1;
+        return false;
+    }
+    if slot.test_and_set(index) {
+        stats.duplicates += 1;
+        return false;
+    }
+    let dps = v.data_per_segment();
+    let start = d * dps;
+    let end = (start + dps).min(MAX_BYTES);
+    slot.buf[start..end].copy_from_slice(&payload[v.prefix()..v.prefix() + (end - start)]);
+    if slot.header_parts == full_header(v) {
+        slot.n_data += 1;
+    }
+    true
+}
+
+/// A complete, checked slot's pixels into `out`.
+fn deliver(out: &mut TactileImage, slot: &Slot, foot: u8, seq: u8, rx_us: u64) {
+    let h = slot.header;
+    let n = h.n_bytes();
+    out.foot = foot;
+    out.seq = seq;
+    out.rows = h.rows;
+    out.cols = h.cols;
+    out.bits = h.bits;
+    out.timestamp_us = h.timestamp_us;
+    out.completed_us = rx_us;
+    let n_px = h.rows as usize * h.cols as usize;
+    if h.bits == 8 {
+        for (p, b) in out.pixels[..n_px].iter_mut().zip(&slot.buf[..n]) {
+            *p = *b as u16;
+        }
+    } else {
+        for (p, b) in out.pixels[..n_px]
+            .iter_mut()
+            .zip(slot.buf[..n].chunks_exact(2))
+        {
+            *p = u16::from_le_bytes([b[0], b[1]]);
+        }
     }
 }
 

@@ -198,8 +198,7 @@ pub(crate) fn half_to_f64(x: u16) -> f64 {
 ///
 /// Integers, exact and branch-free (a 16-bit Laplacian is at most 4 * 65535, its square below
 /// 2^36, a sum of 2^20 of them below 2^56), so that the baseline and the AVX2 build agree to
-/// the bit. Measured on a 41 x 38 working image: 1.7 us on the x86-64 baseline, 0.9 us built
-/// for AVX2; the first version (f64, a branch per sensel) took 1.9 us, eight f32 lanes 1.7 us.
+/// the bit, and faster than floats (docs/decisions/figures-behind-comments.md).
 #[inline(always)]
 pub(super) fn roughness_sums(work: &[u16], rows: usize, cols: usize) -> [u64; 3] {
     let (mut e, mut n, mut load) = (0u64, 0u64, 0u64);

@@ -9,8 +9,8 @@ use super::*;
 ///
 /// A filled dead line is a copy of its neighbour: the texture it carried is gone from the image
 /// and its copy adds spectral lines the training images never had. A model fitted on equally
-/// damaged images compares like with like; at 50% damage that is the difference between about
-/// 70% and 90% of steps classified right (see the node's notes).
+/// damaged images compares like with like (docs/decisions/figures-behind-comments.md,
+/// refit-on-damage).
 pub fn refit(model: &Model, dead_rows: &[bool], dead_cols: &[bool]) -> Result<Model, RefitError> {
     let images = model.images.as_ref().ok_or(RefitError::NoImages)?;
     let (rows, cols) = model.work_size().ok_or(RefitError::Size)?;

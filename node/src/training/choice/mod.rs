@@ -64,9 +64,7 @@ struct Judged {
 
 /// The grid `opts` leaves open: a part a flag pins is not searched. With `one_run`, the load
 /// and texture bands stay off unless pinned: a band drawn on one run cannot be held against
-/// the next one here (measured: the texture band of one run on the simulator's hopping
-/// stances, kept by a choice judged on that run, called 10.4% of the next run on another sensor
-/// unknown, against 2.1% without it).
+/// the next one here (docs/decisions/figures-behind-comments.md, one-run-bands).
 fn grid(opts: &TrainOptions, one_run: bool, energy_ok: bool) -> Vec<Candidate> {
     let both = [false, true];
     let pinned = |on: bool| if on { &both[1..] } else { &both[..] };

@@ -1,0 +1,129 @@
+//! Every argument type of the `presrs` command line, in one place: what `presrs --help` shows
+//! is declared here, and the binary (`src/`) parses into these and wires the member crates.
+//! A robot team's own binary can flatten the same groups (`#[command(flatten)]`).
+//!
+//! The option groups that carry their own behaviour (`protocol::TerrainsArg`,
+//! `record::LiveOptions`, `ros2::Ros2Options`, `sim::FootOptions`, `tools::eval::EvalSpec`,
+//! `node::classifier::train::TrainOptions`) stay beside that behaviour in their crates,
+//! behind each crate's `clap` feature, and are flattened here.
+#![forbid(unsafe_code)]
+
+pub mod bench_node;
+pub mod bridge;
+pub mod capture;
+pub mod classifier;
+pub mod controller;
+pub mod demo;
+pub mod energy;
+pub mod experiment;
+pub mod leg;
+pub mod mcap;
+pub mod node;
+pub mod sim;
+
+use clap::{Parser, Subcommand};
+
+#[derive(Parser)]
+#[command(
+    name = "presrs",
+    version,
+    about = "PreSRS terrain node: classify terrain from a tactile foot over CAN"
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub cmd: Cmd,
+}
+
+/// The lab's path: what a lab runs to put the node on its robot and use it. Everything else is
+/// under `presrs lab`.
+#[derive(Subcommand)]
+pub enum Cmd {
+    /// Simulator, node and controller in one process on the in-process bus: the closed loop.
+    Demo(demo::DemoArgs),
+    /// A training set from the robot's own runs: one image per step (the node's stance logic),
+    /// labelled, into DIR/<terrain>/ with a manifest.
+    Capture(capture::CaptureArgs),
+    /// Train a terrain classifier on DIR/<terrain>/<images>, as `capture` writes them.
+    Train(classifier::TrainArgs),
+    /// Evaluate a model on a dataset: confusion matrix (detected vs actual, %) and accuracy.
+    Eval(classifier::EvalArgs),
+    /// The terrain node: foot switch and tactile frames in, one TerrainClass per step out
+    /// (on a CAN interface, or `--replay` of a candump log).
+    Node(node::NodeArgs),
+    /// The gait controller on a CAN interface: LegCommand out, gait switched per terrain.
+    Controller(controller::ControllerArgs),
+    /// The leg bridge on a CAN interface: LegCommand to the motor drivers (moteus, ODrive,
+    /// MIT protocol), LegState and LegStatus from their encoders.
+    Leg(leg::LegArgs),
+    /// The robot's bus as ROS 2 topics, beside the node: terrain per step, contact, pressure
+    /// images, joint states, gait and /diagnostics, on Zenoh in rmw_zenoh's format (no ROS
+    /// install on the robot).
+    Bridge(bridge::BridgeArgs),
+    /// A candump log to an MCAP file (Foxglove, PlotJuggler, any MCAP reader): each message on
+    /// its own JSON channel per foot, each pressure image a foxglove.RawImage; with --ros2, a
+    /// rosbag2 directory that `ros2 bag play` reads (CDR, the bridge's topics).
+    Mcap(mcap::McapArgs),
+    /// A recording at a glance: a foot's pressure image beside what the recording holds
+    /// (terrain, contact, gait, speed), as a PNG.
+    View(mcap::ViewArgs),
+    /// The lab bench: the simulator and its datasets, the paper's experiments, the node's
+    /// benchmark, the classifier's parts (classify, features, repair), the DBC, the energy fit.
+    #[command(subcommand)]
+    Lab(LabCmd),
+}
+
+/// `presrs lab`: what a lab needs now and then, beside its path.
+#[derive(Subcommand)]
+pub enum LabCmd {
+    /// The simulated hopper and foot on a CAN interface, in real time.
+    Sim(sim::SimArgs),
+    /// Generate a simulated dataset: DIR/<terrain>/<n>.pgm, as `train` and `eval` read it.
+    Dataset(classifier::DatasetArgs),
+    /// Reproduce the paper's tables and figures on simulated data: Markdown and PNG plots.
+    Experiment(experiment::ExperimentArgs),
+    /// The node's speed: sampled frame -> TerrainClass latency, CPU and memory with N feet at
+    /// 100 Hz (in-process, or `presrs node` on `--iface`).
+    BenchNode(bench_node::BenchNodeArgs),
+    /// Classify image files: one line per image (file, terrain, confidence), or with --json one
+    /// object per image (file, terrain, confidence, novelty, threshold).
+    Classify(classifier::ClassifyArgs),
+    /// Print an image's feature vector (eqs. 1-3).
+    Features(classifier::FeaturesArgs),
+    /// Apply the paper's repair filter to an image; writes a PGM of the same size and depth.
+    Repair(classifier::RepairArgs),
+    /// Write the DBC file for an identifier map (defaults, or a TOML file with an [ids] table).
+    Dbc(classifier::DbcArgs),
+    /// Fit a model's energy check on the robot's closed-loop runs on known ground: ground that
+    /// looks like a known terrain but takes a different share of the hop's energy is unknown.
+    Energy(energy::EnergyArgs),
+}
+
+/// The commands that moved under `presrs lab`; their old names still run, with a pointer, for
+/// one release.
+pub const MOVED_TO_LAB: [&str; 9] = [
+    "sim",
+    "dataset",
+    "experiment",
+    "bench-node",
+    "classify",
+    "features",
+    "repair",
+    "dbc",
+    "energy",
+];
+
+/// The arguments, with a command that moved under `presrs lab` put there (and said so once).
+pub fn args() -> Vec<std::ffi::OsString> {
+    let mut args: Vec<_> = std::env::args_os().collect();
+    if let Some(cmd) = args
+        .get(1)
+        .and_then(|a| a.to_str())
+        .filter(|c| MOVED_TO_LAB.contains(c))
+    {
+        eprintln!(
+            "note: `presrs {cmd}` is now `presrs lab {cmd}`; the old name goes in the next release"
+        );
+        args.insert(1, "lab".into());
+    }
+    args
+}

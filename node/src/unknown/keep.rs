@@ -1,0 +1,259 @@
+//! Keeping the stances the node calls unknown, where a lab can reach them
+//! (`presrs node --keep-unknown DIR`, live or over `--replay`).
+//!
+//! Unknown ground is the robot's news: the stances it could not place are what a lab looks at
+//! to decide whether the robot met new ground. Only stances with a real stance image are kept
+//! (unknown by novelty, load, texture or energy); a step without an image or without contact
+//! carries no ground to look at.
+//!
+//! The node's thread only copies: [`UnknownKeeper::offer`] takes a free slot from a pool made
+//! at start (each slot holds the largest image a foot can send), fills it and hands it to a
+//! writer thread, never waiting; with no free slot the stance is dropped and counted. The
+//! writer writes what `presrs capture` writes, `DIR/unknown/<name>.pgm` with its line in
+//! `DIR/manifest.csv` (so a second keep of the same log adds nothing), plus `DIR/kept.csv`
+//! with each stance's reason, best class and confidence.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use crossbeam_channel::{Receiver, Sender, TrySendError};
+use protocol::messages::{TerrainClass, UnknownReason};
+use protocol::tactile::MAX_PIXELS;
+use protocol::terrain::Terrain;
+
+use crate::capture::{CaptureError, CaptureSet, CapturedStep};
+use crate::classifier::PressureImage;
+use crate::stance::{Decided, StanceSample};
+
+/// Stances the pool holds in flight: about 20 s of one foot that meets only new ground.
+pub const SLOTS: usize = 64;
+
+/// The header of `DIR/kept.csv`.
+pub const KEPT_HEADER: &str = "file,foot,step,reason,flags,confidence_pct,damage_pct,gait,source";
+
+/// One kept stance, in a slot of the pool.
+struct Slot {
+    decided: Decided,
+    gait: Option<u8>,
+    sample_rx_us: u64,
+    rows: usize,
+    cols: usize,
+    bits: u8,
+    pixels: Box<[u16; MAX_PIXELS]>,
+}
+
+/// What a keep wrote.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct KeptCounts {
+    /// Stances written.
+    pub written: u64,
+    /// Stances the manifest had already (the same log kept twice).
+    pub duplicates: u64,
+    /// Stances dropped for want of a free slot (the writer fell behind).
+    pub dropped: u64,
+}
+
+/// The node's side: offers unknown stances, never blocks.
+#[derive(Clone)]
+pub struct UnknownKeeper {
+    free: Receiver<Box<Slot>>,
+    full: Sender<Box<Slot>>,
+    dropped: Arc<AtomicU64>,
+    wait: bool,
+}
+
+/// The writer's side: joins the thread and says what it wrote.
+pub struct KeepWriter {
+    thread: std::thread::JoinHandle<Result<KeptCounts, CaptureError>>,
+    dropped: Arc<AtomicU64>,
+}
+
+/// Whether a step's verdict rests on a real stance image (and so is worth keeping).
+pub fn keepable(class: &TerrainClass) -> bool {
+    matches!(
+        class.unknown_reason(),
+        Some(
+            UnknownReason::Novelty
+                | UnknownReason::Load
+                | UnknownReason::Texture
+                | UnknownReason::Energy
+        )
+    )
+}
+
+impl UnknownKeeper {
+    /// Opens `dir` (created if missing; an existing keep is added to, nothing overwritten) and
+    /// starts the writer. `source` names the run in the manifest (the log's file, or the
+    /// interface).
+    pub fn create(dir: &Path, source: &str) -> Result<(Self, KeepWriter), CaptureError> {
+        let set = CaptureSet::open(dir)?;
+        let kept_path = dir.join("kept.csv");
+        let new = !kept_path.exists();
+        let io = |e| crate::capture::io("append to", &kept_path, e);
+        let mut kept = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&kept_path)
+            .map_err(io)?;
+        if new {
+            writeln!(kept, "{KEPT_HEADER}").map_err(io)?;
+        }
+        let (free_tx, free) = crossbeam_channel::bounded(SLOTS);
+        let (full, full_rx) = crossbeam_channel::bounded(SLOTS);
+        for _ in 0..SLOTS {
+            let _ = free_tx.send(Box::new(Slot {
+                decided: Decided {
+                    foot: 0,
+                    class: TerrainClass::default(),
+                    touchdown_us: 0,
+                },
+                gait: None,
+                sample_rx_us: 0,
+                rows: 0,
+                cols: 0,
+                bits: 8,
+                pixels: Box::new([0; MAX_PIXELS]),
+            }));
+        }
+        let dropped = Arc::new(AtomicU64::new(0));
+        let w = Writer {
+            set,
+            kept,
+            kept_path,
+            source: source.replace([',', '\n'], "_"),
+        };
+        let thread = std::thread::Builder::new()
+            .name("keep-unknown".into())
+            .spawn(move || w.run(full_rx, free_tx))
+            .map_err(|e| crate::capture::io("start the writer for", dir, e))?;
+        Ok((
+            Self {
+                free,
+                full,
+                dropped: dropped.clone(),
+                wait: false,
+            },
+            KeepWriter { thread, dropped },
+        ))
+    }
+
+    /// For a replay, which has no deadline and must keep every stance: [`Self::offer`] waits
+    /// for a free slot instead of dropping the stance.
+    pub fn waiting(mut self) -> Self {
+        self.wait = true;
+        self
+    }
+
+    /// Offers step `d` (decided with `gait` in force) and its image `s`: kept when its verdict
+    /// rests on the image ([`keepable`]). Copies into a free slot; no allocation, no wait.
+    pub fn offer(&self, d: &Decided, gait: Option<u8>, s: &StanceSample<'_>) {
+        if !keepable(&d.class) || s.pixels.len() > MAX_PIXELS || s.pixels.len() != s.rows * s.cols {
+            return;
+        }
+        let slot = if self.wait {
+            self.free.recv().ok()
+        } else {
+            self.free.try_recv().ok()
+        };
+        let Some(mut slot) = slot else {
+            self.dropped.fetch_add(1, Ordering::Relaxed);
+            return;
+        };
+        slot.decided = *d;
+        slot.gait = gait;
+        slot.sample_rx_us = s.rx_us;
+        (slot.rows, slot.cols, slot.bits) = (s.rows, s.cols, s.bits);
+        slot.pixels[..s.pixels.len()].copy_from_slice(s.pixels);
+        // The pool holds as many slots as the queue: a slot taken always fits.
+        if let Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) = self.full.try_send(slot)
+        {
+            self.dropped.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+}
+
+impl KeepWriter {
+    /// Waits for the writer once every [`UnknownKeeper`] is dropped; what it wrote.
+    pub fn finish(self) -> Result<KeptCounts, CaptureError> {
+        let mut counts = match self.thread.join() {
+            Ok(r) => r?,
+            Err(_) => {
+                let e = std::io::Error::other("the writer thread panicked");
+                return Err(crate::capture::io(
+                    "write",
+                    Path::new("the kept stances"),
+                    e,
+                ));
+            }
+        };
+        counts.dropped = self.dropped.load(Ordering::Relaxed);
+        Ok(counts)
+    }
+}
+
+struct Writer {
+    set: CaptureSet,
+    kept: std::fs::File,
+    kept_path: PathBuf,
+    source: String,
+}
+
+impl Writer {
+    fn run(
+        mut self,
+        full: Receiver<Box<Slot>>,
+        free: Sender<Box<Slot>>,
+    ) -> Result<KeptCounts, CaptureError> {
+        let mut counts = KeptCounts::default();
+        for slot in full {
+            let r = self.write(&slot, &mut counts);
+            let _ = free.send(slot);
+            r?;
+        }
+        Ok(counts)
+    }
+
+    fn write(&mut self, s: &Slot, counts: &mut KeptCounts) -> Result<(), CaptureError> {
+        let n = s.rows * s.cols;
+        let image = PressureImage::new(s.rows, s.cols, s.bits, s.pixels[..n].to_vec());
+        let c = &s.decided.class;
+        let step = CapturedStep {
+            foot: s.decided.foot,
+            step: c.step,
+            terrain: Terrain::UNKNOWN,
+            touchdown_us: s.decided.touchdown_us,
+            sample_us: s.sample_rx_us,
+            load_sum: image.pixels.iter().map(|&p| p as u64).sum(),
+            damage_pct: c.damage_pct,
+            repaired_lines: 0,
+            gait: s.gait,
+            image,
+            flights_us: [None, None],
+            frames: Vec::new(),
+        };
+        if !self.set.add(&step, &self.source)? {
+            counts.duplicates += 1;
+            return Ok(());
+        }
+        let reason = c.unknown_reason().map_or("", UnknownReason::name);
+        let line = format!(
+            "{},{},{},{reason},{},{:.1},{:.1},{},{}\n",
+            self.set.last_written.as_deref().unwrap_or_default(),
+            step.foot,
+            step.step,
+            c.flags,
+            c.confidence_pct,
+            c.damage_pct,
+            s.gait.map(|g| g.to_string()).unwrap_or_default(),
+            self.source,
+        );
+        self.kept
+            .write_all(line.as_bytes())
+            .and_then(|_| self.kept.flush())
+            .map_err(|e| crate::capture::io("append to", &self.kept_path, e))?;
+        counts.written += 1;
+        Ok(())
+    }
+}
