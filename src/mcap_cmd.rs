@@ -1,6 +1,6 @@
-//! `presrs mcap`: a candump log to an MCAP file; and the `--mcap` / `--foxglove` options with
-//! which `presrs node` and `presrs lab sim` record live. The channels and the writing are
-//! [`record`]'s; this module reads arguments and says what happened.
+//! `presrs mcap` (a candump log to an MCAP file or a ROS 2 bag) and `presrs view` (a recording
+//! as one PNG). The channels and the writing are [`record`]'s and [`ros2`]'s, the picture
+//! [`tools::view`]'s; this module reads arguments and says what happened.
 
 use std::process::ExitCode;
 

@@ -35,12 +35,15 @@ pub struct TrainArgs {
 /// `presrs eval`.
 #[derive(clap::Args)]
 pub struct EvalArgs {
+    /// The model file (`presrs train --out`).
     #[arg(long)]
     pub model: PathBuf,
+    /// The dataset: DIR/<terrain>/<images>, as `capture` writes it.
     #[arg(long)]
     pub data: PathBuf,
     #[command(flatten)]
     pub spec: tools::eval::EvalSpec,
+    /// Print the confusion matrix and accuracy as one JSON object.
     #[arg(long)]
     pub json: bool,
     /// Skip unreadable files (counted) instead of stopping.
@@ -53,8 +56,10 @@ pub struct EvalArgs {
 /// `presrs lab classify`.
 #[derive(clap::Args)]
 pub struct ClassifyArgs {
+    /// The model file (`presrs train --out`).
     #[arg(long)]
     pub model: PathBuf,
+    /// Images to classify (PGM, CSV or a TekScan ASCII export).
     pub files: Vec<PathBuf>,
     /// One JSON object per line: `file`, `terrain`, `confidence`, `novelty` (larger = less
     /// like any known terrain) and `threshold` (above it: unknown), so that the score's
@@ -68,9 +73,12 @@ pub struct ClassifyArgs {
 /// `presrs lab features`.
 #[derive(clap::Args)]
 pub struct FeaturesArgs {
+    /// The image (PGM, CSV or a TekScan ASCII export).
     pub file: PathBuf,
+    /// Rows and columns cut off before the features: TOP,BOTTOM,LEFT,RIGHT.
     #[arg(long, default_value = "0,0,0,0")]
     pub crop: Crop,
+    /// Print the feature vector as a JSON array.
     #[arg(long)]
     pub json: bool,
 }
@@ -78,7 +86,9 @@ pub struct FeaturesArgs {
 /// `presrs lab repair`.
 #[derive(clap::Args)]
 pub struct RepairArgs {
+    /// The image (PGM, CSV or a TekScan ASCII export).
     pub file: PathBuf,
+    /// The repaired image's file (PGM).
     #[arg(long)]
     pub out: PathBuf,
 }
@@ -102,6 +112,7 @@ pub struct DatasetArgs {
     /// static (section 4), sandpaper (section 5) or dynamic (section 7, on the hopper).
     #[arg(value_enum)]
     pub kind: sim::dataset::Kind,
+    /// The folder to write DIR/<terrain>/<n>.pgm into.
     #[arg(long)]
     pub out: PathBuf,
     /// Images per terrain (default: the paper's counts; Table 4 for dynamic).
@@ -109,6 +120,7 @@ pub struct DatasetArgs {
     pub n: Option<usize>,
     #[command(flatten)]
     pub foot: sim::FootOptions,
+    /// The simulator's random seed: the same seed, the same images.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     // Checked like every command's; the simulator generates the paper's terrains, which every

@@ -9,13 +9,14 @@ pub struct ExperimentArgs {
     /// all, static, resolution, dynamic, gaits, damage, lifespan, adaptation or open-set.
     #[arg(value_name = "EXPERIMENT")]
     pub which: Selection,
-    /// Output directory: results.md (or WHICH.md) and figures/. (Not `docs` by default: run in
-    /// a checkout, that overwrote the project's own docs/results.md; pass `--out docs` to.)
+    /// Output directory: results.md (or WHICH.md) and figures/. Not `docs` by default (in a
+    /// checkout that would overwrite the project's docs/results.md); `--out docs` does that.
     #[arg(long, default_value = "results")]
     pub out: PathBuf,
     /// Fewer images and steps: a check that everything runs, not results to quote.
     #[arg(long)]
     pub quick: bool,
+    /// The simulator's random seed: the same seed, the same run.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// With open-set: run it on N seeds from --seed on and add each figure's median and range

@@ -4,8 +4,8 @@
 //!
 //! The option groups that carry their own behaviour (`protocol::TerrainsArg`,
 //! `record::LiveOptions`, `ros2::Ros2Options`, `sim::FootOptions`, `tools::eval::EvalSpec`,
-//! `node::classifier::train::TrainOptions`) stay beside that behaviour in their crates,
-//! behind each crate's `clap` feature, and are flattened here.
+//! `node::classifier::train::TrainOptions`, `node::NodeThreads`) stay beside that behaviour in
+//! their crates, behind each crate's `clap` feature, and are flattened here.
 #![forbid(unsafe_code)]
 
 pub mod bench_node;
@@ -27,7 +27,8 @@ use clap::{Parser, Subcommand};
 #[command(
     name = "presrs",
     version,
-    about = "PreSRS terrain node: classify terrain from a tactile foot over CAN"
+    about = "PreSRS terrain node: classify terrain from a tactile foot over CAN",
+    after_help = "On the robot: node, controller, leg, bridge (systemd units in the .deb). On the lab's computer: demo, capture, train, eval, mcap, view, and `presrs lab` for the rest."
 )]
 pub struct Cli {
     #[command(subcommand)]
@@ -126,4 +127,46 @@ pub fn args() -> Vec<std::ffi::OsString> {
         args.insert(1, "lab".into());
     }
     args
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    /// Every option and argument of every command says what it is in `--help`.
+    #[test]
+    fn every_argument_has_help() {
+        fn walk(cmd: &clap::Command, path: &str, missing: &mut Vec<String>) {
+            for a in cmd.get_arguments() {
+                let id = a.get_id().as_str();
+                if a.get_help().is_none() && !["help", "version"].contains(&id) {
+                    missing.push(format!("{path} --{id}"));
+                }
+            }
+            for sub in cmd.get_subcommands() {
+                walk(sub, &format!("{path} {}", sub.get_name()), missing);
+            }
+        }
+        let mut missing = Vec::new();
+        walk(&Cli::command(), "presrs", &mut missing);
+        assert!(missing.is_empty(), "without help: {missing:#?}");
+    }
+
+    /// A name moved under `presrs lab` still runs there.
+    #[test]
+    fn moved_commands_are_lab_commands() {
+        let lab = Cli::command();
+        let lab = lab.find_subcommand("lab").map(|c| {
+            c.get_subcommands()
+                .map(|s| s.get_name().to_string())
+                .collect::<Vec<_>>()
+        });
+        for name in MOVED_TO_LAB {
+            assert!(
+                lab.as_ref().is_some_and(|l| l.iter().any(|n| n == name)),
+                "{name}"
+            );
+        }
+    }
 }

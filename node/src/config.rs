@@ -49,7 +49,8 @@ pub struct NodeConfig {
     pub feet: u8,
     /// Micro-switch debounce, µs.
     pub debounce_us: u32,
-    /// Stance time of the sampled frame, ms (section 7.1: 70).
+    /// Stance time of the sampled frame, ms (section 7.1: 70), for a model that carries none:
+    /// a model `train` made carries the frame it measured on the lab's stances, and that wins.
     pub sample_ms: u32,
     /// How dead sensor lines are filled.
     pub repair: RepairMode,

@@ -497,7 +497,7 @@ mod tests {
         let shipped = include_str!("../presrs.dbc");
         assert!(
             shipped == generate(&IdConfig::default(), &TerrainCatalog::paper()),
-            "protocol/presrs.dbc is stale: regenerate it with `cargo run -- dbc --out protocol/presrs.dbc`"
+            "protocol/presrs.dbc is stale: regenerate it with `cargo run -- lab dbc --out protocol/presrs.dbc`"
         );
     }
 

@@ -2,7 +2,7 @@
 //!
 //! Every layer makes something and passes it on: the segmenter a foot's frames, the stance
 //! pipeline a terrain decision per step, the node service its outputs, a capture its steps,
-//! a component the frames it sends ([`Outbox`](crate::component::Outbox)), the lock-step bus
+//! a component the frames it sends (`protocol::component::Outbox`), the lock-step bus
 //! every frame it carries. Each takes `&mut (impl Emit<T> + ?Sized)` (or `&mut dyn Emit<T>`), so the
 //! caller chooses where it goes: a closure (`|item| ...`), a `Vec` that collects, or the
 //! component's outbox, without a callback shape per layer.

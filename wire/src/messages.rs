@@ -222,7 +222,7 @@ pub const LATENCY_MAX_US: u32 = 65_535;
 pub struct TerrainClass {
     /// Step counter of this foot (wrapping).
     pub step: u16,
-    /// Terrain id (a [`crate::terrain::TerrainCatalog`]'s), [`TERRAIN_UNKNOWN`] when not classified.
+    /// Terrain id (a `protocol::terrain::TerrainCatalog`'s), [`TERRAIN_UNKNOWN`] when not classified.
     pub terrain: u8,
     /// Posterior of the chosen class, 0..=100 %.
     pub confidence_pct: f64,

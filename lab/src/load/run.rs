@@ -45,14 +45,7 @@ pub fn bench_inproc(
         return Err(LoadError::Recording(p.display().to_string()));
     }
     let mut node = node::NodeService::new(cfg, model)?;
-    let keep = match keep_unknown {
-        Some(dir) => {
-            let (keeper, writer) = node::unknown::keep::UnknownKeeper::create(dir, "bench-node")?;
-            node.set_keep_unknown(keeper);
-            Some(writer)
-        }
-        None => None,
-    };
+    let keep = keep_on(&mut node, keep_unknown)?;
     let node = node.start_on(
         BusSource::InProc(bus.clone()),
         recording.as_ref().map(|r| r.bus_tap()),
@@ -86,13 +79,7 @@ pub fn bench_inproc(
     let rec_cpu_end = task_cpu_ns("self", Some(&["record"]));
     let beside_cpu_end = beside_cpu();
     let stats = node.stop();
-    let kept = match keep {
-        Some(w) => {
-            let c = w.finish()?;
-            serde_json::json!({"written": c.written, "dropped": c.dropped})
-        }
-        None => serde_json::Value::Null,
-    };
+    let kept = kept_json(keep)?;
     let beside = beside.map(|(rec, listener)| {
         stop_beside.store(true, std::sync::atomic::Ordering::Relaxed);
         let _ = listener.join();
@@ -100,8 +87,7 @@ pub fn bench_inproc(
         serde_json::json!({
             "dropped": s.dropped,
             "failed": s.failed,
-            "cpu_pct_of_one_core": beside_cpu_start.zip(beside_cpu_end)
-                .map(|(a0, a1)| a1.saturating_sub(a0) as f64 * 1e-9 / (total_us as f64 * 1e-6) * 100.0),
+            "cpu_pct_of_one_core": cpu_pct(beside_cpu_start, beside_cpu_end, total_us),
         })
     });
     let memory_mb = memory_mb("self");
@@ -114,8 +100,7 @@ pub fn bench_inproc(
             "images": s.stats.images,
             "dropped": s.dropped,
             "failed": s.failed,
-            "recorder_cpu_pct_of_one_core": rec_cpu_start.zip(rec_cpu_end)
-                .map(|(a0, a1)| a1.saturating_sub(a0) as f64 * 1e-9 / (total_us as f64 * 1e-6) * 100.0),
+            "recorder_cpu_pct_of_one_core": cpu_pct(rec_cpu_start, rec_cpu_end, total_us),
         })
     });
     Ok(BenchRun {
@@ -134,6 +119,34 @@ pub fn bench_inproc(
             "kept_unknown": kept,
         }),
     })
+}
+
+/// CPU time between two readings (ns) as a share of one core over `total_us`, percent.
+fn cpu_pct(start: Option<u64>, end: Option<u64>, total_us: u64) -> Option<f64> {
+    let (a0, a1) = start.zip(end)?;
+    Some(a1.saturating_sub(a0) as f64 * 1e-9 / (total_us as f64 * 1e-6) * 100.0)
+}
+
+/// The node keeping its unknown stances in `dir`, when given; the writer to finish.
+fn keep_on(
+    node: &mut node::NodeService,
+    dir: Option<&std::path::Path>,
+) -> Result<Option<node::unknown::keep::KeepWriter>, LoadError> {
+    let Some(dir) = dir else { return Ok(None) };
+    let (keeper, writer) = node::unknown::keep::UnknownKeeper::create(dir, "bench-node")?;
+    node.set_keep_unknown(keeper);
+    Ok(Some(writer))
+}
+
+/// What the keeper wrote and dropped, once the node is stopped (`null` without one).
+fn kept_json(
+    keep: Option<node::unknown::keep::KeepWriter>,
+) -> Result<serde_json::Value, LoadError> {
+    let Some(w) = keep else {
+        return Ok(serde_json::Value::Null);
+    };
+    let c = w.finish()?;
+    Ok(serde_json::json!({"written": c.written, "dropped": c.dropped}))
 }
 
 /// A consumer beside the node: its own recorder and listener on the bus, as `presrs bridge`

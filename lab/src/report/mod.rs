@@ -205,7 +205,7 @@ pub struct Report {
 pub struct OpenSetModels {
     /// Images drawn per class and, of them, trained on (the rest validate); `None` is the
     /// paper's 20 and 13. More than a run's images per class stores the whole training run
-    /// and leaves none of it to the calibration: see `node::classifier::novelty`, "How many
+    /// and leaves none of it to the calibration: see `node::unknown::novelty`, "How many
     /// images to store".
     split: Option<(usize, usize)>,
     /// `--unknown-rate` (`None`: the default, 0.02).

@@ -497,11 +497,11 @@ const IDLE_WAIT: Duration = Duration::from_millis(20);
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum NodeThreads {
-    /// Receive, decide and send on one thread ([`component::spawn_one`]).
+    /// Receive, decide and send on one thread (`component::spawn_one`).
     #[default]
     #[cfg_attr(feature = "clap", value(name = "1"))]
     One,
-    /// Receive, pipeline and send threads ([`component::spawn`]).
+    /// Receive, pipeline and send threads (`component::spawn`).
     #[cfg_attr(feature = "clap", value(name = "3"))]
     Three,
 }

@@ -245,7 +245,7 @@ impl Trained {
 /// What `presrs train` adds when a calibration on held-out runs holds none of the training
 /// run's images (fewer than `MIN_SAME_RUN_PER_CLASS` per terrain were left out of the model):
 /// the calibration's own check then says less than the next run will do. Measured: see
-/// `crate::classifier::novelty`, "How many images to store".
+/// `crate::unknown::novelty`, "How many images to store".
 pub fn no_training_run_images_note() -> String {
     format!(
         "unknown terrain: the calibration holds none of the training run's images (fewer than \
