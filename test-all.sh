@@ -13,6 +13,7 @@ export CARGO_INCREMENTAL=0
 # by side below, and two apt-gets at once would fight over dpkg's lock.
 part "install dependencies"; scripts/install-deps.sh --cross arm64 --package --uml
 part "cargo fmt --check"; cargo fmt --all --check
+part "import cycles between modules"; python3 scripts/module_cycles.py
 # The arm64 part's builds (aarch64 lints, test binaries, the package's binary), in their own
 # target directory (scripts/test-arm64.sh), from now on at idle priority: they take only the
 # CPU time the parts below leave (their tests wait on real time, the vcan suite's User-mode

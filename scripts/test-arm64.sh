@@ -66,8 +66,11 @@ if [ "$build_only" = 1 ]; then
   step "builds done"
   exit 0
 fi
+# Two of the service tests are left to the host: one replays a long stream twice to compare
+# decisions (logic the ARM build shares; 32 s under qemu), one judges how late the node decided
+# (qemu's timing is not a robot's; 15 s). The rest exercise the ARM build's threads and kernels.
 step "node crate tests under qemu-aarch64"
-cross cargo test "${node_tests[@]}"
+cross cargo test "${node_tests[@]}" -- --skip the_deciding_frame_is_announced --skip latency_shows
 
 step "arm64 Debian package"; cross scripts/package-deb.sh --arch arm64
 # Beside the amd64 one, where scripts/test-package.sh looks.

@@ -9,6 +9,15 @@ use presrs_lab::closed_loop::{LoopParams, run};
 use protocol::TerrainCatalog;
 use sim::runner::Track;
 
+/// The dynamic terrains' model, trained once per test binary: every run here uses the same one
+/// (training it per run was most of this file's time).
+fn sim_model() -> node::classifier::Model {
+    static MODEL: std::sync::OnceLock<node::classifier::Model> = std::sync::OnceLock::new();
+    MODEL
+        .get_or_init(|| presrs_lab::model::sim_model(1).unwrap())
+        .clone()
+}
+
 fn track(terrain: &str) -> Track {
     let text = format!("diameter_m = 2.8\n[[segments]]\nterrain = \"{terrain}\"\nlength_m = 9.0\n");
     Track::from_toml(&text, "restart.toml", &TerrainCatalog::paper()).unwrap()
@@ -17,7 +26,7 @@ fn track(terrain: &str) -> Track {
 /// Runs 60 steps on `terrain` with the controller (or the node) dead from 6 s to 7 s; returns
 /// the falls and the gaits of the last ten steps.
 fn restart(terrain: &str, cfg: &ControllerConfig, seed: u64, node: bool) -> (u64, Vec<u8>) {
-    let model = presrs_lab::model::sim_model(1).unwrap();
+    let model = sim_model();
     let outage = Some((6_000_000, 1_000_000));
     let p = LoopParams {
         controller_restart: if node { None } else { outage },
@@ -65,7 +74,7 @@ fn a_restarted_node_costs_no_fall_on_any_gait() {
 /// in the leg's reports: 21 of 45 such runs fell (1-5 times each; these four among them).
 #[test]
 fn a_silent_bus_costs_no_fall() {
-    let model = presrs_lab::model::sim_model(1).unwrap();
+    let model = sim_model();
     let cfg = ControllerConfig::default();
     for (at, len) in [
         (9_000_000, 2_000_000),
@@ -96,7 +105,7 @@ fn a_silent_bus_costs_no_fall() {
 /// (the stall's own disturbance: the motors hold the last set point through it).
 #[test]
 fn a_stalled_bridge_or_a_short_silence_costs_a_leg_of_motors_no_cascade_of_falls() {
-    let model = presrs_lab::model::sim_model(1).unwrap();
+    let model = sim_model();
     let cfg = ControllerConfig::default();
     let mut total = 0;
     for kind in leg::DriverKind::ALL {
@@ -139,7 +148,7 @@ fn a_stalled_bridge_or_a_short_silence_costs_a_leg_of_motors_no_cascade_of_falls
 /// after the controller was back (MIT 6-10, moteus 6-10, ODrive 1-3); after, 0-1 per run.
 #[test]
 fn a_restarted_controller_takes_a_limp_leg_of_motors_back_at_once() {
-    let model = presrs_lab::model::sim_model(1).unwrap();
+    let model = sim_model();
     let cfg = ControllerConfig::default();
     let mut after_total = 0;
     for kind in leg::DriverKind::ALL {

@@ -25,7 +25,7 @@ use protocol::TerrainCatalog;
 use protocol::candump::format_seconds;
 use protocol::messages::{TERRAIN_UNKNOWN, TerrainClass};
 
-use crate::service::Output;
+use crate::service::output::Output;
 
 /// The header line.
 pub const HEADER: &str =

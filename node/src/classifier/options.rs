@@ -4,7 +4,7 @@
 
 use super::image::CropSpec;
 use super::model::{MAX_DOWNSAMPLE, MAX_UNKNOWN_RATE};
-use super::train::TrainError;
+use super::train::error::TrainError;
 use crate::unknown::novelty::NoveltyScore;
 
 /// How to train: the paper's split and the preprocessing. With the `clap` feature these are

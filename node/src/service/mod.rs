@@ -23,6 +23,8 @@
 mod running;
 mod stats;
 
+pub mod output;
+pub use output::Output;
 pub use running::RunningNode;
 use stats::Shared;
 pub use stats::{NodeStats, StageTimes};
@@ -37,7 +39,7 @@ use protocol::bus::{BusSource, ControllerState, Tap};
 use protocol::clock::Clock;
 use protocol::component::{self, Component, Link, LinkStats, Outbox, RunOptions, Threaded};
 use protocol::emit::Emit;
-use protocol::messages::{Message, NodeState, NodeStatus, TERRAIN_UNKNOWN, TerrainClass};
+use protocol::messages::{NodeState, NodeStatus, TERRAIN_UNKNOWN};
 use protocol::tactile::ReassemblyStats;
 use protocol::terrain::CatalogError;
 use protocol::{CanFrame, IdConfig, MessageKind, Stamped, TerrainCatalog};
@@ -75,47 +77,6 @@ pub enum ServiceError {
     /// The node's threads have exited (stopped, or a thread panicked).
     #[error("the node has stopped; start it again")]
     Stopped,
-}
-
-/// What the node says: frames for the bus, as messages.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Output {
-    /// One step's decision (exactly one per step).
-    Class {
-        /// The foot that stepped.
-        foot: u8,
-        /// The decision.
-        class: TerrainClass,
-        /// The gait in force when it was decided (the controller's last GaitStatus; `None`
-        /// before any): not on the bus frame, which carries the decision alone.
-        gait: Option<u8>,
-        /// The step's touchdown on the receiver's clock (µs; a replay's: the log's
-        /// timestamps): see [`crate::stance::Decided::touchdown_us`].
-        touchdown_us: u64,
-    },
-    /// The heartbeat, at `status_hz`.
-    Status(NodeStatus),
-}
-
-impl Output {
-    /// The step `d` decided with `gait` in force.
-    fn class(d: Decided, gait: Option<u8>) -> Self {
-        Output::Class {
-            foot: d.foot,
-            class: d.class,
-            gait,
-            touchdown_us: d.touchdown_us,
-        }
-    }
-
-    /// The frame that carries this on `ids`: TerrainClass on its foot's id, NodeStatus on
-    /// the node's.
-    pub fn to_frame(&self, ids: &IdConfig) -> Option<CanFrame> {
-        match *self {
-            Output::Class { foot, class, .. } => Message::TerrainClass(class).to_frame(ids, foot),
-            Output::Status(s) => Message::NodeStatus(s).to_frame(ids, 0),
-        }
-    }
 }
 
 /// Notes step `d` for the keeper when it is one to keep.

@@ -27,8 +27,6 @@
 //! The reason travels on the bus (TerrainClass `UnknownReason`, `FlagEnergy`), in the node's
 //! statistics and in recordings, so a monitor can count unknowns per reason.
 
-pub mod bands;
-pub mod calibrate;
 pub mod checks;
 pub mod energy;
 pub mod energy_fit;

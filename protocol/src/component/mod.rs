@@ -60,6 +60,7 @@
 //! ```
 
 mod lockstep;
+mod options;
 mod run;
 mod serve;
 mod signals;
@@ -67,7 +68,8 @@ mod threaded;
 mod wake;
 
 pub use lockstep::LockStep;
-pub use run::{DRAIN_QUIET, RunOptions, RunStats, run, run_opened};
+pub use options::{DRAIN_QUIET, RunOptions};
+pub use run::{RunStats, run, run_opened};
 pub use signals::{SignalError, Signals};
 pub use threaded::{Link, LinkStats, Threaded, spawn, spawn_one};
 pub use wake::{COALESCE_US, POLL_AFTER_US, POLL_LEAD_US, PRE_WAKE_US};

@@ -1,65 +1,13 @@
 //! The loop every process runs a component with: [`run`].
 
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
+use super::options::RunOptions;
 use super::serve::{Served, drain, flush, serve};
 use super::{Component, Link, LinkStats, Outbox};
-use crate::bus::{Backoff, BusSource, CanBus, HealthWatch, Tap, after_bus_error, open_with_retry};
-use crate::clock::Clock;
+use crate::bus::{Backoff, BusSource, CanBus, HealthWatch, after_bus_error, open_with_retry};
 use crate::error::BusError;
-
-/// How [`run`] drives a component.
-#[derive(Clone)]
-pub struct RunOptions {
-    /// Robot time per wall time: 1 on a robot; a simulator's `--speed` when the robot's time
-    /// runs slower than the wall's (under emulation).
-    pub time_scale: f64,
-    /// The longest wall time between two ticks.
-    pub tick: Duration,
-    /// The most frames taken in one go before the component is ticked, so a stream it reads
-    /// cannot hold its clock back.
-    pub max_burst: usize,
-    /// Keeps a copy of every frame received and sent (a recorder's queue).
-    pub tap: Option<Arc<dyn Tap>>,
-    /// The component's clock, when it is not the default (wall time since the run began,
-    /// times `time_scale`): the node reads the bus's ([`BusSource::clock`]), so that its
-    /// deadlines compare with the frames' receive times; a test passes a
-    /// [`ManualClock`](crate::clock::ManualClock).
-    pub clock: Option<Arc<dyn Clock>>,
-    /// Counts frames in and out, errors and the link's state, for a status the component
-    /// reports or a watcher reads.
-    pub link: Option<Arc<LinkStats>>,
-    /// After the stop, go on reading what reached the socket, until it has been quiet for
-    /// [`DRAIN_QUIET`] or for at most this long: for a recorder beside a process that stops
-    /// it when done, whose last frames are otherwise in the socket and lost to the recording
-    /// (docs/decisions/figures-behind-comments.md, drain-after-stop).
-    /// `None` (the default): the run ends at the stop.
-    pub drain_on_stop: Option<Duration>,
-    /// Without frames, wake to tick only after this long, not every `tick`: a component whose
-    /// frames come often (the node: a tactile stream per foot) ticks after them, at `tick`
-    /// grain, and an idle wait does not wake it a thousand times a second. `None`: every `tick`.
-    pub idle_wait: Option<Duration>,
-}
-
-/// How long a socket must stay quiet for a drain ([`RunOptions::drain_on_stop`]) to end.
-pub const DRAIN_QUIET: Duration = Duration::from_millis(20);
-
-impl Default for RunOptions {
-    fn default() -> Self {
-        Self {
-            time_scale: 1.0,
-            tick: Duration::from_millis(1),
-            max_burst: 256,
-            tap: None,
-            clock: None,
-            link: None,
-            drain_on_stop: None,
-            idle_wait: None,
-        }
-    }
-}
 
 /// What one [`run`] did (the frame counts are its share of [`LinkStats`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -209,7 +157,10 @@ mod tests {
     use super::*;
     use crate::CanFrame;
     use crate::bus::InProcBus;
+    use crate::component::Component;
     use crate::frame::Stamped;
+    use std::sync::Arc;
+    use std::time::Duration;
 
     /// Counts what the runner does to it; sends one frame per tick with the tick count.
     #[derive(Default)]

@@ -5,7 +5,7 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use super::run::{DRAIN_QUIET, RunOptions};
+use super::options::{DRAIN_QUIET, RunOptions};
 use super::wake::{COALESCE_US, Plan, Wake};
 use super::{Component, LinkStats, Outbox};
 use crate::bus::{CanBus, HealthWatch};

@@ -4,8 +4,7 @@
 //! NEON on aarch64, plain Rust elsewhere). The callers in [`super::pwe`] see one function per
 //! operation.
 
-#[cfg(target_arch = "aarch64")]
-mod aarch64;
+mod baseline;
 mod portable;
 #[cfg(target_arch = "x86_64")]
 mod x86_64;

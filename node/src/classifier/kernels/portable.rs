@@ -3,10 +3,8 @@
 //! vectorises it elsewhere. The AVX2/FMA builds of `quad_form`, `centre` and `sq_dists` are
 //! these functions compiled for AVX2 (see `x86_64.rs`).
 
-#[cfg(target_arch = "aarch64")]
-use super::aarch64::rows4;
-#[cfg(target_arch = "x86_64")]
-use super::x86_64::rows4;
+#[cfg(any(target_arch = "x86_64", target_arch = "aarch64"))]
+use super::baseline::rows4;
 
 /// The projection with the target's baseline SIMD: the AVX2 kernel's shape (four rows of W per
 /// pass over `c`, so that each load of `c` serves four rows; two 4-lane accumulators per row)

@@ -1,5 +1,5 @@
 //! x86-64 kernels: AVX2 with FMA (and F16C for the half-precision weights), run only when
-//! the CPU has them, and SSE2 (every x86-64 CPU) for the portable projection's four rows.
+//! the CPU has them (SSE2, which every x86-64 CPU has, is in `baseline`).
 
 use super::portable;
 
@@ -116,41 +116,6 @@ pub(super) fn project_f16c(w: &[f32], w16: &[u16], c: &[f32], q: &mut [f32]) {
         }
         j += m;
     }
-}
-
-/// Four dot products `rows[i] . c` (each row as long as `c`) with SSE2.
-pub(super) fn rows4(rows: [&[f32]; 4], c: &[f32]) -> [f32; 4] {
-    use std::arch::x86_64::*;
-    let n = c.len();
-    let n8 = n - n % 8;
-    let mut out = [0.0f32; 4];
-    // SAFETY: SSE2 is part of every x86-64 CPU; each 4-lane load reads k..k+8 <= n8 <= n
-    // elements of `c` or of a row, both n long.
-    unsafe {
-        let mut acc = [_mm_setzero_ps(); 8];
-        let mut k = 0;
-        while k < n8 {
-            let c0 = _mm_loadu_ps(c.as_ptr().add(k));
-            let c1 = _mm_loadu_ps(c.as_ptr().add(k + 4));
-            for i in 0..4 {
-                let p = rows[i].as_ptr().add(k);
-                acc[2 * i] = _mm_add_ps(acc[2 * i], _mm_mul_ps(_mm_loadu_ps(p), c0));
-                acc[2 * i + 1] = _mm_add_ps(acc[2 * i + 1], _mm_mul_ps(_mm_loadu_ps(p.add(4)), c1));
-            }
-            k += 8;
-        }
-        for (i, o) in out.iter_mut().enumerate() {
-            let mut lanes = [0.0f32; 4];
-            _mm_storeu_ps(lanes.as_mut_ptr(), _mm_add_ps(acc[2 * i], acc[2 * i + 1]));
-            *o = lanes.iter().sum();
-        }
-    }
-    for (i, o) in out.iter_mut().enumerate() {
-        for (x, y) in rows[i][n8..].iter().zip(&c[n8..]) {
-            *o += x * y;
-        }
-    }
-    out
 }
 
 /// [`portable::quad_form`] compiled for AVX2/FMA: the compiler's own 8-lane code (measured with

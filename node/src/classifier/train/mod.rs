@@ -4,8 +4,9 @@
 //! of T and V are stored as the model's samples P.
 
 //! `fit` trains, `refit` follows a damaged sensor; the unknown-ground checks a model carries
-//! are fitted in `crate::unknown` (`calibrate`: the thresholds, `bands`: the load and texture
-//! bands), re-exported here for the training pipeline.
+//! (`crate::unknown`, what the node runs) are fitted here: `calibrate` the novelty thresholds,
+//! `cross_fit` the session scoring itself, `density` the leave-one-out densities, `bands` the
+//! load and texture bands.
 
 use nalgebra::DMatrix;
 use rand::SeedableRng;
@@ -14,18 +15,25 @@ use rand::seq::SliceRandom;
 use super::features::{FeatureExtractor, fft_len};
 use super::image::{Crop, CropSpec, PressureImage};
 use super::model::{
-    Checks, ClassInfo, MAX_CLASSES, MAX_DOWNSAMPLE, MAX_UNKNOWN_RATE, MODEL_VERSION, MinContact,
-    Model, StoredImages,
+    Checks, ClassInfo, MAX_CLASSES, MODEL_VERSION, MinContact, Model, StoredImages,
 };
 use crate::unknown::novelty::CalibrationSource;
 
 pub use super::options::{DEFAULT_UNKNOWN_RATE, TrainOptions};
 use super::options::{Margin, UnknownChecks};
 
+mod bands;
+mod calibrate;
+mod cross_fit;
+mod density;
+pub mod error;
 mod fit;
 mod refit;
 
-pub use crate::unknown::bands::*;
-pub use crate::unknown::calibrate::*;
+pub use bands::*;
+pub use calibrate::*;
+pub use cross_fit::*;
+pub use density::*;
+pub use error::TrainError;
 pub use fit::*;
 pub use refit::*;

@@ -1,8 +1,8 @@
 //! The load and texture bands: per class, the range a known image's load or texture falls in.
 
+use super::*;
 use crate::classifier::image::PressureImage;
 use crate::classifier::model::Model;
-use crate::classifier::train::*;
 
 /// Adds the texture check (`TrainOptions::check_texture`) to `m`: per class, the roughness
 /// band of `images` (each with its class index) through the model's crop and downsampling,
