@@ -24,10 +24,11 @@ use protocol::terrain::TerrainCatalog;
 
 use crate::gait::Gait;
 use crate::laws;
+use crate::stride::{StrideEstimate, StrideEstimator};
 
 mod takeover;
 
-pub use crate::config::ControllerConfig;
+use crate::config::ControllerConfig;
 use takeover::Listen;
 pub use takeover::{TAKEOVER_FIT_RAD, Takeover};
 
@@ -152,6 +153,8 @@ pub struct Controller {
     contact_counts: bool,
     /// How the controller took over, once it has.
     pub takeover: Option<Takeover>,
+    /// Each hop measured from the edges and LegState ([`crate::stride`]).
+    stride: StrideEstimator,
 }
 
 impl Controller {
@@ -194,6 +197,7 @@ impl Controller {
             gait_resets: 0,
             listen: (cfg.takeover_ms > 0).then(Listen::default),
             takeover: None,
+            stride: StrideEstimator::default(),
             // A fresh start assumes flight (the leg is set down after the first command).
             phase_known: cfg.takeover_ms == 0,
             touchdown_known: false,
@@ -222,6 +226,12 @@ impl Controller {
     /// Why the gait in force was chosen.
     pub fn reason(&self) -> GaitReason {
         self.reason
+    }
+
+    /// The last hop measured from the bus (touchdown to touchdown): speed, stance and flight
+    /// time, the leg's angles ([`crate::stride`]).
+    pub fn last_stride(&self) -> Option<StrideEstimate> {
+        self.stride.last()
     }
 
     /// Takes a foot timestamp (32-bit µs, wrapping every 71 min) and returns it unwrapped.
@@ -338,6 +348,10 @@ impl Controller {
             Message::LegState(ls) if foot == self.cfg.foot => {
                 self.leg_state(ls.timestamp_us, now_us);
                 self.leg_angle = ls.leg_angle_rad;
+                // On the foot's clock, as the edges: the leg's is another device's.
+                let t = self.foot_now(now_us);
+                self.stride
+                    .on_leg_state(t, ls.leg_angle_rad, ls.leg_length_m);
             }
             Message::FootContact(fc) if foot == self.cfg.foot => self.on_contact(&fc, now_us, out),
             Message::TerrainClass(tc) if foot == self.cfg.foot => self.on_terrain(&tc, out),
@@ -372,6 +386,7 @@ impl Controller {
         }
         self.last_contact = Some((fc.seq, t));
         if !self.phase_known {
+            self.stride.reset();
             self.phase_known = true;
             self.stance = fc.stance;
             self.touchdown_known = false;
@@ -389,6 +404,11 @@ impl Controller {
         }
         self.last_edge_us = Some(t);
         self.stance = fc.stance;
+        if fc.stance {
+            self.stride.on_touchdown(t);
+        } else {
+            self.stride.on_liftoff(t);
+        }
         if fc.stance {
             self.touchdown_us = t;
             self.touchdown_known = true;

@@ -15,9 +15,9 @@
 //! A model carries them in one section, [`checks::Checks`] (model format 3; a version 2 file's
 //! keys are moved there on load, with identical decisions), and every threshold is held by one
 //! comparison, [`within_threshold`] (a figure that is not a number is unknown, never known).
-//! Fitting lives here too: [`calibrate`] (the thresholds), [`bands`] (the load and texture
-//! bands), [`energy_fit`] (the return maps); `train` chooses among them
-//! ([`crate::training::choice`]).
+//! The image checks' thresholds and bands are fitted with the model, in
+//! [`crate::classifier::train`] (`calibrate`, `cross_fit`, `bands`); the energy check's return
+//! maps here, in [`energy_fit`]; `train` chooses among them ([`crate::training::choice`]).
 //! [`image_verdict`] judges a stance image (called by the classifier, so by the node's
 //! single-frame and multi-frame paths, `classify`, `eval`, `capture`, replays and experiments
 //! alike); [`step_verdict`] adds the energy check for a step. [`crate::training::choice`] is
