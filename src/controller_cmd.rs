@@ -29,8 +29,20 @@ pub fn run(a: ControllerArgs) -> Result<ExitCode> {
     let mut cfg = load_config(a.config.as_deref())?;
     if a.terrains.terrains.is_some() {
         cfg.terrains = a.terrains.terrains.clone();
+    }
+    if let Some(n) = a.sweep {
+        cfg.sweep_steps = n;
+    }
+    if a.terrains.terrains.is_some() || a.sweep.is_some() {
         let catalog = cfg.catalog()?;
         cfg.validate(&catalog)?;
+    }
+    if cfg.sweep_steps > 0 {
+        tracing::info!(
+            steps = cfg.sweep_steps,
+            "sweeping: every gait for {} steps on each terrain met, the safe gait first",
+            cfg.sweep_steps
+        );
     }
     let signals = Signals::install()?;
     controller::service::run(

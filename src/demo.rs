@@ -78,6 +78,10 @@ fn setup(a: &DemoArgs) -> Result<(node::classifier::Model, ControllerConfig, nod
     if a.terrains.terrains.is_some() {
         ctrl_cfg.terrains = a.terrains.terrains.clone();
     }
+    if let Some(n) = a.sweep {
+        ctrl_cfg.sweep_steps = n;
+        ctrl_cfg.validate(&ctrl_cfg.catalog()?).context("--sweep")?;
+    }
     model.check_catalog(&node_cfg.catalog()?)?;
     Ok((model, ctrl_cfg, node_cfg))
 }

@@ -6,6 +6,7 @@ use anyhow::Result;
 use clap::Parser;
 use presrs_cli::{Cli, Cmd, LabCmd};
 
+mod adaptation_cmd;
 mod bench_node;
 mod capture_cmd;
 mod classifier_cmd;
@@ -41,6 +42,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             LabCmd::Repair(a) => classifier_cmd::repair(&a),
             LabCmd::Dbc(a) => classifier_cmd::dbc(&a),
             LabCmd::Energy(a) => energy_cmd::run(a),
+            LabCmd::Adaptation(a) => adaptation_cmd::run(a),
         },
     }
 }

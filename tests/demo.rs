@@ -69,7 +69,88 @@ fn demo_runs_the_loop_and_reports_json() {
     // Then, on the cached model (one test, so that nothing else loads the machine while the
     // real-time loop runs): `--realtime` and `--fixed-gait`.
     realtime_and_fixed_gait(&dir);
+    sweep_and_its_adaptation_table(&dir);
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `--sweep`: the controller runs every gait on each terrain, and `presrs lab adaptation` tables
+/// the recorded run with no simulator truth: faster gaits faster on every terrain, as the
+/// simulator's truth orders them (lab/tests/stride.rs measures each cell against it).
+fn sweep_and_its_adaptation_table(dir: &std::path::Path) {
+    let log = dir.join("sweep.log");
+    let out = common::output_ok(
+        Command::new(env!("CARGO_BIN_EXE_presrs"))
+            .args([
+                "demo",
+                "--steps",
+                "300",
+                "--sweep",
+                "20",
+                "--json",
+                "--candump",
+            ])
+            .arg(&log)
+            .env("XDG_CACHE_HOME", dir),
+    );
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(j["falls"], 0, "{j}");
+    let table = dir.join("adaptation");
+    let out = common::output_ok(
+        Command::new(env!("CARGO_BIN_EXE_presrs"))
+            .args(["lab", "adaptation"])
+            .arg(&log)
+            .arg("--out")
+            .arg(&table),
+    );
+    let md = String::from_utf8_lossy(&out.stdout).to_string();
+    assert_eq!(
+        md,
+        std::fs::read_to_string(table.join("adaptation.md")).unwrap()
+    );
+    let mut full_rows = 0;
+    for terrain in ["wood", "carpet", "clay", "grass"] {
+        let row = md
+            .lines()
+            .find(|l| l.starts_with(&format!("| {terrain} |")))
+            .unwrap_or_else(|| panic!("no {terrain} row:\n{md}"));
+        let medians: Vec<f64> = row
+            .split(" | ")
+            .skip(1)
+            .filter_map(|c| c.split(' ').next()?.parse().ok())
+            .collect();
+        assert!(medians.len() >= 2, "{row}");
+        full_rows += usize::from(medians.len() == 3);
+        assert!(medians.windows(2).all(|w| w[0] < w[1]), "{row}");
+    }
+    assert!(full_rows >= 2, "{md}");
+    // Every stride in the CSV, read back.
+    let csv = std::fs::read_to_string(table.join("strides.csv")).unwrap();
+    let mut lines = csv.lines();
+    assert!(
+        lines
+            .next()
+            .unwrap()
+            .starts_with("t_s,foot,terrain,gait,speed_m_s")
+    );
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert!(rows.len() >= 250, "{} strides", rows.len());
+    assert!(
+        rows.iter()
+            .all(|r| r.len() == 10 && r[4].parse::<f64>().is_ok())
+    );
+    // A log without a hop: refused by name.
+    let empty = dir.join("empty.log");
+    std::fs::write(&empty, "").unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_presrs"))
+        .args(["lab", "adaptation"])
+        .arg(&empty)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("empty.log") && err.contains("FootContact"),
+        "{err}"
+    );
 }
 
 /// `--realtime`: the three loops as concurrent tasks on the wall clock (as they run as processes

@@ -14,6 +14,11 @@ pub struct ControllerArgs {
     /// the simulator runs slower or faster than real time (on a robot: 1).
     #[arg(long, default_value_t = 1.0)]
     pub time_scale: f64,
+    /// Overrides the config's `sweep_steps`: every gait for STEPS steps on each terrain it
+    /// meets, the safe gait first, then the terrain's own (`presrs lab adaptation` tables the
+    /// run's log).
+    #[arg(long, value_name = "STEPS")]
+    pub sweep: Option<u32>,
     /// Overrides the config's `terrains` key.
     #[command(flatten)]
     pub terrains: protocol::TerrainsArg,

@@ -77,4 +77,8 @@ pub struct DemoArgs {
     /// --labels` and `presrs lab energy --labels`.
     #[arg(long, value_name = "FILE", requires = "candump")]
     pub truth: Option<PathBuf>,
+    /// The controller runs every gait for STEPS steps on each terrain it meets, the safe gait
+    /// first (its `sweep_steps`): with --candump, `presrs lab adaptation` tables the run.
+    #[arg(long, value_name = "STEPS")]
+    pub sweep: Option<u32>,
 }

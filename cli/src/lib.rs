@@ -8,6 +8,7 @@
 //! their crates, behind each crate's `clap` feature, and are flattened here.
 #![forbid(unsafe_code)]
 
+pub mod adaptation;
 pub mod bench_node;
 pub mod bridge;
 pub mod capture;
@@ -97,6 +98,9 @@ pub enum LabCmd {
     /// Fit a model's energy check on the robot's closed-loop runs on known ground: ground that
     /// looks like a known terrain but takes a different share of the hop's energy is unknown.
     Energy(energy::EnergyArgs),
+    /// The paper's Table 3 for your robot: forward speed per terrain and gait from a recorded
+    /// run (each hop measured from the foot switch and LegState, as the controller does).
+    Adaptation(adaptation::AdaptationArgs),
 }
 
 /// The commands that moved under `presrs lab`; their old names still run, with a pointer, for

@@ -44,6 +44,12 @@ pub struct ControllerConfig {
     pub foot: u8,
     /// Switch edges closer than this to the last accepted edge are bounce, µs.
     pub lockout_us: u64,
+    /// The adaptation experiment in one run: on each terrain it meets, the controller runs
+    /// every gait of `gaits` for this many of the terrain's steps (the safe gait first, then
+    /// the others in `gaits` order), then the terrain's own gait; `presrs lab adaptation`
+    /// makes the table of the run. 0 (the default): off. Give at least 20: the hopper takes
+    /// about six steps to follow a switch, and those are left out of the table.
+    pub sweep_steps: u32,
     /// CAN identifier map (the same `[ids]` table as the node's and the DBC's).
     pub ids: protocol::ids::IdConfig,
 }
@@ -77,6 +83,7 @@ impl Default for ControllerConfig {
             status_hz: 10.0,
             foot: 0,
             lockout_us: 20_000,
+            sweep_steps: 0,
             ids: protocol::ids::IdConfig::default(),
         }
     }
@@ -156,6 +163,7 @@ impl ControllerConfig {
         // Longer than a stance, every edge would be taken for bounce.
         range("lockout_us", self.lockout_us as f64, 0.0, 100_000.0)?;
         range("status_hz", self.status_hz, 0.1, 100.0)?;
+        range("sweep_steps", self.sweep_steps as f64, 0.0, 10_000.0)?;
         range(
             "foot",
             self.foot as f64,

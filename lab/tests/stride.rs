@@ -161,3 +161,107 @@ fn the_controller_reports_each_hop_within_five_percent() {
         assert!(m <= 0.05, "G{gait}: median error {:.2}%", 100.0 * m);
     }
 }
+
+/// A recorded run of `gait` on `terrain`: the simulator's frames on the log's clock, with a
+/// GaitStatus at the start and, as a node would send it, a TerrainClass after each touchdown
+/// (the simulator's labels: the table is judged here, not the classifier). With the true
+/// speed of each stride.
+fn recorded_run(terrain: &str, gait: u8, seconds: f64) -> (Vec<protocol::Stamped>, Vec<f64>) {
+    use protocol::messages::{GaitStatus, TerrainClass};
+    let catalog = TerrainCatalog::paper();
+    let text = format!("diameter_m = 2.8\n[[segments]]\nterrain = \"{terrain}\"\nlength_m = 9.0\n");
+    let track = Track::from_toml(&text, "stride.toml", &catalog).unwrap();
+    let id = catalog.by_name(terrain).unwrap().id();
+    let mut robot = SimRobot::new(
+        SimConfig {
+            track,
+            gait,
+            ..SimConfig::default()
+        },
+        1,
+    );
+    let ids = IdConfig::default();
+    let frame = |m: Message| m.to_frame(&ids, 0).unwrap();
+    let gs = GaitStatus {
+        gait,
+        terrain: id,
+        ..GaitStatus::default()
+    };
+    let mut log = vec![protocol::Stamped {
+        t_us: 0,
+        frame: frame(Message::GaitStatus(gs)),
+    }];
+    let mut said = 0;
+    let mut t = 0u64;
+    while (t as f64) < seconds * 1e6 {
+        t += 1_000;
+        let mut frames = Frames(Vec::new());
+        robot.advance_to(t, &mut frames);
+        log.extend(
+            frames
+                .0
+                .into_iter()
+                .map(|frame| protocol::Stamped { t_us: t, frame }),
+        );
+        while let Some(st) = robot
+            .steps
+            .get(said)
+            .filter(|st| st.touchdown_us + 70_000 <= t)
+        {
+            let tc = TerrainClass {
+                step: said as u16,
+                terrain: id,
+                ..TerrainClass::default()
+            };
+            log.push(protocol::Stamped {
+                t_us: t,
+                frame: frame(Message::TerrainClass(tc)),
+            });
+            let _ = st;
+            said += 1;
+        }
+    }
+    let truth = robot.steps.iter().skip(1).map(|s| s.speed_m_s).collect();
+    (log, truth)
+}
+
+/// The adaptation table from recorded runs alone (`presrs lab adaptation`): each cell's median
+/// within 5% of the simulator's true median speed, and the gaits on each terrain in the order
+/// the truth puts them.
+#[test]
+fn the_adaptation_table_from_a_recording_orders_the_gaits_as_the_truth_does() {
+    let catalog = TerrainCatalog::paper();
+    let ids = IdConfig::default();
+    for terrain in ["wood", "grass", "clay"] {
+        let id = catalog.by_name(terrain).unwrap().id();
+        let mut measured = Vec::new();
+        for gait in 1..=3u8 {
+            let (log, truth) = recorded_run(terrain, gait, 14.0);
+            let strides = tools::adaptation::strides(log, &ids, &catalog);
+            let cells = tools::adaptation::table(&strides);
+            let cell = cells
+                .get(&(id, gait))
+                .copied()
+                .unwrap_or_else(|| panic!("{terrain} G{gait}: {cells:?}"));
+            assert!(cell.strides >= 20, "{terrain} G{gait}: {cell:?}");
+            let true_median = median(truth[tools::adaptation::SETTLE_STRIDES..].to_vec());
+            let err = (cell.median_m_s - true_median).abs() / true_median;
+            assert!(
+                err <= 0.05,
+                "{terrain} G{gait}: {cell:?} against {true_median:.3} m/s"
+            );
+            measured.push((gait, cell.median_m_s, true_median));
+            if gait == 3 {
+                let md = tools::adaptation::markdown(&cells, &catalog);
+                assert!(md.contains(&format!("| {terrain} |")), "{md}");
+            }
+        }
+        let order = |key: fn(&(u8, f64, f64)) -> f64| {
+            let mut v = measured.clone();
+            v.sort_by(|a, b| key(a).total_cmp(&key(b)));
+            v.iter().map(|m| m.0).collect::<Vec<u8>>()
+        };
+        assert_eq!(order(|m| m.1), order(|m| m.2), "{terrain}: {measured:?}");
+        eprintln!("{terrain}: {measured:.3?}");
+    }
+}

@@ -220,7 +220,7 @@ pub fn stances(
                 }
                 last_td = Some((t, x0));
             }
-            Some(Event::Liftoff { t, beta }) => {
+            Some(Event::Liftoff { t, beta, .. }) => {
                 cmd.on_liftoff(beta);
                 if let Some(s) = out.last_mut().filter(|s| s.stance_s == 0.0)
                     && let Some((t0, _)) = last_td

@@ -96,6 +96,8 @@ pub enum Event {
         t: f64,
         /// Leg angle, rad.
         beta: f64,
+        /// Leg length at the liftoff (the stance's last, not the flight's rest length), m.
+        length: f64,
     },
     /// The body touched the ground: the hopper fell.
     Fell {
@@ -301,9 +303,14 @@ impl Hopper {
                         [self.x, self.y, self.vx, self.vy] = s;
                         self.t += hi;
                         let beta = (self.x - foot_x).atan2(self.y);
+                        let length = (self.x - foot_x).hypot(self.y);
                         self.phase = Phase::Flight;
                         self.foot_force = 0.0;
-                        return Some(Event::Liftoff { t: self.t, beta });
+                        return Some(Event::Liftoff {
+                            t: self.t,
+                            beta,
+                            length,
+                        });
                     }
                     [self.x, self.y, self.vx, self.vy] = s1;
                     self.t += h;

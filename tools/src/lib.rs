@@ -4,6 +4,8 @@
 //!
 //! What a lab runs on its own robot's data, beside the robot and never on it, with no
 //! simulator in its dependencies:
+//! - [`adaptation`]: the paper's Table 3 for the lab's robot, speed per terrain and gait from a
+//!   recorded run (`presrs lab adaptation`);
 //! - [`eval`]: a model judged on a captured session (`presrs eval`): confusion, accuracy,
 //!   unknown shares, time per classification;
 //! - [`replay`]: a candump log to an MCAP recording or a ROS 2 bag, with a model's decisions
@@ -13,6 +15,7 @@
 //! - [`plot`]: the bundled font and the error every figure shares (the paper's figures in
 //!   `presrs-lab` draw with it too).
 
+pub mod adaptation;
 pub mod eval;
 pub mod plot;
 pub mod replay;

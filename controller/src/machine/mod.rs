@@ -155,6 +155,9 @@ pub struct Controller {
     pub takeover: Option<Takeover>,
     /// Each hop measured from the edges and LegState ([`crate::stride`]).
     stride: StrideEstimator,
+    /// With `sweep_steps`: each terrain's confirmed steps so far, by terrain id (fixed-size:
+    /// a step allocates nothing).
+    swept: [u32; 256],
 }
 
 impl Controller {
@@ -198,6 +201,7 @@ impl Controller {
             listen: (cfg.takeover_ms > 0).then(Listen::default),
             takeover: None,
             stride: StrideEstimator::default(),
+            swept: [0; 256],
             // A fresh start assumes flight (the leg is set down after the first command).
             phase_known: cfg.takeover_ms == 0,
             touchdown_known: false,
@@ -477,16 +481,42 @@ impl Controller {
                 self.candidate = (tc.terrain, 1);
             }
             if self.candidate.1 >= self.cfg.switch_after_steps {
-                let gid = self
-                    .gait_of_terrain
-                    .get(&tc.terrain)
-                    .copied()
-                    .unwrap_or(self.cfg.safe_gait);
+                let gid = self.gait_for(tc.terrain);
                 self.request(gid, GaitReason::Terrain, tc.terrain);
             }
         }
         if !self.stance {
             self.apply_pending(out);
+        }
+    }
+
+    /// The gait for a confirmed step on `terrain`: the table's (the safe gait for a terrain it
+    /// leaves out), or while sweeping ([`ControllerConfig::sweep_steps`]) the safe gait, then
+    /// each other configured gait, for `sweep_steps` of the terrain's steps each.
+    fn gait_for(&mut self, terrain: u8) -> u8 {
+        let table = self
+            .gait_of_terrain
+            .get(&terrain)
+            .copied()
+            .unwrap_or(self.cfg.safe_gait);
+        let n = self.cfg.sweep_steps;
+        if n == 0 {
+            return table;
+        }
+        let done = &mut self.swept[terrain as usize];
+        let turn = (*done / n) as usize;
+        *done = done.saturating_add(1);
+        let safe = self.cfg.safe_gait;
+        match turn {
+            0 => safe,
+            k => self
+                .cfg
+                .gaits
+                .iter()
+                .map(|g| g.id)
+                .filter(|&id| id != safe)
+                .nth(k - 1)
+                .unwrap_or(table),
         }
     }
 

@@ -530,3 +530,42 @@ fn a_fall_restarts_the_touchdown_law_from_beta_des() {
     c.on_message(0, &contact(false, 1_830_000), 1_830_000, &mut out);
     assert_eq!(c.gait_resets, 2);
 }
+
+/// Sweeping, each terrain runs the safe gait, then every other configured gait, for
+/// `sweep_steps` of its steps each, then its own gait; another terrain's steps do not count
+/// toward it, and a gait the config leaves out is never run.
+#[test]
+fn a_sweep_runs_each_configured_gait_on_each_terrain_then_its_own() {
+    let mut cfg = fresh();
+    cfg.sweep_steps = 3;
+    cfg.gaits.retain(|g| g.id != 2);
+    cfg.terrain_gaits.retain(|_, g| *g != 2);
+    cfg.terrain_gaits.insert("grass".into(), 3);
+    cfg.initial_gait = 1;
+    let catalog = TerrainCatalog::paper();
+    cfg.validate(&catalog).unwrap();
+    let mut c = Controller::new(cfg, &catalog);
+    let mut out = Vec::new();
+    let hb = Message::NodeStatus(NodeStatus::default());
+    let (wood, grass) = (protocol::Terrain::WOOD.id(), protocol::Terrain::GRASS.id());
+    let mut t = 0;
+    let mut gaits = Vec::new();
+    let mut step = |c: &mut Controller, terrain: u8| {
+        t += 100_000;
+        c.on_message(0, &hb, t, &mut out);
+        c.on_message(0, &contact(true, t), t, &mut out);
+        c.on_message(0, &tc(terrain, 90.0), t + 70_000, &mut out);
+        c.on_message(0, &contact(false, t + 140_000), t + 140_000, &mut out);
+        t += 140_000;
+        c.gait().id
+    };
+    // Wood: confirmed at its second step; G1 (safe) 3 steps, G3 3 steps, then wood's own G3.
+    for _ in 0..8 {
+        gaits.push(step(&mut c, wood));
+    }
+    assert_eq!(gaits, [1, 1, 1, 1, 3, 3, 3, 3], "wood");
+    // Grass starts its own sweep at the safe gait.
+    let g: Vec<u8> = (0..4).map(|_| step(&mut c, grass)).collect();
+    assert_eq!(g, [3, 1, 1, 1], "grass");
+    assert!(!gaits.contains(&2) && !g.contains(&2));
+}

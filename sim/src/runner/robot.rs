@@ -352,12 +352,13 @@ impl SimRobot {
                         );
                     }
                 }
-                Some(Event::Liftoff { beta, .. }) => {
+                Some(Event::Liftoff { beta, length, .. }) => {
                     leg.cmd.fixed.on_liftoff(beta);
                     bounce(&mut leg.edges, ev_us, false, &mut self.rng);
-                    let len = leg.hopper.leg_length(&leg.cmd);
+                    // The stance's last length: after the event the hopper is in flight and
+                    // reports the rest length, which put the hip 8% short of where it left.
                     if leg.cmd.motors.is_none() {
-                        send_leg_state(ids, foot as u8, -beta, len, ev_us, emit);
+                        send_leg_state(ids, foot as u8, -beta, length, ev_us, emit);
                     }
                 }
                 Some(Event::Fell { .. }) => {
