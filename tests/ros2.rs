@@ -282,6 +282,7 @@ fn a_zenoh_subscriber_sees_the_tokens_the_hashes_and_every_message() {
         "presrs_msgs/msg/TerrainClass",
         "presrs_msgs/msg/FootContact",
         "presrs_msgs/msg/GaitState",
+        "presrs_msgs/msg/StepState",
         "sensor_msgs/msg/Image",
         "sensor_msgs/msg/JointState",
         "diagnostic_msgs/msg/DiagnosticArray",

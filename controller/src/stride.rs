@@ -10,7 +10,10 @@
 //! ```
 //!
 //! which is what the simulator's truth measures (the body's travel between touchdowns over
-//! their interval). The ends of the stance come from the first and last LegState reports of
+//! their interval). The hop's energy ratio is the body's energy per unit mass at liftoff over
+//! that at touchdown, `v^2/2 + g y` with `y = l cos(beta)` the hip's height over the foot (a
+//! SLIP's spring is at rest at both edges, so it holds none): what the stance law (AER) put
+//! in or took out. Flight keeps the energy, so a steady gait's ratio is 1. The ends of the stance come from the first and last LegState reports of
 //! it, each end fitted with a quadratic in time (value and slope at the edge): a leg reports
 //! at 100 Hz to 1 kHz, and an edge falls between two reports.
 //!
@@ -40,15 +43,23 @@ pub struct StrideEstimate {
     pub stance_travel_m: f64,
     /// Forward speed over the stride, m/s.
     pub speed_m_s: f64,
+    /// The body's energy at liftoff over its energy at touchdown (per unit mass, kinetic and
+    /// gravitational about the foot).
+    pub energy_ratio: f64,
 }
+
+/// Gravity, m/s² (the hip's height over the foot carries the stance's potential energy).
+const G_M_S2: f64 = 9.81;
 
 /// One stance's ends: the hip's horizontal position over the foot at the reports nearest each
 /// edge.
 #[derive(Clone, Copy, Debug, Default)]
 struct Ends {
     first: [(f64, f64); END_SAMPLES],
+    first_y: [(f64, f64); END_SAMPLES],
     n_first: usize,
     last: [(f64, f64); END_SAMPLES],
+    last_y: [(f64, f64); END_SAMPLES],
     /// Reports in the stance so far (the ring `last` holds the latest of them).
     n: usize,
     first_angle: f64,
@@ -56,27 +67,37 @@ struct Ends {
 }
 
 impl Ends {
-    fn push(&mut self, t_s: f64, x: f64, angle: f64) {
+    fn push(&mut self, t_s: f64, (x, y): (f64, f64), angle: f64) {
         if self.n_first < END_SAMPLES {
             self.first[self.n_first] = (t_s, x);
+            self.first_y[self.n_first] = (t_s, y);
             self.n_first += 1;
             if self.n_first == 1 {
                 self.first_angle = angle;
             }
         }
         self.last[self.n % END_SAMPLES] = (t_s, x);
+        self.last_y[self.n % END_SAMPLES] = (t_s, y);
         self.n += 1;
         self.last_angle = angle;
     }
 
-    /// The latest reports, oldest first.
-    fn latest(&self) -> ([(f64, f64); END_SAMPLES], usize) {
+    /// The latest reports of `ring` (`last` or `last_y`), oldest first.
+    fn latest(&self, ring: &[(f64, f64); END_SAMPLES]) -> ([(f64, f64); END_SAMPLES], usize) {
         let k = self.n.min(END_SAMPLES);
         let mut out = [(0.0, 0.0); END_SAMPLES];
         for (i, o) in out.iter_mut().take(k).enumerate() {
-            *o = self.last[(self.n - k + i) % END_SAMPLES];
+            *o = ring[(self.n - k + i) % END_SAMPLES];
         }
         (out, k)
+    }
+
+    /// The body's energy per unit mass at `t` from the fits of `x` and `y` through `pts_x`,
+    /// `pts_y`.
+    fn energy_at(pts_x: &[(f64, f64)], pts_y: &[(f64, f64)], t: f64) -> Option<f64> {
+        let (_, vx) = fit_at(pts_x, t)?;
+        let (y, vy) = fit_at(pts_y, t)?;
+        Some(0.5 * (vx * vx + vy * vy) + G_M_S2 * y)
     }
 }
 
@@ -89,6 +110,7 @@ struct Lifted {
     speed_m_s: f64,
     touchdown_angle_rad: f64,
     liftoff_angle_rad: f64,
+    energy_ratio: f64,
 }
 
 /// Estimates each stride from the foot switch's debounced edges and the leg's reports.
@@ -104,8 +126,11 @@ impl StrideEstimator {
     /// A leg report at `t_us` (the foot's clock) with the leg at `angle_rad`, `length_m`.
     pub fn on_leg_state(&mut self, t_us: u64, angle_rad: f64, length_m: f64) {
         if self.touchdown_us.is_some() && angle_rad.is_finite() && length_m.is_finite() {
-            self.ends
-                .push(t_us as f64 * 1e-6, -length_m * angle_rad.sin(), angle_rad);
+            self.ends.push(
+                t_us as f64 * 1e-6,
+                (-length_m * angle_rad.sin(), length_m * angle_rad.cos()),
+                angle_rad,
+            );
         }
     }
 
@@ -123,6 +148,7 @@ impl StrideEstimator {
                 liftoff_angle_rad: l.liftoff_angle_rad,
                 stance_travel_m: l.travel_m,
                 speed_m_s: speed,
+                energy_ratio: l.energy_ratio,
             })
         });
         self.touchdown_us = Some(t_us);
@@ -140,9 +166,13 @@ impl StrideEstimator {
                 return None;
             }
             let (t0, t1) = (td as f64 * 1e-6, t_us as f64 * 1e-6);
-            let (x0, _) = fit_at(&self.ends.first[..self.ends.n_first], t0)?;
-            let (latest, k) = self.ends.latest();
+            let n0 = self.ends.n_first;
+            let (x0, _) = fit_at(&self.ends.first[..n0], t0)?;
+            let (latest, k) = self.ends.latest(&self.ends.last);
+            let (latest_y, _) = self.ends.latest(&self.ends.last_y);
             let (x1, v1) = fit_at(&latest[..k], t1)?;
+            let e0 = Ends::energy_at(&self.ends.first[..n0], &self.ends.first_y[..n0], t0)?;
+            let e1 = Ends::energy_at(&latest[..k], &latest_y[..k], t1)?;
             Some(Lifted {
                 touchdown_us: td,
                 liftoff_us: t_us,
@@ -150,6 +180,7 @@ impl StrideEstimator {
                 speed_m_s: v1,
                 touchdown_angle_rad: self.ends.first_angle,
                 liftoff_angle_rad: self.ends.last_angle,
+                energy_ratio: if e0 > 0.0 { e1 / e0 } else { f64::NAN },
             })
         });
     }
@@ -239,6 +270,7 @@ mod tests {
 
     /// A hip that crosses its foot at a constant 1 m/s (a stiff leg's limit) and flies on at
     /// the same speed: the stride's speed is 1 m/s whatever the report rate.
+    /// (The energy ratio within the quadratic fit of `y = sqrt(l^2 - x^2)` at the edges.)
     #[test]
     fn a_constant_speed_hop_is_measured_at_its_speed() {
         for period_us in [1_000u64, 10_000] {
@@ -263,7 +295,45 @@ mod tests {
             let s = e.last().unwrap();
             assert!((s.speed_m_s - v).abs() < 1e-6, "{period_us}: {s:?}");
             assert!((s.stance_s - 0.24).abs() < 1e-9 && (s.flight_s - 0.16).abs() < 1e-9);
+            // A symmetric stance: the hip as high and as fast at liftoff as at touchdown.
+            assert!((s.energy_ratio - 1.0).abs() < 1e-3, "{period_us}: {s:?}");
         }
+    }
+
+    /// A stance that sends the hip off faster than it came in gained energy: the ratio is the
+    /// two edges' `v^2/2 + g y`.
+    #[test]
+    fn the_energy_ratio_is_liftoff_over_touchdown_energy() {
+        let mut e = StrideEstimator::default();
+        let l = 0.3f64;
+        for hop in 0..2u64 {
+            let td = hop * 400_000;
+            e.on_touchdown(td);
+            // x from -0.12 m: 1 m/s at touchdown, accelerating at 2 m/s^2.
+            let mut s = td + 2_000;
+            while s <= td + 238_000 {
+                let u = (s - td) as f64 * 1e-6;
+                let x = -0.12 + u + u * u;
+                e.on_leg_state(s, (-x / l).asin(), l);
+                s += 2_000;
+            }
+            e.on_liftoff(td + 240_000);
+        }
+        e.on_touchdown(800_000);
+        let s = e.last().unwrap();
+        let energy = |x: f64, vx: f64| {
+            let y = (l * l - x * x).sqrt();
+            let vy = -x * vx / y;
+            0.5 * (vx * vx + vy * vy) + G_M_S2 * y
+        };
+        let (u1, x1) = (0.24, -0.12 + 0.24 + 0.24 * 0.24);
+        let want = energy(x1, 1.0 + 2.0 * u1) / energy(-0.12, 1.0);
+        assert!(
+            (s.energy_ratio - want).abs() < 5e-3,
+            "{} against {want}",
+            s.energy_ratio
+        );
+        assert!(s.energy_ratio > 1.0);
     }
 
     #[test]

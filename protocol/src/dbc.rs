@@ -11,7 +11,8 @@ use std::fmt::Write;
 
 use crate::ids::{IdConfig, MAX_FEET, MessageKind};
 use crate::messages::{
-    ANGLE_SCALE_RAD, LENGTH_SCALE_M, OMEGA_SCALE, PERCENT_SCALE, TERRAIN_UNKNOWN,
+    ANGLE_SCALE_RAD, ENERGY_RATIO_SCALE, LENGTH_SCALE_M, OMEGA_SCALE, PERCENT_SCALE,
+    PHASE_TIME_SCALE_S, SPEED_SCALE_M_S, STEP_ANGLE_SCALE_RAD, TERRAIN_UNKNOWN,
 };
 use crate::tactile::Variant;
 use crate::terrain::TerrainCatalog;
@@ -199,6 +200,14 @@ pub fn signals(kind: MessageKind) -> Vec<Signal> {
                 .values("GaitReason"),
             sig("Foot", 56, 8, false, 1.0, "").range(0.0, 7.0),
         ],
+        MessageKind::StepState => vec![
+            sig("Speed", 0, 16, true, SPEED_SCALE_M_S, "m/s"),
+            sig("StanceTime", 16, 8, false, PHASE_TIME_SCALE_S, "s"),
+            sig("FlightTime", 24, 8, false, PHASE_TIME_SCALE_S, "s"),
+            sig("TouchdownAngle", 32, 12, true, STEP_ANGLE_SCALE_RAD, "rad"),
+            sig("LiftoffAngle", 44, 12, true, STEP_ANGLE_SCALE_RAD, "rad"),
+            sig("EnergyRatio", 56, 8, false, ENERGY_RATIO_SCALE, ""),
+        ],
         MessageKind::TactileFrame => {
             let mut v = vec![
                 sig("FrameSeq", 0, 8, false, 1.0, ""),
@@ -245,6 +254,14 @@ pub fn signals(kind: MessageKind) -> Vec<Signal> {
 /// What a signal means where its name and unit do not say it (docs/protocol.md says more).
 fn comment(kind: MessageKind, signal: &str) -> Option<&'static str> {
     Some(match (kind, signal) {
+        (MessageKind::StepState, "Speed") => {
+            "Forward speed over the hop (touchdown to touchdown), estimated by the controller from \
+             the foot switch and LegState: no speed sensor."
+        }
+        (MessageKind::StepState, "EnergyRatio") => {
+            "The body's energy (kinetic and gravitational, per unit mass) at liftoff over that at \
+             touchdown: what the stance law put in (above 1) or took out; 1 in a steady gait."
+        }
         (MessageKind::TerrainClass, "UnknownReason") => {
             "With TerrainId 255: the check of the stance image that called it unknown, 1 novelty \
              (unlike every known terrain), 2 load, 3 texture; 0 when a flag says why (FlagNoSample, \
@@ -283,7 +300,7 @@ fn comment(kind: MessageKind, signal: &str) -> Option<&'static str> {
 
 fn sender(kind: MessageKind) -> &'static str {
     match kind {
-        MessageKind::LegCommand | MessageKind::GaitStatus => "Controller",
+        MessageKind::LegCommand | MessageKind::GaitStatus | MessageKind::StepState => "Controller",
         MessageKind::FootContact | MessageKind::TactileFrame | MessageKind::TactileFrameClassic => {
             "Foot"
         }
@@ -301,7 +318,7 @@ fn receivers(kind: MessageKind) -> &'static str {
         | MessageKind::LegStatus
         | MessageKind::TerrainClass
         | MessageKind::NodeStatus => "Controller",
-        MessageKind::GaitStatus => "Node",
+        MessageKind::GaitStatus | MessageKind::StepState => "Node",
     }
 }
 

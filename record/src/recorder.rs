@@ -41,6 +41,7 @@ impl Topic {
                 MessageKind::LegStatus => format!("/leg{f}/status"),
                 MessageKind::NodeStatus => "/node/status".into(),
                 MessageKind::GaitStatus => "/gait".into(),
+                MessageKind::StepState => format!("/leg{f}/step"),
                 MessageKind::TactileFrame | MessageKind::TactileFrameClassic => {
                     format!("/foot{f}/image")
                 }

@@ -30,6 +30,8 @@ pub enum RosTopic {
     Joints(u8),
     /// `gait`: `presrs_msgs/msg/GaitState`.
     Gait,
+    /// `legN/step`: `presrs_msgs/msg/StepState`, one per hop.
+    Step(u8),
     /// `/diagnostics`: `diagnostic_msgs/msg/DiagnosticArray` (node, legs, the bridge).
     Diagnostics,
 }
@@ -44,6 +46,7 @@ impl RosTopic {
             RosTopic::Image(f) => format!("foot{f}/image"),
             RosTopic::Joints(f) => format!("leg{f}/joint_states"),
             RosTopic::Gait => "gait".into(),
+            RosTopic::Step(f) => format!("leg{f}/step"),
             RosTopic::Diagnostics => "/diagnostics".into(),
         }
     }
@@ -56,6 +59,7 @@ impl RosTopic {
             RosTopic::Image(_) => &types::IMAGE,
             RosTopic::Joints(_) => &types::JOINT_STATE,
             RosTopic::Gait => &types::GAIT_STATE,
+            RosTopic::Step(_) => &types::STEP_STATE,
             RosTopic::Diagnostics => &types::DIAGNOSTIC_ARRAY,
         }
     }
@@ -232,6 +236,19 @@ impl Encoder {
             }
             // The controller's set points are the leg's business; the leg's state is published.
             Message::LegCommand(_) => Ok(()),
+            Message::StepState(s) => {
+                let m = ros::StepState {
+                    header: header(format!("leg{foot}")),
+                    leg: foot,
+                    speed_m_s: s.speed_m_s as f32,
+                    stance_s: s.stance_s as f32,
+                    flight_s: s.flight_s as f32,
+                    touchdown_angle_rad: s.touchdown_angle_rad as f32,
+                    liftoff_angle_rad: s.liftoff_angle_rad as f32,
+                    energy_ratio: s.energy_ratio as f32,
+                };
+                self.emit(RosTopic::Step(foot), t_ns, &m, sink)
+            }
         }
     }
 

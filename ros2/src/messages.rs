@@ -87,6 +87,19 @@ pub struct GaitState {
     pub foot: u8,
 }
 
+/// `presrs_msgs/msg/StepState`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct StepState {
+    pub header: Header,
+    pub leg: u8,
+    pub speed_m_s: f32,
+    pub stance_s: f32,
+    pub flight_s: f32,
+    pub touchdown_angle_rad: f32,
+    pub liftoff_angle_rad: f32,
+    pub energy_ratio: f32,
+}
+
 /// `sensor_msgs/msg/Image`.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct Image {

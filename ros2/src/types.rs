@@ -171,6 +171,22 @@ pub static GAIT_STATE: MsgType = MsgType {
     msg: include_str!("../presrs_msgs/msg/GaitState.msg"),
 };
 
+/// `presrs_msgs/msg/StepState`.
+pub static STEP_STATE: MsgType = MsgType {
+    name: "presrs_msgs/msg/StepState",
+    fields: &[
+        f("header", HEADER),
+        f("leg", Base::U8),
+        f("speed_m_s", Base::F32),
+        f("stance_s", Base::F32),
+        f("flight_s", Base::F32),
+        f("touchdown_angle_rad", Base::F32),
+        f("liftoff_angle_rad", Base::F32),
+        f("energy_ratio", Base::F32),
+    ],
+    msg: include_str!("../presrs_msgs/msg/StepState.msg"),
+};
+
 /// `sensor_msgs/msg/Image`.
 pub static IMAGE: MsgType = MsgType {
     name: "sensor_msgs/msg/Image",
@@ -236,12 +252,13 @@ pub static DIAGNOSTIC_ARRAY: MsgType = MsgType {
 };
 
 /// Every type the bridge knows, nested ones included.
-pub static ALL: [&MsgType; 10] = [
+pub static ALL: [&MsgType; 11] = [
     &TIME,
     &HEADER_MSG,
     &TERRAIN_CLASS,
     &FOOT_CONTACT,
     &GAIT_STATE,
+    &STEP_STATE,
     &IMAGE,
     &JOINT_STATE,
     &KEY_VALUE,

@@ -70,6 +70,14 @@ pub fn signals(m: &Message) -> BTreeMap<&'static str, f64> {
             s.insert("Reason", c.reason as u8 as f64);
             s.insert("Foot", c.foot as f64);
         }
+        Message::StepState(c) => {
+            s.insert("Speed", c.speed_m_s);
+            s.insert("StanceTime", c.stance_s);
+            s.insert("FlightTime", c.flight_s);
+            s.insert("TouchdownAngle", c.touchdown_angle_rad);
+            s.insert("LiftoffAngle", c.liftoff_angle_rad);
+            s.insert("EnergyRatio", c.energy_ratio);
+        }
         Message::TactileSegment(_) => {}
     }
     s
@@ -129,6 +137,14 @@ pub fn random_messages(rng: &mut impl rand::Rng, foot: u8) -> Vec<Message> {
             beta_des_rad: rng.random_range(-1.0..1.0),
             reason: GaitReason::from_u8(rng.random_range(0..4)).unwrap_or_default(),
             foot,
+        }),
+        Message::StepState(protocol::messages::StepState {
+            speed_m_s: rng.random_range(-3.0..3.0),
+            stance_s: rng.random_range(0.0..0.5),
+            flight_s: rng.random_range(0.0..0.5),
+            touchdown_angle_rad: rng.random_range(-1.0..1.0),
+            liftoff_angle_rad: rng.random_range(-1.0..1.0),
+            energy_ratio: rng.random_range(0.0..1.9),
         }),
     ];
     // Quantise through the wire so expected values are exactly what the frame carries.

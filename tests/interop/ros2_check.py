@@ -166,6 +166,9 @@ def summary(ros_type, m):
         return [m.foot, bool(m.stance), m.seq, m.foot_timestamp_us]
     if ros_type == "presrs_msgs/msg/GaitState":
         return [m.gait, m.terrain_id, m.reason, m.foot]
+    if ros_type == "presrs_msgs/msg/StepState":
+        return [m.leg, round(m.speed_m_s, 3), round(m.stance_s, 3), round(m.flight_s, 3),
+                round(m.energy_ratio, 3)]
     if ros_type == "sensor_msgs/msg/JointState":
         return [list(m.name), [round(p, 4) for p in m.position]]
     if ros_type == "sensor_msgs/msg/Image":

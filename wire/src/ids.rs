@@ -33,6 +33,8 @@ pub enum MessageKind {
     NodeStatus,
     /// Controller -> all: the gait in force.
     GaitStatus,
+    /// Controller -> all: each hop as measured (speed, stance and flight time, angles).
+    StepState,
     /// Tactile image segments, CAN FD variant (64-byte frames).
     TactileFrame,
     /// Tactile image segments, classic CAN variant (8-byte frames).
@@ -41,7 +43,7 @@ pub enum MessageKind {
 
 impl MessageKind {
     /// Every kind, in priority order (lowest identifier first).
-    pub const ALL: [MessageKind; 9] = [
+    pub const ALL: [MessageKind; 10] = [
         MessageKind::LegCommand,
         MessageKind::FootContact,
         MessageKind::LegState,
@@ -49,6 +51,7 @@ impl MessageKind {
         MessageKind::TerrainClass,
         MessageKind::NodeStatus,
         MessageKind::GaitStatus,
+        MessageKind::StepState,
         MessageKind::TactileFrame,
         MessageKind::TactileFrameClassic,
     ];
@@ -68,6 +71,7 @@ impl MessageKind {
             MessageKind::TerrainClass => "TerrainClass",
             MessageKind::NodeStatus => "NodeStatus",
             MessageKind::GaitStatus => "GaitStatus",
+            MessageKind::StepState => "StepState",
             MessageKind::TactileFrame => "TactileFrame",
             MessageKind::TactileFrameClassic => "TactileFrameClassic",
         }
@@ -108,6 +112,8 @@ pub struct IdConfig {
     pub node_status: u32,
     /// Base identifier of GaitStatus.
     pub gait_status: u32,
+    /// Base identifier of StepState (foot i adds i).
+    pub step_state: u32,
     /// Base identifier of the CAN FD tactile segments.
     pub tactile_frame: u32,
     /// Base identifier of the classic-CAN tactile segments.
@@ -125,6 +131,7 @@ impl Default for IdConfig {
             terrain_class: 0x200,
             node_status: 0x280,
             gait_status: 0x290,
+            step_state: 0x220,
             tactile_frame: 0x600,
             tactile_frame_classic: 0x680,
         }
@@ -145,6 +152,7 @@ impl IdConfig {
             terrain_class: 0x058,
             node_status: 0x060,
             gait_status: 0x061,
+            step_state: 0x070,
             tactile_frame: 0x6C0,
             tactile_frame_classic: 0x6E0,
         }
@@ -160,6 +168,7 @@ impl IdConfig {
             MessageKind::TerrainClass => self.terrain_class,
             MessageKind::NodeStatus => self.node_status,
             MessageKind::GaitStatus => self.gait_status,
+            MessageKind::StepState => self.step_state,
             MessageKind::TactileFrame => self.tactile_frame,
             MessageKind::TactileFrameClassic => self.tactile_frame_classic,
         }

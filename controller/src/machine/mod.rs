@@ -17,8 +17,8 @@ use std::collections::BTreeMap;
 
 use protocol::emit::Emit;
 use protocol::messages::{
-    FootContact, GaitReason, GaitStatus, LegCommand, LegMode, Message, Phase, TERRAIN_UNKNOWN,
-    TerrainClass,
+    FootContact, GaitReason, GaitStatus, LegCommand, LegMode, Message, Phase, StepState,
+    TERRAIN_UNKNOWN, TerrainClass,
 };
 use protocol::terrain::TerrainCatalog;
 
@@ -287,6 +287,16 @@ impl Controller {
         }
     }
 
+    /// Our time on the foot's clock with no holdover: for measuring a hop from LegState,
+    /// whose samples keep their spacing when the foot's reports pause (the stance law's
+    /// wait is [`Self::foot_now`]'s).
+    fn foot_clock(&self, now_us: u64) -> u64 {
+        match self.foot_clock {
+            Some((foot, ours)) => foot + now_us.saturating_sub(ours),
+            None => now_us,
+        }
+    }
+
     fn gait_by_id(&self, id: u8) -> Option<Gait> {
         self.cfg.gaits.iter().find(|g| g.id == id).cloned()
     }
@@ -353,7 +363,7 @@ impl Controller {
                 self.leg_state(ls.timestamp_us, now_us);
                 self.leg_angle = ls.leg_angle_rad;
                 // On the foot's clock, as the edges: the leg's is another device's.
-                let t = self.foot_now(now_us);
+                let t = self.foot_clock(now_us);
                 self.stride
                     .on_leg_state(t, ls.leg_angle_rad, ls.leg_length_m);
             }
@@ -409,7 +419,19 @@ impl Controller {
         self.last_edge_us = Some(t);
         self.stance = fc.stance;
         if fc.stance {
-            self.stride.on_touchdown(t);
+            // The hop this touchdown closes, on the bus (a listening controller stays quiet).
+            if let Some(h) = self.stride.on_touchdown(t)
+                && self.listen.is_none()
+            {
+                out.emit(Message::StepState(StepState {
+                    speed_m_s: h.speed_m_s,
+                    stance_s: h.stance_s,
+                    flight_s: h.flight_s,
+                    touchdown_angle_rad: h.touchdown_angle_rad,
+                    liftoff_angle_rad: h.liftoff_angle_rad,
+                    energy_ratio: h.energy_ratio,
+                }));
+            }
         } else {
             self.stride.on_liftoff(t);
         }

@@ -569,3 +569,58 @@ fn a_sweep_runs_each_configured_gait_on_each_terrain_then_its_own() {
     assert_eq!(g, [3, 1, 1, 1], "grass");
     assert!(!gaits.contains(&2) && !g.contains(&2));
 }
+
+/// Each hop goes on the bus at the touchdown that closes it (StepState), measured from the
+/// switch and LegState: a hip that crosses its foot at 1 m/s and flies on at it.
+#[test]
+fn each_closed_hop_is_sent_as_a_step_state() {
+    let mut c = Controller::new(fresh(), &TerrainCatalog::paper());
+    let mut out = Vec::new();
+    let hb = Message::NodeStatus(NodeStatus::default());
+    let leg = |t: u64, angle: f64| {
+        Message::LegState(protocol::messages::LegState {
+            leg_angle_rad: angle,
+            leg_length_m: 0.3,
+            timestamp_us: t as u32,
+        })
+    };
+    // Three stances close two hops.
+    let mut t = 100_000u64;
+    for _ in 0..3 {
+        c.on_message(0, &hb, t, &mut out);
+        c.on_message(0, &contact(true, t), t, &mut out);
+        for k in 1..18u64 {
+            // x = -l sin(angle) from -0.09 m at 1 m/s.
+            let x = -0.09 + k as f64 * 0.01;
+            c.on_message(
+                0,
+                &leg(t + k * 10_000, (-x / 0.3).asin()),
+                t + k * 10_000,
+                &mut out,
+            );
+        }
+        c.on_message(0, &contact(false, t + 180_000), t + 180_000, &mut out);
+        // The leg reports in flight too (a gap would make the phase unknown), swinging its
+        // foot forward: those reports are not the stance's.
+        for k in 18..34u64 {
+            let angle = -0.27 + (k - 18) as f64 * 0.034;
+            c.on_message(0, &leg(t + k * 10_000, angle), t + k * 10_000, &mut out);
+        }
+        t += 340_000;
+    }
+    let steps: Vec<StepState> = out
+        .iter()
+        .filter_map(|m| match m {
+            Message::StepState(s) => Some(*s),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(steps.len(), 2, "{steps:?}");
+    for s in steps {
+        assert!((s.speed_m_s - 1.0).abs() < 0.01, "{s:?}");
+        assert!(
+            (s.stance_s - 0.18).abs() < 1e-6 && (s.flight_s - 0.16).abs() < 1e-6,
+            "{s:?}"
+        );
+    }
+}
