@@ -12,6 +12,11 @@ export CARGO_INCREMENTAL=0
 # Everything the parts need, before any part runs: the arm64 builds and the vcan run go side
 # by side below, and two apt-gets at once would fight over dpkg's lock.
 part "install dependencies"; scripts/install-deps.sh --cross arm64 --package --uml
+# The package tests' throwaway Debian roots (downloads and unpacking, no build needed), from
+# now on beside the builds: else the command's tail waited on the network for them.
+roots_log=$(mktemp); roots_rc=$(mktemp)
+( rc=0; nice -n 10 scripts/test-package.sh --prepare >"$roots_log" 2>&1 || rc=$?; echo "$rc" >"$roots_rc" ) &
+roots_pid=$!
 part "cargo fmt --check"; cargo fmt --all --check
 part "import cycles between modules"; python3 scripts/module_cycles.py
 # The arm64 part's builds (aarch64 lints, test binaries, the package's binary), in their own
@@ -26,7 +31,7 @@ arm_log=$(mktemp); arm_build_rc=$(mktemp)
 arm_build_pid=$!
 # A process and all it started: to stop the arm64 part when a part fails.
 tree() { echo "$1"; for c in $(ps -o pid= --ppid "$1" 2>/dev/null); do tree "$c"; done; }
-trap 'for p in $(tree "$arm_build_pid") ${arm_pid:+$(tree "$arm_pid")}; do kill "$p" 2>/dev/null; done' EXIT
+trap 'for p in $(tree "$roots_pid") $(tree "$arm_build_pid") ${arm_pid:+$(tree "$arm_pid")}; do kill "$p" 2>/dev/null; done' EXIT
 part "cargo clippy"; cargo clippy --workspace --all-targets --features vcan,interop -- -D warnings
 part "the wire crate without std, for the foot's microcontroller (thumbv7em-none-eabihf)"
 cargo build -p presrs-wire --no-default-features --target thumbv7em-none-eabihf
@@ -49,6 +54,9 @@ part "vcan suite (beside it, at idle priority: the rest of scripts/test-arm64.sh
   while [ ! -s "$arm_build_rc" ]; do sleep 2; done
   rc=$(cat "$arm_build_rc"); rm -f "$arm_build_rc"
   [ "$rc" = 0 ] || exit "$rc"
+  # The roots too (a failed preparation is tried again, and reported, by the package test).
+  while [ ! -s "$roots_rc" ]; do sleep 2; done
+  cat "$roots_log"; rm -f "$roots_log" "$roots_rc"
   chrt --idle 0 nice -n 19 scripts/test-arm64.sh >>"$arm_log" 2>&1
 ) &
 arm_pid=$!

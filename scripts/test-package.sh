@@ -12,12 +12,17 @@
 #
 #   scripts/test-package.sh [--x86 PATH]   PATH: the x86-64 presrs to compare with (the test
 #                                          command's test build); without it, the release build
+#   scripts/test-package.sh --prepare      only the roots (downloads and unpacking, no package
+#                                          needed): ./test-all.sh runs it at its start, beside
+#                                          the builds, so that the test command's tail does not
+#                                          wait on the network
 set -euo pipefail
-x86=""
+x86=""; prepare_only=0
 case "${1:-}" in
   "") ;;
   --x86) x86="${2:?--x86 takes the path of an x86-64 presrs}" ;;
-  *) echo "test-package: unknown argument \`$1\` (use --x86 PATH, or none)" >&2; exit 2 ;;
+  --prepare) prepare_only=1 ;;
+  *) echo "test-package: unknown argument \`$1\` (use --x86 PATH, --prepare, or none)" >&2; exit 2 ;;
 esac
 root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root"
@@ -28,9 +33,11 @@ version=$(python3 -c 'import json,sys; print(next(p["version"] for p in json.loa
 target_dir=$(python3 -c 'import json,sys; print(json.load(sys.stdin)["target_directory"])' <<<"$meta")
 amd="$target_dir/debian/presrs_${version}_amd64.deb"
 arm="$target_dir/debian/presrs_${version}_arm64.deb"
-for d in "$amd" "$arm"; do
-  [ -s "$d" ] || { echo "test-package: $d is missing: run scripts/package-deb.sh --arch amd64 and arm64" >&2; exit 1; }
-done
+if [ "$prepare_only" = 0 ]; then
+  for d in "$amd" "$arm"; do
+    [ -s "$d" ] || { echo "test-package: $d is missing: run scripts/package-deb.sh --arch amd64 and arm64" >&2; exit 1; }
+  done
+fi
 
 fail() { echo "test-package: FAILED: $*" >&2; exit 1; }
 work="$target_dir/deb-test"
@@ -44,8 +51,23 @@ if [ ! -e "$base/.complete" ]; then
     { tail -20 "$work/debootstrap.log" >&2; fail "debootstrap (log: $work/debootstrap.log)"; }
   touch "$base/.complete"
 fi
-fresh() { rm -rf "$1"; cp -a "$base" "$1"; cp /etc/resolv.conf "$1/etc/resolv.conf"; }
+# A fresh copy of root $2 (the base by default) at $1.
+fresh() { rm -rf "$1"; cp -a "${2:-$base}" "$1"; cp /etc/resolv.conf "$1/etc/resolv.conf"; }
 in_root() { local r=$1; shift; chroot "$r" /usr/bin/env -i PATH=/usr/sbin:/usr/bin:/sbin:/bin LC_ALL=C "$@"; }
+# The arm64 root before the package: arm64 a foreign architecture, Debian's arm64 libc in it.
+arm_base="$work/base-$codename-arm64"
+if [ ! -e "$arm_base/.complete" ]; then
+  fresh "$arm_base"; rm -f "$arm_base/.complete"
+  in_root "$arm_base" dpkg --add-architecture arm64
+  in_root "$arm_base" apt-get update -qq >/dev/null || fail "apt-get update in the arm64 root"
+  in_root "$arm_base" env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends \
+    libc6:arm64 libgcc-s1:arm64 >/dev/null || fail "installing libc6:arm64 libgcc-s1:arm64 in the root"
+  touch "$arm_base/.complete"
+fi
+if [ "$prepare_only" = 1 ]; then
+  echo "test-package: the $codename roots are ready ($work)"
+  exit 0
+fi
 
 # ---- amd64: install, run, verify the units, conffiles across remove/reinstall/purge
 r="$work/root-amd64"; fresh "$r"
@@ -83,11 +105,7 @@ in_root "$r" dpkg -P presrs >/dev/null || fail "dpkg -P presrs"
 echo "test-package: amd64: installs into a fresh $codename root, runs, units and their can0/can1 instances verify, edited config kept on remove and reinstall, purge keeps the model"
 
 # ---- arm64: a root with Debian's arm64 libc, the package installed there, its binary run
-r="$work/root-arm64"; fresh "$r"
-in_root "$r" dpkg --add-architecture arm64
-in_root "$r" apt-get update -qq >/dev/null || fail "apt-get update in the arm64 root"
-in_root "$r" env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends \
-  libc6:arm64 libgcc-s1:arm64 >/dev/null || fail "installing libc6:arm64 libgcc-s1:arm64 in the root"
+r="$work/root-arm64"; fresh "$r" "$arm_base"
 cp "$arm" "$r/tmp/presrs.deb"
 in_root "$r" dpkg -i /tmp/presrs.deb >/dev/null || fail "dpkg -i $(basename "$arm") into the arm64 root"
 [ "$(in_root "$r" dpkg-query -W -f='${Architecture} ${Status}' presrs)" = "arm64 install ok installed" ] ||

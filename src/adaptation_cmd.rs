@@ -4,7 +4,7 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result};
 use presrs_cli::adaptation::AdaptationArgs;
-use tools::adaptation::{SETTLE_STRIDES, csv, markdown, strides, table};
+use tools::adaptation::{SETTLE_STRIDES, csv, report, strides};
 
 pub fn run(a: AdaptationArgs) -> Result<ExitCode> {
     let cfg =
@@ -14,24 +14,15 @@ pub fn run(a: AdaptationArgs) -> Result<ExitCode> {
     let mut records = file.records()?;
     let all = strides(records.by_ref().map(|r| r.stamped), &cfg.ids, &catalog);
     records.finish()?;
-    let cells = table(&all);
-    anyhow::ensure!(
-        !cells.is_empty(),
-        "{}: no settled stride on known ground with a gait ({} strides measured): the log needs \
-         FootContact and LegState of a foot, the controller's GaitStatus and the node's \
-         TerrainClass, and {SETTLE_STRIDES} strides in a row on one terrain and gait",
-        a.log.display(),
-        all.len()
-    );
-    let settled = all.iter().filter(|s| s.settled).count();
-    let md = format!(
-        "Forward speed per terrain and gait, {}: median (interquartile range, strides). {} \
-         strides measured, {settled} settled ({SETTLE_STRIDES} after each change of gait or \
-         terrain left out: the hopper takes that long to follow).\n\n{}",
-        a.log.display(),
-        all.len(),
-        markdown(&cells, &catalog)
-    );
+    let md = report(&a.log.display().to_string(), &all, &catalog).with_context(|| {
+        format!(
+            "{}: no settled stride on known ground with a gait ({} strides measured): the log \
+             needs FootContact and LegState of a foot, the controller's GaitStatus and the \
+             node's TerrainClass, and {SETTLE_STRIDES} strides in a row on one terrain and gait",
+            a.log.display(),
+            all.len()
+        )
+    })?;
     print!("{md}");
     if let Some(dir) = &a.out {
         std::fs::create_dir_all(dir).with_context(|| format!("--out {}", dir.display()))?;

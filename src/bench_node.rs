@@ -150,19 +150,5 @@ fn bench_one(
         memory_mb: run.memory_mb,
         extra: run.extra,
     };
-    let mut text = r.to_string();
-    if let Some(b) = r.extra.get("beside").filter(|b| !b.is_null()) {
-        text.push_str(&format!(
-            "ROS 2 bridge beside it: CPU {:.1}% of one core, {} frames dropped\n",
-            b["cpu_pct_of_one_core"].as_f64().unwrap_or(f64::NAN),
-            b["dropped"]
-        ));
-    }
-    if let Some(k) = r.extra.get("kept_unknown").filter(|k| !k.is_null()) {
-        text.push_str(&format!(
-            "kept {} unknown stances, {} dropped\n",
-            k["written"], k["dropped"]
-        ));
-    }
-    Ok((text, r.to_json()))
+    Ok((r.to_string(), r.to_json()))
 }

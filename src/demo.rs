@@ -102,7 +102,7 @@ fn realtime(
     }
     let (run, switches) = lab::closed_loop::run_realtime(track, model, lp)?;
     if show {
-        run.rows.iter().for_each(print_row);
+        run.rows.iter().for_each(|r| println!("{r}"));
         println!(
             "(controller: {switches} gait switches; {} falls)",
             run.falls()
@@ -143,7 +143,7 @@ fn lockstep(
     };
     let on_step = |row: &StepRecord| {
         if show {
-            print_row(row)
+            println!("{row}")
         }
     };
     // Ctrl-C ends a recorded run properly (the file's summary written); without a
@@ -183,20 +183,6 @@ fn lockstep(
     }
     let falls = run.falls();
     Ok((falls, run.rows, run.leg_state.zip(run.leg_counters)))
-}
-
-/// One step's line of the live log.
-fn print_row(row: &StepRecord) {
-    // An unknown step has no confidence: the frame's is the rejected class's.
-    let confidence = if row.classified == protocol::Terrain::UNKNOWN.name() {
-        "-".to_string()
-    } else {
-        format!("{:.1}%", row.confidence_pct)
-    };
-    println!(
-        "t {:7.2} s  step {:4}  true {:<8} classified {:<8} {confidence:>6}  gait G{}  {:.2} m/s",
-        row.t_s, row.step, row.truth, row.classified, row.gait, row.speed_m_s
-    );
 }
 
 /// The step CSV and the summary (a table, or one JSON object with `--json`).

@@ -119,13 +119,7 @@ fn finish_keep(keep: Option<node::unknown::keep::KeepWriter>, a: &NodeArgs) -> R
         let c = w
             .finish()
             .with_context(|| format!("--keep-unknown {}", dir.display()))?;
-        eprintln!(
-            "kept {} unknown stances in {} ({} already there, {} dropped: the writer fell behind)",
-            c.written,
-            dir.display(),
-            c.duplicates,
-            c.dropped
-        );
+        eprintln!("kept in {}: {c}", dir.display());
     }
     Ok(())
 }

@@ -136,7 +136,7 @@ fn sweep_and_its_adaptation_table(dir: &std::path::Path) {
     assert!(rows.len() >= 250, "{} strides", rows.len());
     assert!(
         rows.iter()
-            .all(|r| r.len() == 10 && r[4].parse::<f64>().is_ok())
+            .all(|r| r.len() == 11 && r[4].parse::<f64>().is_ok() && r[9].parse::<f64>().is_ok())
     );
     // A log without a hop: refused by name.
     let empty = dir.join("empty.log");

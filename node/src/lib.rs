@@ -37,12 +37,12 @@
 pub mod capture;
 pub mod classifier;
 pub mod config;
-pub mod gait;
+pub mod gait_status;
 pub mod health;
+pub mod order_stats;
 pub mod replay;
 pub mod service;
 pub mod stance;
-pub mod stats;
 pub mod step_table;
 pub mod training;
 pub mod unknown;

@@ -15,7 +15,7 @@ use protocol::candump::LogRecord;
 use protocol::messages::TerrainClass;
 use protocol::tactile::ReassemblyStats;
 
-use crate::gait::{GaitCount, describe_counts};
+use crate::gait_status::{GaitCount, describe_counts};
 use crate::service::{NodeService, Output};
 use crate::stance::Counters;
 

@@ -70,6 +70,23 @@ impl StepRecord {
     }
 }
 
+/// One step's line of a run's live log (`presrs demo`).
+impl std::fmt::Display for StepRecord {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        // An unknown step has no confidence: the frame's is the rejected class's.
+        let confidence = if self.classified == protocol::Terrain::UNKNOWN.name() {
+            "-".to_string()
+        } else {
+            format!("{:.1}%", self.confidence_pct)
+        };
+        write!(
+            f,
+            "t {:7.2} s  step {:4}  true {:<8} classified {:<8} {confidence:>6}  gait G{}  {:.2} m/s",
+            self.t_s, self.step, self.truth, self.classified, self.gait, self.speed_m_s
+        )
+    }
+}
+
 /// A leg of motors: how the LegState its bridge sends agrees with the simulator's truth,
 /// while the bridge drives the leg. Each is compared with the nearest truth of the 3 ms before
 /// its stamp where that stamp is on the simulator's clock (one process: the lock-step demo),

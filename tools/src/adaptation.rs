@@ -12,7 +12,7 @@
 use std::collections::BTreeMap;
 
 use controller::{Controller, ControllerConfig};
-use node::stats::{median, upper_quantile};
+use node::order_stats::{median, upper_quantile};
 use protocol::messages::{Message, TERRAIN_UNKNOWN, decode};
 use protocol::{IdConfig, Stamped, TerrainCatalog};
 
@@ -203,6 +203,23 @@ pub fn markdown(cells: &BTreeMap<(u8, u8), Cell>, catalog: &TerrainCatalog) -> S
     md
 }
 
+/// The report of a run from `source` (a log's name): what was measured, then the table. None
+/// when no stride settled on known ground with a gait.
+pub fn report(source: &str, strides: &[Stride], catalog: &TerrainCatalog) -> Option<String> {
+    let cells = table(strides);
+    if cells.is_empty() {
+        return None;
+    }
+    let settled = strides.iter().filter(|s| s.settled).count();
+    Some(format!(
+        "Forward speed per terrain and gait, {source}: median (interquartile range, strides). {} \
+         strides measured, {settled} settled ({SETTLE_STRIDES} after each change of gait or \
+         terrain left out: the hopper takes that long to follow).\n\n{}",
+        strides.len(),
+        markdown(&cells, catalog)
+    ))
+}
+
 /// Every stride as CSV, with [`STRIDES_CSV_HEADER`].
 pub fn csv(strides: &[Stride], catalog: &TerrainCatalog) -> String {
     let mut s = format!("{STRIDES_CSV_HEADER}\n");
@@ -212,7 +229,7 @@ pub fn csv(strides: &[Stride], catalog: &TerrainCatalog) -> String {
             |x| x.name().to_string(),
         );
         s.push_str(&format!(
-            "{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{}\n",
+            "{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{}\n",
             protocol::candump::format_seconds(r.touchdown_us),
             r.foot,
             name,
@@ -222,6 +239,7 @@ pub fn csv(strides: &[Stride], catalog: &TerrainCatalog) -> String {
             r.hop.flight_s,
             r.hop.touchdown_angle_rad,
             r.hop.liftoff_angle_rad,
+            r.hop.energy_ratio,
             r.settled
         ));
     }
@@ -229,4 +247,4 @@ pub fn csv(strides: &[Stride], catalog: &TerrainCatalog) -> String {
 }
 
 /// The columns of [`csv`].
-pub const STRIDES_CSV_HEADER: &str = "t_s,foot,terrain,gait,speed_m_s,stance_s,flight_s,touchdown_angle_rad,liftoff_angle_rad,settled";
+pub const STRIDES_CSV_HEADER: &str = "t_s,foot,terrain,gait,speed_m_s,stance_s,flight_s,touchdown_angle_rad,liftoff_angle_rad,energy_ratio,settled";

@@ -75,10 +75,10 @@ pub fn confusion(
 }
 
 /// The value at quantile `q` of `values` by the node's one rule, the nearest rank at or above
-/// ([`node::stats::upper_quantile`]); `None` when empty.
+/// ([`node::order_stats::upper_quantile`]); `None` when empty.
 pub fn percentile(values: &[f64], q: f64) -> Option<f64> {
     let mut v = values.to_vec();
-    Some(node::stats::upper_quantile(&mut v, q)).filter(|x| !x.is_nan())
+    Some(node::order_stats::upper_quantile(&mut v, q)).filter(|x| !x.is_nan())
 }
 
 /// How [`evaluate`] tests a model (with the `clap` feature, `presrs eval`'s options).

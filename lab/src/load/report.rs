@@ -145,6 +145,22 @@ impl std::fmt::Display for BenchReport<'_> {
             self.memory_scope,
             n(self.memory_mb.0),
             n(self.memory_mb.1)
-        )
+        )?;
+        if let Some(b) = self.extra.get("beside").filter(|b| !b.is_null()) {
+            writeln!(
+                f,
+                "ROS 2 bridge beside it: CPU {:.1}% of one core, {} frames dropped",
+                b["cpu_pct_of_one_core"].as_f64().unwrap_or(f64::NAN),
+                b["dropped"]
+            )?;
+        }
+        if let Some(k) = self.extra.get("kept_unknown").filter(|k| !k.is_null()) {
+            writeln!(
+                f,
+                "kept {} unknown stances, {} dropped",
+                k["written"], k["dropped"]
+            )?;
+        }
+        Ok(())
     }
 }

@@ -6,11 +6,11 @@ use super::OpenSetRow;
 
 /// The per-gait counts of several rows, summed gait by gait.
 pub fn pool_gait_counts<'a>(
-    rows: impl IntoIterator<Item = &'a Vec<node::gait::GaitCount>>,
-) -> Vec<node::gait::GaitCount> {
+    rows: impl IntoIterator<Item = &'a Vec<node::gait_status::GaitCount>>,
+) -> Vec<node::gait_status::GaitCount> {
     let mut v = Vec::new();
     for c in rows.into_iter().flatten() {
-        node::gait::add_count(&mut v, c.gait, c.steps, c.unknown);
+        node::gait_status::add_count(&mut v, c.gait, c.steps, c.unknown);
     }
     v
 }
@@ -97,7 +97,7 @@ impl Spread {
     /// The spread of `v` (NaN everywhere when it is empty).
     pub fn of(v: &[f64]) -> Self {
         let mut v = v.to_vec();
-        let median = node::stats::median(&mut v);
+        let median = node::order_stats::median(&mut v);
         let n = v.len();
         let mean = v.iter().sum::<f64>() / n as f64;
         let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n.saturating_sub(1) as f64;

@@ -26,7 +26,7 @@ use crate::simdata::TrainingSet;
 mod aggregate;
 #[cfg(test)]
 use aggregate::t_975;
-pub use aggregate::*;
+pub use aggregate::{OpenSetMeans, SEPARABLE_AUROC, SeedSpread, Spread, pool_gait_counts};
 
 /// One source of images for the study.
 #[derive(Clone)]
@@ -94,7 +94,7 @@ pub struct OpenSetRow {
     /// The known test images per gait they touched down in, and those of them called unknown
     /// (images of unknown gait are not counted); in gait order. In [`OpenSetMeans`], summed
     /// over the rows.
-    pub known_by_gait: Vec<node::gait::GaitCount>,
+    pub known_by_gait: Vec<node::gait_status::GaitCount>,
     /// The unknown-ground checks the model was trained with (`train --unknown-checks`' list:
     /// what `train` chose on the known classes, or the options given).
     pub checks: String,
@@ -184,7 +184,7 @@ pub fn leave_class_out(src: &OpenSetSource, out_k: usize) -> Result<OpenSetRow, 
         let s = judge.score(img, false);
         if let Some(gait) = gait {
             let unknown = s.class.is_none() as usize;
-            node::gait::add_count(&mut known_by_gait, Some(gait), 1, unknown);
+            node::gait_status::add_count(&mut known_by_gait, Some(gait), 1, unknown);
         }
         right += (s.class == Some(truth)) as usize;
         right_open += (s.best == Some(truth)) as usize;
@@ -317,7 +317,7 @@ impl Judge {
 fn auroc(scored: &[Scored], f: impl Fn(&Scored) -> f64) -> f64 {
     let novel: Vec<f64> = scored.iter().filter(|s| s.novel).map(&f).collect();
     let known: Vec<f64> = scored.iter().filter(|s| !s.novel).map(&f).collect();
-    node::stats::auroc(&known, &novel)
+    node::order_stats::auroc(&known, &novel)
 }
 
 #[cfg(test)]

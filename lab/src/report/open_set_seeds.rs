@@ -149,7 +149,7 @@ pub(super) fn open_set_options_separable(
 /// SpeedPP2D the walking speed), pooled over the left-out classes and the seeds run: where the
 /// cost of the rejection falls. Empty when no source has two gaits.
 pub(super) fn open_set_by_gait(names: &[&str], spreads: &[crate::open_set::SeedSpread]) -> String {
-    let pooled: Vec<(&str, Vec<node::gait::GaitCount>)> = names
+    let pooled: Vec<(&str, Vec<node::gait_status::GaitCount>)> = names
         .iter()
         .zip(spreads)
         .map(|(name, s)| {
@@ -178,7 +178,7 @@ Fresh known images called unknown, by the gait they touched down in (pooled over
             .map(|c| {
                 format!(
                     "{} {} ({}/{})",
-                    node::gait::gait_name(c.gait),
+                    node::gait_status::gait_name(c.gait),
                     pct(c.unknown as f64 / c.steps.max(1) as f64),
                     c.unknown,
                     c.steps
@@ -448,7 +448,7 @@ mod tests {
     #[test]
     fn the_gait_table_pools_seeds_and_skips_sources_of_one_gait() {
         use crate::open_set::{SeedSpread, mean_row as row};
-        let g = |gait, steps, unknown| node::gait::GaitCount {
+        let g = |gait, steps, unknown| node::gait_status::GaitCount {
             gait: Some(gait),
             steps,
             unknown,

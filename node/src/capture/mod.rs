@@ -172,7 +172,7 @@ pub struct Capture {
     /// Per foot: its last step, held until the next touchdown gives the flight after it.
     pending: Vec<Option<CapturedStep>>,
     ids: protocol::ids::IdConfig,
-    gaits: crate::gait::GaitTrack,
+    gaits: crate::gait_status::GaitTrack,
 }
 
 impl Capture {
@@ -188,7 +188,7 @@ impl Capture {
             counts: CaptureCounts::default(),
             decided: Vec::new(),
             pending: Vec::new(),
-            gaits: crate::gait::GaitTrack::default(),
+            gaits: crate::gait_status::GaitTrack::default(),
         }
     }
 

@@ -74,7 +74,7 @@ impl CaptureService {
             "steps": c.steps, "written": set.written, "duplicates": set.duplicates,
             "no_image": c.no_image, "blank": c.blank, "unlabelled": c.unlabelled,
             "spans_labels": c.spans_labels, "per_terrain": set.written_per_terrain,
-            "per_gait": set.written_per_gait.iter().map(|(g, n)| (crate::gait::gait_name(*g), *n))
+            "per_gait": set.written_per_gait.iter().map(|(g, n)| (crate::gait_status::gait_name(*g), *n))
                 .collect::<std::collections::BTreeMap<_, _>>(),
             "set_total": set.len(), "error": self.failed.as_ref().map(|e| e.to_string()),
         })
@@ -91,7 +91,7 @@ impl CaptureService {
         let gaits: Vec<String> = set
             .written_per_gait
             .iter()
-            .map(|(g, n)| format!("{} {n}", crate::gait::gait_name(*g)))
+            .map(|(g, n)| format!("{} {n}", crate::gait_status::gait_name(*g)))
             .collect();
         format!(
             "capture of {}: {} steps, {} written ({}; by gait at touchdown: {}), {} already in the set; skipped: {} without an image in the stance, {} blank, {} outside every label, {} spanning two labels; {} holds {} steps",

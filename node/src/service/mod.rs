@@ -20,14 +20,14 @@
 //! The bus handle is opened with retry and backoff: a missing interface, or one that goes
 //! down, shows as `Degraded` in NodeStatus and in the log, never as an exit.
 
+mod counters;
 mod running;
-mod stats;
 
 pub mod output;
+use counters::Shared;
+pub use counters::{NodeStats, StageTimes};
 pub use output::Output;
 pub use running::RunningNode;
-use stats::Shared;
-pub use stats::{NodeStats, StageTimes};
 
 use crate::unknown::{Reason, ReasonCounts};
 use std::path::Path;
@@ -48,7 +48,7 @@ use thiserror::Error;
 use crate::classifier::Model;
 use crate::classifier::model::{CatalogMismatch, ModelError};
 use crate::config::NodeConfig;
-use crate::gait::{GaitTally, GaitTrack, describe_counts};
+use crate::gait_status::{GaitTally, GaitTrack, describe_counts};
 use crate::stance::{Counters, Decided, StancePipeline};
 use crate::step_table::StepSender;
 use crate::unknown::energy::EnergyTally;

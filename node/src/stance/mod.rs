@@ -13,8 +13,8 @@
 mod adapt;
 mod ahead;
 mod debounce;
-mod decision;
 mod sample;
+mod step_decision;
 mod timing;
 
 use protocol::clock::Clock;
@@ -700,7 +700,7 @@ impl StancePipeline {
             Some(cls) if cfg.multi_frame && f.used > 0 => {
                 let m = cls.model();
                 let lp = f.sum_lp.get(..m.classes.len()).unwrap_or(&f.sum_lp);
-                let (best, pct) = decision::combine(lp);
+                let (best, pct) = step_decision::combine(lp);
                 tc.confidence_pct = pct;
                 tc.flags |= flags::MULTI_FRAME;
                 // The checks' verdict on the class the frames decided, at the sample-time frame.
@@ -735,20 +735,21 @@ impl StancePipeline {
             _ => {}
         }
         let sampled = f.used > 0 || (!cfg.multi_frame && f.best_err.is_some());
-        let outcome = decision::outcome(f.no_contact, f.used, sampled, self.classifier.is_some());
+        let outcome =
+            step_decision::outcome(f.no_contact, f.used, sampled, self.classifier.is_some());
         match outcome {
-            decision::Outcome::NoContact => self.counters.no_contact += 1,
-            decision::Outcome::NoSample => self.counters.no_sample += 1,
-            decision::Outcome::Classified => self.counters.classified += 1,
+            step_decision::Outcome::NoContact => self.counters.no_contact += 1,
+            step_decision::Outcome::NoSample => self.counters.no_sample += 1,
+            step_decision::Outcome::Classified => self.counters.classified += 1,
         }
-        decision::set_flags(&mut tc, outcome, cfg.low_confidence, f.repaired);
+        step_decision::set_flags(&mut tc, outcome, cfg.low_confidence, f.repaired);
         // The step's verdict, in one place for both paths: the image's checks, then the
         // energy check (the texture's terrain took energy out of the last hop that it does
         // not: other ground that looks like it).
         let reason = match outcome {
-            decision::Outcome::NoContact => Some(Reason::NoContact),
-            decision::Outcome::NoSample => Some(Reason::NoSample),
-            decision::Outcome::Classified => unknown::step_verdict(
+            step_decision::Outcome::NoContact => Some(Reason::NoContact),
+            step_decision::Outcome::NoSample => Some(Reason::NoSample),
+            step_decision::Outcome::Classified => unknown::step_verdict(
                 image_reason,
                 f.balance.class.is_some_and(|k| f.balance.rejects(k)),
             ),
@@ -771,7 +772,7 @@ impl StancePipeline {
             .clock
             .as_ref()
             .map_or(self.now_rx_us, |c| c.now_us().max(self.now_rx_us));
-        tc.latency_us = decision::latency_us(&tc, now, f.best_rx_us);
+        tc.latency_us = step_decision::latency_us(&tc, now, f.best_rx_us);
         out.emit(Decided {
             foot,
             class: tc,

@@ -218,7 +218,7 @@ impl TrainingSet {
             }
         }
         let mut o = String::from("gaits at touchdown (capture manifest): ");
-        let name = |g: u8| crate::gait::gait_name(Some(g));
+        let name = |g: u8| crate::gait_status::gait_name(Some(g));
         let counts: Vec<String> = all
             .iter()
             .map(|(&g, n)| format!("{} {n}", name(g)))

@@ -135,7 +135,7 @@ pub fn fit(stances: &[(usize, f64, f64)], n_classes: usize, rate: f64) -> Vec<Op
             Some(ReturnMap {
                 intercept_s: intercept,
                 slope,
-                residual_s: crate::stats::widened_band(&r, rate),
+                residual_s: crate::order_stats::widened_band(&r, rate),
                 stances: n,
             })
         })

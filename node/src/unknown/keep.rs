@@ -55,6 +55,16 @@ pub struct KeptCounts {
     pub dropped: u64,
 }
 
+impl std::fmt::Display for KeptCounts {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} unknown stances ({} already there, {} dropped: the writer fell behind)",
+            self.written, self.duplicates, self.dropped
+        )
+    }
+}
+
 /// The node's side: offers unknown stances, never blocks.
 #[derive(Clone)]
 pub struct UnknownKeeper {

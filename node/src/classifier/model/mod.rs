@@ -164,7 +164,7 @@ pub struct Model {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bits: Option<u8>,
     /// The gaits its training and calibration images touched down in (the capture manifest's
-    /// `gait`, see [`crate::gait`]), sorted: a stance in another gait may look new to it
+    /// `gait`, see [`crate::gait_status`]), sorted: a stance in another gait may look new to it
     /// (`presrs node --replay` counts unknowns per gait and names those). Absent in older model
     /// files and where no image's gait was known.
     #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -31,7 +31,7 @@ pub(crate) fn bands_of<'a>(
             v.push(value(&w));
         }
     }
-    crate::stats::class_bands(per, m.unknown.rate)
+    crate::order_stats::class_bands(per, m.unknown.rate)
 }
 
 /// Adds the load check to `m` with bands drawn over `images` (each with its class index),
@@ -58,7 +58,7 @@ pub fn add_load_check(m: &mut Model) -> bool {
 }
 
 /// Per class, the band of load (summed working image) its images showed at the sample time
-/// ([`crate::stats::class_bands`]): an image whose load lies outside its best class's band is
+/// ([`crate::order_stats::class_bands`]): an image whose load lies outside its best class's band is
 /// unknown, however its texture matches. It also carries the hopper's history (the steps after
 /// sand are light too): docs/decisions/unknown-load-check.md.
 pub(crate) fn load_ranges(work: &[Vec<u16>], labels: &[usize], rate: f64) -> Vec<[f64; 2]> {
@@ -67,7 +67,7 @@ pub(crate) fn load_ranges(work: &[Vec<u16>], labels: &[usize], rate: f64) -> Vec
     for (p, &k) in work.iter().zip(labels) {
         per[k].push(p.iter().map(|&v| v as f64).sum());
     }
-    crate::stats::class_bands(per, rate)
+    crate::order_stats::class_bands(per, rate)
 }
 
 /// Moves a class's calibrated threshold `q` so that images DISTANCE_MARGIN farther from the

@@ -4,7 +4,7 @@
 use super::*;
 use crate::classifier::image::PressureImage;
 use crate::classifier::model::Model;
-use crate::stats::{median, upper_quantile};
+use crate::order_stats::{median, upper_quantile};
 use crate::unknown::novelty::{
     Calibration, CalibrationSource, HELD_OUT_RATE_FACTOR, NOVELTY_K, NUISANCE_DIRECTIONS, Novelty,
     NoveltyScore, SHRINK_IMAGES,

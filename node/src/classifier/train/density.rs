@@ -2,7 +2,7 @@
 //! leave-one-out density and each class's spread.
 
 use super::*;
-use crate::stats::median;
+use crate::order_stats::median;
 
 /// `v` when it is a positive number, else `fallback` (else 1).
 pub(crate) fn positive(v: f64, fallback: f64) -> f64 {

@@ -30,10 +30,18 @@ pub mod error;
 mod fit;
 mod refit;
 
-pub use bands::*;
-pub use calibrate::*;
-pub use cross_fit::*;
-pub use density::*;
+pub use bands::{add_load_check, add_load_check_on, add_texture_check};
+pub use calibrate::{
+    CalibrateError, MAX_CALIBRATION_PER_CLASS, MIN_SAME_RUN_PER_CLASS, calibrate_on_runs, rescore,
+};
+pub use cross_fit::{CROSS_FIT_BLOCKS, TIME_BLOCKS, time_blocks, time_blocks_of};
+pub use density::loo_log_densities;
 pub use error::TrainError;
-pub use fit::*;
-pub use refit::*;
+pub use fit::{Labelled, Split, resolve_crop, train, train_with_max_dims};
+pub use refit::{RefitError, refit};
+// What the modules share among themselves and with the rest of the crate.
+pub(crate) use bands::{load_ranges, widen};
+pub(crate) use calibrate::{Parts, set_novelty};
+pub(crate) use cross_fit::{cross_fit, nuisance_directions, residual_vector};
+pub(crate) use density::{class_spreads, positive, unknown_thresholds};
+pub(crate) use fit::{fit, preprocess, sq_dist};

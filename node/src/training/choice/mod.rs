@@ -27,7 +27,7 @@ use crate::classifier::train::{
     preprocess, rescore, train_with_max_dims,
 };
 use crate::classifier::{ClassInfo, Classifier, Model, PressureImage};
-use crate::stats::auroc;
+use crate::order_stats::auroc;
 use crate::unknown::novelty::NoveltyScore;
 use crate::unknown::{self, Bands, ChoiceRecord, Measured};
 
