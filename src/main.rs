@@ -7,13 +7,13 @@ use clap::Parser;
 use presrs_cli::{Cli, Cmd, LabCmd};
 
 mod adaptation_cmd;
-mod bench_node;
+mod bench_node_cmd;
 mod capture_cmd;
 mod classifier_cmd;
 mod controller_cmd;
-mod demo;
+mod demo_cmd;
 mod energy_cmd;
-mod experiment;
+mod experiment_cmd;
 mod leg_cmd;
 mod mcap_cmd;
 mod node_cmd;
@@ -22,7 +22,7 @@ mod sim_cmd;
 
 fn run(cli: Cli) -> Result<ExitCode> {
     match cli.cmd {
-        Cmd::Demo(a) => demo::run(a),
+        Cmd::Demo(a) => demo_cmd::run(a),
         Cmd::Capture(a) => capture_cmd::run(a),
         Cmd::Train(a) => classifier_cmd::train(&a),
         Cmd::Eval(a) => classifier_cmd::eval(&a),
@@ -35,8 +35,8 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Cmd::Lab(cmd) => match cmd {
             LabCmd::Sim(a) => sim_cmd::run(a),
             LabCmd::Dataset(a) => classifier_cmd::dataset(&a),
-            LabCmd::Experiment(a) => experiment::run(a),
-            LabCmd::BenchNode(a) => bench_node::run(a),
+            LabCmd::Experiment(a) => experiment_cmd::run(a),
+            LabCmd::BenchNode(a) => bench_node_cmd::run(a),
             LabCmd::Classify(a) => classifier_cmd::classify(&a),
             LabCmd::Features(a) => classifier_cmd::features(&a),
             LabCmd::Repair(a) => classifier_cmd::repair(&a),
