@@ -119,7 +119,7 @@ fn finish_keep(keep: Option<node::unknown::keep::KeepWriter>, a: &NodeArgs) -> R
         let c = w
             .finish()
             .with_context(|| format!("--keep-unknown {}", dir.display()))?;
-        eprintln!("kept in {}: {c}", dir.display());
+        eprintln!("kept {c} in {}", dir.display());
     }
     Ok(())
 }
