@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Every test: format, lints, unit/property/interop tests, the arm64 build with its Debian
 # packages, and the vcan suite on real SocketCAN (inside a VM when this kernel has no CAN).
-# Installs what it needs first. Each part prints its wall time.
+# Installs what it needs, beside the first lints. Each part prints its wall time.
 set -euo pipefail
 cd "$(dirname "$0")"
 t0=$SECONDS
@@ -9,30 +9,44 @@ t0=$SECONDS
 part() { echo "== $1 (at $((SECONDS - t0)) s; $(df -h --output=avail . | tail -1 | tr -d ' ') free)"; }
 # One clean build per run: incremental caches only cost disk and time here.
 export CARGO_INCREMENTAL=0
-# Everything the parts need, before any part runs: the arm64 builds and the vcan run go side
-# by side below, and two apt-gets at once would fight over dpkg's lock.
-part "install dependencies"; scripts/install-deps.sh --cross arm64 --package --uml
-# The package tests' throwaway Debian roots (downloads and unpacking, no build needed), from
-# now on beside the builds: else the command's tail waited on the network for them.
+# What the parts need (Debian's packages, Python clients, Rust targets) installs beside the
+# host's lints, which need none of it: on a fresh machine the install took minutes that
+# clippy now fills. One install, before anything else that uses apt: two apt-gets at once
+# would fight over dpkg's lock.
+deps_log=$(mktemp); deps_rc=$(mktemp)
+( rc=0; scripts/install-deps.sh --cross arm64 --package --uml >"$deps_log" 2>&1 || rc=$?; echo "$rc" >"$deps_rc" ) &
+deps_pid=$!
+# A process and all it started: to stop the jobs beside the parts when a part fails.
+tree() { echo "$1"; for c in $(ps -o pid= --ppid "$1" 2>/dev/null); do tree "$c"; done; }
+trap 'for p in $(tree "$deps_pid") ${roots_pid:+$(tree "$roots_pid")} ${arm_build_pid:+$(tree "$arm_build_pid")} ${arm_pid:+$(tree "$arm_pid")}; do kill "$p" 2>/dev/null; done' EXIT
+part "install dependencies (beside the lints below; its output after them)"
+deps_ok() { while [ ! -s "$deps_rc" ]; do sleep 1; done; [ "$(cat "$deps_rc")" = 0 ]; }
+# Once installed: the package tests' throwaway Debian roots (downloads and unpacking, no build
+# needed; else the command's tail waited on the network for them), then the arm64 part's
+# builds (aarch64 lints, test binaries, the package's binary) in their own target directory
+# (scripts/test-arm64.sh), at idle priority: they take only the CPU time the parts below
+# leave (their tests wait on real time, the vcan suite's User-mode Linux holds one core), and
+# never make those wait. Their output comes after the vcan suite.
 roots_log=$(mktemp); roots_rc=$(mktemp)
-( rc=0; nice -n 10 scripts/test-package.sh --prepare >"$roots_log" 2>&1 || rc=$?; echo "$rc" >"$roots_rc" ) &
-roots_pid=$!
-part "cargo fmt --check"; cargo fmt --all --check
-part "import cycles between modules"; python3 scripts/module_cycles.py
-# The arm64 part's builds (aarch64 lints, test binaries, the package's binary), in their own
-# target directory (scripts/test-arm64.sh), from now on at idle priority: they take only the
-# CPU time the parts below leave (their tests wait on real time, the vcan suite's User-mode
-# Linux holds one core), and never make those wait. Its output comes after the vcan suite.
 arm_log=$(mktemp); arm_build_rc=$(mktemp)
 (
+  deps_ok || { echo 1 >"$roots_rc"; exit 0; }
+  rc=0; nice -n 10 scripts/test-package.sh --prepare >"$roots_log" 2>&1 || rc=$?; echo "$rc" >"$roots_rc"
+) &
+roots_pid=$!
+(
+  deps_ok || { echo 1 >"$arm_build_rc"; exit 0; }
   rc=0; chrt --idle 0 nice -n 19 scripts/test-arm64.sh --build >"$arm_log" 2>&1 || rc=$?
   echo "$rc" >"$arm_build_rc"
 ) &
 arm_build_pid=$!
-# A process and all it started: to stop the arm64 part when a part fails.
-tree() { echo "$1"; for c in $(ps -o pid= --ppid "$1" 2>/dev/null); do tree "$c"; done; }
-trap 'for p in $(tree "$roots_pid") $(tree "$arm_build_pid") ${arm_pid:+$(tree "$arm_pid")}; do kill "$p" 2>/dev/null; done' EXIT
+part "cargo fmt --check"; cargo fmt --all --check
+part "import cycles between modules"; python3 scripts/module_cycles.py
 part "cargo clippy"; cargo clippy --workspace --all-targets --features vcan,interop -- -D warnings
+part "install dependencies: done"
+deps_ok_rc=0; deps_ok || deps_ok_rc=1
+cat "$deps_log"; rm -f "$deps_log"
+[ "$deps_ok_rc" = 0 ] || { echo "FAILED: scripts/install-deps.sh (its output above)" >&2; exit 1; }
 part "the wire crate without std, for the foot's microcontroller (thumbv7em-none-eabihf)"
 cargo build -p presrs-wire --no-default-features --target thumbv7em-none-eabihf
 cargo clippy -p presrs-wire --no-default-features --target thumbv7em-none-eabihf -- -D warnings
