@@ -61,7 +61,7 @@ cross cargo clippy --quiet --target "$triple" -p presrs-node -p presrs-protocol 
 # classifier end to end (training, model files deciding as the build that wrote them). Not the
 # service's tests: qemu-user runs the guest's threads on this host's strongly ordered memory,
 # so an ordering bug that only ARM's weak memory model shows cannot appear under it, and what
-# the service's threads do is tested on the host (113 s under qemu for nothing the host does
+# the service's threads do is tested on the host (its time under qemu for nothing the host does
 # not prove; docs/decisions/test-command-time.md).
 node_tests=(--quiet --release --target "$triple" -p presrs-node --lib --test train_classify)
 if [ "$build_only" = 1 ]; then

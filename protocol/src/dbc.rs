@@ -208,7 +208,16 @@ pub fn signals(kind: MessageKind) -> Vec<Signal> {
             sig("LiftoffAngle", 44, 12, true, STEP_ANGLE_SCALE_RAD, "rad"),
             sig("EnergyRatio", 56, 8, false, ENERGY_RATIO_SCALE, ""),
         ],
-        MessageKind::TactileFrame => {
+        MessageKind::TactileFrame => tactile_signals(Variant::Fd),
+        MessageKind::TactileFrameClassic => tactile_signals(Variant::Classic),
+    }
+}
+
+/// The multiplexed segment layout of a tactile variant: segment 0 the header, the others
+/// pixels (the classic variant's CRC and timestamp in segments 1 and 2).
+fn tactile_signals(variant: Variant) -> Vec<Signal> {
+    match variant {
+        Variant::Fd => {
             let mut v = vec![
                 sig("FrameSeq", 0, 8, false, 1.0, ""),
                 sig("SegmentIndex", 8, 8, false, 1.0, "").mux(Mux::Multiplexor),
@@ -227,7 +236,7 @@ pub fn signals(kind: MessageKind) -> Vec<Signal> {
             }
             v
         }
-        MessageKind::TactileFrameClassic => {
+        Variant::Classic => {
             let mut v = vec![
                 sig("FrameSeq", 0, 8, false, 1.0, ""),
                 sig("SegmentIndex", 8, 16, false, 1.0, "").mux(Mux::Multiplexor),
