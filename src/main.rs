@@ -12,6 +12,7 @@ mod capture_cmd;
 mod classifier_cmd;
 mod controller_cmd;
 mod demo_cmd;
+mod discover_cmd;
 mod energy_cmd;
 mod experiment_cmd;
 mod leg_cmd;
@@ -30,6 +31,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Cmd::Controller(a) => controller_cmd::run(a),
         Cmd::Leg(a) => leg_cmd::run(a),
         Cmd::Bridge(a) => ros2_cmd::bridge(a),
+        Cmd::Discover(a) => discover_cmd::run(a),
         Cmd::Mcap(a) => mcap_cmd::run(a),
         Cmd::View(a) => mcap_cmd::view(a),
         Cmd::Lab(cmd) => match cmd {

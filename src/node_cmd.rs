@@ -49,6 +49,7 @@ pub fn run(a: NodeArgs) -> Result<ExitCode> {
                 multi_frame = cfg.multi_frame,
                 "presrs node starting"
             );
+            let terrains = cfg.terrains.clone();
             let mut node = NodeService::new(cfg, model)
                 .with_context(|| format!("--model {}", a.model.display()))?;
             // After the checks above: a bad model or config is an error before any file exists.
@@ -69,13 +70,21 @@ pub fn run(a: NodeArgs) -> Result<ExitCode> {
                 node.catalog(),
                 false,
             )?;
-            let running = node.start_with_tap(
+            let mut running = node.start_with_tap(
                 BusSource::Iface(iface.clone()),
                 outputs.recorder.as_ref().map(|r| r.bus_tap()),
             )?;
             while !signals.stopping() && running.is_running() {
                 if signals.take_reload() {
-                    match running.reload_model(&a.model) {
+                    // The terrains file again too: `presrs discover --add` may have added one.
+                    let catalog = match protocol::TerrainCatalog::load(terrains.as_deref()) {
+                        Ok(c) => Some(c),
+                        Err(e) => {
+                            tracing::error!("SIGHUP: {e}; keeping the terrains read at start");
+                            None
+                        }
+                    };
+                    match running.reload(&a.model, catalog) {
                         Ok(id) => {
                             tracing::info!(model = %a.model.display(), model_id = id, "SIGHUP: model reloaded")
                         }
@@ -107,8 +116,9 @@ fn keep_unknown(
     let Some(dir) = &a.keep_unknown else {
         return Ok(None);
     };
-    let (keeper, writer) = node::unknown::keep::UnknownKeeper::create(dir, source)
-        .with_context(|| format!("--keep-unknown {}", dir.display()))?;
+    let (keeper, writer) =
+        node::unknown::keep::UnknownKeeper::create(dir, source, &node.catalog().clone())
+            .with_context(|| format!("--keep-unknown {}", dir.display()))?;
     node.set_keep_unknown(if replay { keeper.waiting() } else { keeper });
     Ok(Some(writer))
 }

@@ -205,7 +205,9 @@ fn the_firmware_examples_log_is_a_run_the_node_decides() {
 
 /// `--keep-unknown DIR` over a replay: a model that knows three of the track's four terrains
 /// keeps exactly the steps it calls unknown on their image, as images `train` reads and a
-/// `kept.csv` that says why; keeping the same log again adds nothing.
+/// `kept.csv` that says why; keeping the same log again adds nothing; `presrs discover`
+/// proposes the fourth terrain from them, and nothing when the model knows all four; `--add`
+/// makes it a terrain that a fresh run decides, the known terrains no worse.
 #[test]
 fn keep_unknown_keeps_each_step_called_unknown_on_its_image_and_nothing_twice() {
     let dir = std::env::temp_dir().join(format!("presrs-keep-{}", std::process::id()));
@@ -269,7 +271,24 @@ fn keep_unknown_keeps_each_step_called_unknown_on_its_image_and_nothing_twice() 
         on_image.len()
     );
     let table = std::fs::read_to_string(kept.join("kept.csv")).unwrap();
-    let rows: Vec<&str> = table.lines().skip(1).collect();
+    let all_rows: Vec<&str> = table.lines().skip(1).collect();
+    // The session's known stances (reason `known`, under session/) beside the unknown ones.
+    let rows: Vec<&str> = all_rows
+        .iter()
+        .copied()
+        .filter(|r| r.split(',').nth(3) != Some("known"))
+        .collect();
+    let session = all_rows.len() - rows.len();
+    assert!(
+        session > 0 && session <= 3 * 40,
+        "{session} known stances kept"
+    );
+    for r in all_rows
+        .iter()
+        .filter(|r| r.split(',').nth(3) == Some("known"))
+    {
+        assert!(r.starts_with("session/"), "{r}");
+    }
     assert_eq!(rows.len(), on_image.len(), "{table}");
     for (row, v) in rows.iter().zip(&on_image) {
         let cols: Vec<&str> = row.split(',').collect();
@@ -296,5 +315,256 @@ fn keep_unknown_keeps_each_step_called_unknown_on_its_image_and_nothing_twice() 
         std::fs::read_to_string(kept.join("kept.csv")).unwrap(),
         table
     );
+    // `presrs discover`: the kept stances give one proposed terrain, the clay the model never
+    // saw: at least 80% of the run's clay steps at 90% purity or more.
+    let found = dir.join("found");
+    let discover = |kept: &std::path::Path, model: &std::path::Path| -> serde_json::Value {
+        let out = common::output_ok(
+            Command::new(env!("CARGO_BIN_EXE_presrs"))
+                .arg("discover")
+                .arg(kept)
+                .arg("--model")
+                .arg(model)
+                .arg("--json")
+                .arg("--out")
+                .arg(&found),
+        );
+        serde_json::from_slice(&out.stdout).unwrap()
+    };
+    let d = discover(&kept, &model_path);
+    let clay_of = |file: &str| {
+        let k = rows
+            .iter()
+            .position(|r| r.split(',').next() == Some(file))
+            .unwrap();
+        truth(on_image[k]["t_us"].as_u64().unwrap()).as_deref() == Some("clay")
+    };
+    let new: Vec<&serde_json::Value> = d["groups"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|g| g["new_ground"] == true)
+        .collect();
+    assert_eq!(new.len(), 1, "{d}");
+    let files: Vec<&str> = new[0]["files"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f.as_str().unwrap())
+        .collect();
+    let clay_in = files.iter().filter(|f| clay_of(f)).count();
+    eprintln!(
+        "discover: {} groups, the new one {} stances, {clay_in} of them clay (of {clay_steps} clay steps)",
+        d["groups"].as_array().unwrap().len(),
+        files.len()
+    );
+    assert!(
+        clay_in * 10 >= clay_steps * 8,
+        "{clay_in} of {clay_steps}: {d}"
+    );
+    assert!(
+        clay_in * 10 >= files.len() * 9,
+        "purity {clay_in}/{}: {d}",
+        files.len()
+    );
+    // Every stance in groups.csv, and a contact sheet per group, read back.
+    let groups = std::fs::read_to_string(found.join("groups.csv")).unwrap();
+    assert_eq!(groups.lines().count(), all_rows.len() + 1);
+    for g in 1..=d["groups"].as_array().unwrap().len() {
+        let png = std::fs::read(found.join(format!("group-{g}.png"))).unwrap();
+        assert_eq!(&png[1..4], b"PNG");
+    }
+    // The same run with a model that knows all four terrains: nothing new proposed.
+    let full_path = dir.join("full.json");
+    common::model_without("none").save(&full_path).unwrap();
+    let kept_full = dir.join("kept-full");
+    common::output_ok(
+        Command::new(env!("CARGO_BIN_EXE_presrs"))
+            .args(["node", "--replay", log.to_str().unwrap()])
+            .args(["--model", full_path.to_str().unwrap(), "--keep-unknown"])
+            .arg(&kept_full),
+    );
+    if kept_full.join("kept.csv").exists()
+        && std::fs::read_to_string(kept_full.join("kept.csv"))
+            .unwrap()
+            .lines()
+            .count()
+            > 1
+    {
+        let d = discover(&kept_full, &full_path);
+        assert!(
+            d["groups"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .all(|g| g["new_ground"] == false),
+            "known ground only: {d}"
+        );
+    }
+    // `--add mud`: the group as a terrain. On a fresh run (another seed), the clay steps are
+    // mud at 90% or more, and the known terrains lose at most a point against the old model.
+    let mud = dir.join("mud.json");
+    let terrains = dir.join("terrains.toml");
+    let add = |extra: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_presrs"))
+            .arg("discover")
+            .arg(&kept)
+            .arg("--model")
+            .arg(&model_path)
+            .args(["--add", "mud", "--out-model"])
+            .arg(&mud)
+            .arg("--terrains")
+            .arg(&terrains)
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let o = add(&[]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let said = String::from_utf8_lossy(&o.stderr);
+    assert!(said.contains("as `mud` (terrain id 20"), "{said}");
+    // Again: the model file exists, refused, nothing overwritten.
+    let written = std::fs::read(&mud).unwrap();
+    let o = add(&[]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("exists"), "{err}");
+    assert_eq!(std::fs::read(&mud).unwrap(), written);
+    // A name the model has: refused by name.
+    let o = Command::new(env!("CARGO_BIN_EXE_presrs"))
+        .arg("discover")
+        .arg(&kept)
+        .arg("--model")
+        .arg(&model_path)
+        .args(["--add", "wood", "--out-model"])
+        .arg(dir.join("wood.json"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("`wood`"), "{err}");
+    assert!(!dir.join("wood.json").exists());
+    let mut fresh = SimRobot::new(SimConfig::default(), 6);
+    let log2 = dir.join("run2.log");
+    let mut w = std::io::BufWriter::new(std::fs::File::create(&log2).unwrap());
+    let mut t = 0;
+    while t < 40_000_000 {
+        t += 1000;
+        fresh.advance_to(t, &mut |frame| {
+            protocol::candump::write_record(&mut w, "vcan0", &Stamped { t_us: t, frame }).unwrap()
+        });
+    }
+    drop(w);
+    let decide = |model: &std::path::Path| -> Vec<(String, String)> {
+        let out = common::output_ok(
+            Command::new(env!("CARGO_BIN_EXE_presrs"))
+                .args(["node", "--json", "--replay"])
+                .arg(&log2)
+                .arg("--model")
+                .arg(model)
+                .arg("--terrains")
+                .arg(&terrains),
+        );
+        String::from_utf8_lossy(&out.stdout)
+            .lines()
+            .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
+            .filter_map(|v| {
+                let t_us = v["t_us"].as_u64()?;
+                let truth = fresh
+                    .steps
+                    .iter()
+                    .rev()
+                    .find(|s| s.touchdown_us <= t_us)?
+                    .terrain
+                    .name()
+                    .to_string();
+                Some((truth, v["terrain"].as_str()?.to_string()))
+            })
+            .collect()
+    };
+    let (before, after) = (decide(&model_path), decide(&mud));
+    let scratch = decide(&full_path);
+    let share = |d: &[(String, String)], known: bool| {
+        let on: Vec<_> = d.iter().filter(|(t, _)| (t != "clay") == known).collect();
+        let right = on
+            .iter()
+            .filter(|(t, c)| c == t || (t == "clay" && c == "mud"))
+            .count();
+        (right as f64 / on.len().max(1) as f64, on.len())
+    };
+    let ((known_before, n_known), (known_after, _)) = (share(&before, true), share(&after, true));
+    let (clay_after, n_clay) = share(&after, false);
+    let scratch_tally = {
+        let mut m = std::collections::BTreeMap::new();
+        for p in &scratch {
+            *m.entry(p.clone()).or_insert(0) += 1;
+        }
+        m
+    };
+    eprintln!("a model trained on all four from the start: {scratch_tally:?}");
+    eprintln!(
+        "after --add mud, a fresh run: clay steps mud {:.1}% of {n_clay}; known terrains right \
+         {:.1}% -> {:.1}% of {n_known}",
+        clay_after * 100.0,
+        known_before * 100.0,
+        known_after * 100.0
+    );
+    assert!(clay_after >= 0.9, "{after:?}");
+    let tally = |d: &[(String, String)]| {
+        let mut m = std::collections::BTreeMap::new();
+        for p in d {
+            *m.entry(p.clone()).or_insert(0) += 1;
+        }
+        m
+    };
+    assert!(
+        known_after >= known_before - 0.01,
+        "{:?}\n{:?}",
+        tally(&before),
+        tally(&after)
+    );
+    // A stance of another sensor size in the keep: refused, naming the file, nothing written.
+    let odd = dir.join("odd");
+    std::fs::create_dir_all(odd.join("unknown")).unwrap();
+    std::fs::copy(kept.join("kept.csv"), odd.join("kept.csv")).unwrap();
+    for r in &all_rows {
+        let f = r.split(',').next().unwrap();
+        if let Some(parent) = odd.join(f).parent() {
+            std::fs::create_dir_all(parent).unwrap();
+        }
+        std::fs::copy(kept.join(f), odd.join(f)).unwrap();
+    }
+    let first = rows[0].split(',').next().unwrap();
+    std::fs::write(
+        odd.join(first),
+        b"P5\n32 32\n255\n"
+            .iter()
+            .copied()
+            .chain([7u8; 1024])
+            .collect::<Vec<u8>>(),
+    )
+    .unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_presrs"))
+        .arg("discover")
+        .arg(&odd)
+        .arg("--model")
+        .arg(&model_path)
+        .arg("--out")
+        .arg(dir.join("odd-found"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains(first), "{err}");
+    assert!(!dir.join("odd-found").exists());
+    // A folder that is not a keep: refused, naming what it lacks.
+    let o = Command::new(env!("CARGO_BIN_EXE_presrs"))
+        .args([
+            "discover",
+            dir.to_str().unwrap(),
+            "--model",
+            model_path.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("kept.csv"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }

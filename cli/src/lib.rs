@@ -15,6 +15,7 @@ pub mod capture;
 pub mod classifier;
 pub mod controller;
 pub mod demo;
+pub mod discover;
 pub mod energy;
 pub mod experiment;
 pub mod leg;
@@ -29,7 +30,7 @@ use clap::{Parser, Subcommand};
     name = "presrs",
     version,
     about = "PreSRS terrain node: classify terrain from a tactile foot over CAN",
-    after_help = "On the robot: node, controller, leg, bridge (systemd units in the .deb). On the lab's computer: demo, capture, train, eval, mcap, view, and `presrs lab` for the rest."
+    after_help = "On the robot: node, controller, leg, bridge (systemd units in the .deb). On the lab's computer: demo, capture, train, eval, discover, mcap, view, and `presrs lab` for the rest."
 )]
 pub struct Cli {
     #[command(subcommand)]
@@ -65,6 +66,10 @@ pub enum Cmd {
     /// its own JSON channel per foot, each pressure image a foxglove.RawImage; with --ros2, a
     /// rosbag2 directory that `ros2 bag play` reads (CDR, the bridge's topics).
     Mcap(mcap::McapArgs),
+    /// New ground: the stances a node kept as unknown (`node --keep-unknown DIR`) grouped into
+    /// proposed terrains, each with its size, how far it lies from the known terrains and a
+    /// contact sheet.
+    Discover(discover::DiscoverArgs),
     /// A recording at a glance: a foot's pressure image beside what the recording holds
     /// (terrain, contact, gait, speed), as a PNG.
     View(mcap::ViewArgs),

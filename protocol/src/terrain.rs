@@ -352,6 +352,48 @@ impl TerrainCatalog {
     pub fn added(&self) -> usize {
         self.added
     }
+
+    /// The lowest id from [`FIRST_LAB_ID`] up that no terrain has: the id a terrain a lab
+    /// adds gets (`presrs discover --add`); None when all are taken.
+    pub fn free_id(&self) -> Option<u8> {
+        (FIRST_LAB_ID..UNKNOWN_ID).find(|&id| self.by_id(id).is_none())
+    }
+}
+
+/// The first id a lab's own terrains get by default: the paper's end at 11, and a gap leaves
+/// room for terrains a later paper adds.
+pub const FIRST_LAB_ID: u8 = 20;
+
+/// Adds the entry `id`, `name` to the terrains file at `path` (made if missing; its entries
+/// kept as they are) and reads the file back: the catalog it now gives. Nothing is written
+/// when the entry clashes with the file or the defaults.
+pub fn append_entry(path: &Path, id: u8, name: &str) -> Result<TerrainCatalog, CatalogError> {
+    let origin = path.display().to_string();
+    let old = match std::fs::read_to_string(path) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => String::new(),
+        Err(e) => {
+            return Err(CatalogError::Read {
+                path: origin,
+                reason: e.to_string(),
+            });
+        }
+    };
+    let mut cat = TerrainCatalog::from_toml(&old, &origin)?;
+    cat.add(id as i64, name, &origin)?;
+    let mut text = old;
+    if !text.is_empty() && !text.ends_with('\n') {
+        text.push('\n');
+    }
+    if !text.is_empty() {
+        text.push('\n');
+    }
+    text.push_str(&format!("[[terrain]]\nid = {id}\nname = \"{name}\"\n"));
+    std::fs::write(path, &text).map_err(|e| CatalogError::Read {
+        path: origin.clone(),
+        reason: format!("cannot write it: {e}"),
+    })?;
+    TerrainCatalog::load(Some(path))
 }
 
 /// A `'static` copy of a terrain name, made once per distinct name in a process (catalogs are
@@ -373,6 +415,32 @@ fn intern(name: &str) -> &'static str {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_entry_appended_keeps_the_file_and_a_clash_writes_nothing() {
+        let dir = std::env::temp_dir().join(format!("presrs-terrains-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("terrains.toml");
+        // A file not made yet: made, and read back.
+        let cat = append_entry(&path, 20, "mud").unwrap();
+        assert_eq!(cat.by_name("mud").map(Terrain::id), Some(20));
+        assert_eq!(cat.free_id(), Some(21));
+        let cat = append_entry(&path, 21, "gravel_wet").unwrap();
+        assert_eq!(cat.added(), 2);
+        let before = std::fs::read_to_string(&path).unwrap();
+        assert!(
+            before.starts_with("[[terrain]]\nid = 20\nname = \"mud\"\n"),
+            "{before}"
+        );
+        // The same name again, a default's name, a default's id: refused, the file as it was.
+        for (id, name) in [(22, "mud"), (22, "grass"), (8, "tarmac")] {
+            assert!(append_entry(&path, id, name).is_err(), "{id} {name}");
+            assert_eq!(std::fs::read_to_string(&path).unwrap(), before);
+        }
+        assert_eq!(TerrainCatalog::paper().free_id(), Some(FIRST_LAB_ID));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 
     #[test]
     fn the_paper_catalog_has_twelve_terrains_in_id_order() {

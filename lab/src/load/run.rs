@@ -133,7 +133,8 @@ fn keep_on(
     dir: Option<&std::path::Path>,
 ) -> Result<Option<node::unknown::keep::KeepWriter>, LoadError> {
     let Some(dir) = dir else { return Ok(None) };
-    let (keeper, writer) = node::unknown::keep::UnknownKeeper::create(dir, "bench-node")?;
+    let (keeper, writer) =
+        node::unknown::keep::UnknownKeeper::create(dir, "bench-node", &node.catalog().clone())?;
     node.set_keep_unknown(keeper);
     Ok(Some(writer))
 }

@@ -558,6 +558,12 @@ impl Classifier {
         &self.q[..self.model.h]
     }
 
+    /// The last decision's feature vector F (scaled to the model's load when it normalises):
+    /// the whole of what the image shows the model, inside its PCA subspace and out.
+    pub fn features(&self) -> &[f32] {
+        &self.feat
+    }
+
     /// The last decision's centred feature vector, F - mean (models with a novelty score). For
     /// calibration.
     pub fn centred(&self) -> &[f32] {

@@ -82,13 +82,12 @@ pub enum ServiceError {
 /// Notes step `d` for the keeper when it is one to keep.
 #[inline]
 fn mark_keep(
-    keeping: bool,
+    keep: Option<&UnknownKeeper>,
     due: &mut [Option<(Decided, Option<u8>)>],
     d: &Decided,
     gait: Option<u8>,
 ) {
-    if keeping
-        && crate::unknown::keep::keepable(&d.class)
+    if keep.is_some_and(|k| k.wants(&d.class))
         && let Some(slot) = due.get_mut(d.foot as usize)
     {
         *slot = Some((*d, gait));
@@ -202,7 +201,7 @@ impl NodeService {
     pub fn process(&mut self, frame: &Stamped, out: &mut (impl Emit<Output> + ?Sized)) {
         self.gait.on_frame(frame, self.pipeline.ids());
         let (gait, tally, steps) = (self.gait.current(), &mut self.tally, &self.steps);
-        let (keeping, due) = (self.keep.is_some(), &mut self.keep_due);
+        let (keeping, due) = (self.keep.as_ref(), &mut self.keep_due);
         let t_us = frame.t_us;
         self.pipeline.on_frame(frame, &mut |d: Decided| {
             tally.add(gait, d.class.terrain == TERRAIN_UNKNOWN);
@@ -233,7 +232,7 @@ impl NodeService {
     /// has passed with no nearer frame possible, and NodeStatus when a status period is up.
     pub fn tick(&mut self, now_us: u64, out: &mut (impl Emit<Output> + ?Sized)) {
         let (gait, tally, steps) = (self.gait.current(), &mut self.tally, &self.steps);
-        let (keeping, due) = (self.keep.is_some(), &mut self.keep_due);
+        let (keeping, due) = (self.keep.as_ref(), &mut self.keep_due);
         self.pipeline.tick(now_us, &mut |d: Decided| {
             tally.add(gait, d.class.terrain == TERRAIN_UNKNOWN);
             mark_keep(keeping, due, &d, gait);
@@ -296,6 +295,17 @@ impl NodeService {
     /// model already loaded in place.
     pub fn reload_model(&mut self, path: &Path) -> Result<u64, ServiceError> {
         let model = Model::load(path)?;
+        self.set_model(model)
+    }
+
+    /// [`Self::set_model`] with the terrains read again (see [`RunningNode::reload`]).
+    pub fn set_model_in(
+        &mut self,
+        model: Model,
+        catalog: TerrainCatalog,
+    ) -> Result<u64, ServiceError> {
+        model.check_catalog(&catalog)?;
+        self.catalog = catalog;
         self.set_model(model)
     }
 

@@ -12,16 +12,22 @@
 //! writer writes what `presrs capture` writes, `DIR/unknown/<name>.pgm` with its line in
 //! `DIR/manifest.csv` (so a second keep of the same log adds nothing), plus `DIR/kept.csv`
 //! with each stance's reason, best class and confidence.
+//!
+//! Beside them, the run's first [`SESSION_PER_TERRAIN`] stances of each known terrain decided
+//! at [`SESSION_CONFIDENCE_PCT`] or more go to `DIR/session/<terrain>/` (reason `known` in
+//! `kept.csv`): how known ground looked in the same run, which `presrs discover --add`
+//! calibrates the new model on, so that what the run shares with the new ground (its load,
+//! its sensor, its day) is not taken for the new terrain's signature.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU8, AtomicU64, Ordering};
 
 use crossbeam_channel::{Receiver, Sender, TrySendError};
 use protocol::messages::{TerrainClass, UnknownReason};
 use protocol::tactile::MAX_PIXELS;
-use protocol::terrain::Terrain;
+use protocol::terrain::{Terrain, TerrainCatalog};
 
 use crate::capture::{CaptureError, CaptureSet, CapturedStep};
 use crate::classifier::PressureImage;
@@ -29,6 +35,15 @@ use crate::stance::{Decided, StanceSample};
 
 /// Stances the pool holds in flight: about 20 s of one foot that meets only new ground.
 pub const SLOTS: usize = 64;
+
+/// Known stances kept per terrain and run, as the session's references.
+pub const SESSION_PER_TERRAIN: u8 = 40;
+
+/// The confidence a known stance needs to be kept as a reference (the node's own label).
+pub const SESSION_CONFIDENCE_PCT: f64 = 90.0;
+
+/// The folder of a keep that holds the session's known stances.
+pub const SESSION_DIR: &str = "session";
 
 /// The header of `DIR/kept.csv`.
 pub const KEPT_HEADER: &str = "file,foot,step,reason,flags,confidence_pct,damage_pct,gait,source";
@@ -53,14 +68,17 @@ pub struct KeptCounts {
     pub duplicates: u64,
     /// Stances dropped for want of a free slot (the writer fell behind).
     pub dropped: u64,
+    /// Known stances kept as the session's references.
+    pub session: u64,
 }
 
 impl std::fmt::Display for KeptCounts {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "{} unknown stances ({} already there, {} dropped: the writer fell behind)",
-            self.written, self.duplicates, self.dropped
+            "{} unknown stances ({} already there, {} dropped: the writer fell behind) and {} \
+             known ones as the session's references",
+            self.written, self.duplicates, self.dropped, self.session
         )
     }
 }
@@ -72,6 +90,8 @@ pub struct UnknownKeeper {
     full: Sender<Box<Slot>>,
     dropped: Arc<AtomicU64>,
     wait: bool,
+    /// Known stances kept so far, per terrain id.
+    known: Arc<[AtomicU8; 256]>,
 }
 
 /// The writer's side: joins the thread and says what it wrote.
@@ -96,9 +116,14 @@ pub fn keepable(class: &TerrainClass) -> bool {
 impl UnknownKeeper {
     /// Opens `dir` (created if missing; an existing keep is added to, nothing overwritten) and
     /// starts the writer. `source` names the run in the manifest (the log's file, or the
-    /// interface).
-    pub fn create(dir: &Path, source: &str) -> Result<(Self, KeepWriter), CaptureError> {
+    /// interface); `catalog` names the known terrains' folders.
+    pub fn create(
+        dir: &Path,
+        source: &str,
+        catalog: &TerrainCatalog,
+    ) -> Result<(Self, KeepWriter), CaptureError> {
         let set = CaptureSet::open(dir)?;
+        let session = CaptureSet::open(&dir.join(SESSION_DIR))?;
         let kept_path = dir.join("kept.csv");
         let new = !kept_path.exists();
         let io = |e| crate::capture::io("append to", &kept_path, e);
@@ -130,6 +155,8 @@ impl UnknownKeeper {
         let dropped = Arc::new(AtomicU64::new(0));
         let w = Writer {
             set,
+            session,
+            catalog: catalog.clone(),
             kept,
             kept_path,
             source: source.replace([',', '\n'], "_"),
@@ -144,6 +171,7 @@ impl UnknownKeeper {
                 full,
                 dropped: dropped.clone(),
                 wait: false,
+                known: Arc::new(std::array::from_fn(|_| AtomicU8::new(0))),
             },
             KeepWriter { thread, dropped },
         ))
@@ -156,12 +184,28 @@ impl UnknownKeeper {
         self
     }
 
-    /// Offers step `d` (decided with `gait` in force) and its image `s`: kept when its verdict
-    /// rests on the image ([`keepable`]). Copies into a free slot; no allocation, no wait.
+    /// Whether step `class` is one to keep: unknown on its image ([`keepable`]), or a
+    /// confident known stance of a terrain that has fewer than [`SESSION_PER_TERRAIN`] kept.
+    #[inline]
+    pub fn wants(&self, class: &TerrainClass) -> bool {
+        keepable(class) || self.wants_known(class)
+    }
+
+    #[inline]
+    fn wants_known(&self, class: &TerrainClass) -> bool {
+        class.terrain != protocol::messages::TERRAIN_UNKNOWN
+            && class.confidence_pct >= SESSION_CONFIDENCE_PCT
+            && self.known[class.terrain as usize].load(Ordering::Relaxed) < SESSION_PER_TERRAIN
+    }
+
+    /// Offers step `d` (decided with `gait` in force) and its image `s`: kept when
+    /// [`Self::wants`] it. Copies into a free slot; no allocation, no wait.
     pub fn offer(&self, d: &Decided, gait: Option<u8>, s: &StanceSample<'_>) {
-        if !keepable(&d.class) || s.pixels.len() > MAX_PIXELS || s.pixels.len() != s.rows * s.cols {
+        if !self.wants(&d.class) || s.pixels.len() > MAX_PIXELS || s.pixels.len() != s.rows * s.cols
+        {
             return;
         }
+        let known = !keepable(&d.class);
         let slot = if self.wait {
             self.free.recv().ok()
         } else {
@@ -177,9 +221,14 @@ impl UnknownKeeper {
         (slot.rows, slot.cols, slot.bits) = (s.rows, s.cols, s.bits);
         slot.pixels[..s.pixels.len()].copy_from_slice(s.pixels);
         // The pool holds as many slots as the queue: a slot taken always fits.
-        if let Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) = self.full.try_send(slot)
-        {
-            self.dropped.fetch_add(1, Ordering::Relaxed);
+        match self.full.try_send(slot) {
+            Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => {
+                self.dropped.fetch_add(1, Ordering::Relaxed);
+            }
+            Ok(()) if known => {
+                self.known[d.class.terrain as usize].fetch_add(1, Ordering::Relaxed);
+            }
+            Ok(()) => {}
         }
     }
 }
@@ -205,6 +254,8 @@ impl KeepWriter {
 
 struct Writer {
     set: CaptureSet,
+    session: CaptureSet,
+    catalog: TerrainCatalog,
     kept: std::fs::File,
     kept_path: PathBuf,
     source: String,
@@ -229,10 +280,13 @@ impl Writer {
         let n = s.rows * s.cols;
         let image = PressureImage::new(s.rows, s.cols, s.bits, s.pixels[..n].to_vec());
         let c = &s.decided.class;
+        let known = (!keepable(c))
+            .then(|| self.catalog.by_id(c.terrain))
+            .flatten();
         let step = CapturedStep {
             foot: s.decided.foot,
             step: c.step,
-            terrain: Terrain::UNKNOWN,
+            terrain: known.unwrap_or(Terrain::UNKNOWN),
             touchdown_us: s.decided.touchdown_us,
             sample_us: s.sample_rx_us,
             load_sum: image.pixels.iter().map(|&p| p as u64).sum(),
@@ -243,14 +297,27 @@ impl Writer {
             flights_us: [None, None],
             frames: Vec::new(),
         };
-        if !self.set.add(&step, &self.source)? {
-            counts.duplicates += 1;
+        let set = if known.is_some() {
+            &mut self.session
+        } else {
+            &mut self.set
+        };
+        if !set.add(&step, &self.source)? {
+            if known.is_none() {
+                counts.duplicates += 1;
+            }
             return Ok(());
         }
-        let reason = c.unknown_reason().map_or("", UnknownReason::name);
+        let file = match (known, set.last_written.as_deref()) {
+            (Some(_), Some(f)) => format!("{SESSION_DIR}/{f}"),
+            (_, f) => f.unwrap_or_default().to_string(),
+        };
+        let reason = match known {
+            Some(_) => "known",
+            None => c.unknown_reason().map_or("", UnknownReason::name),
+        };
         let line = format!(
-            "{},{},{},{reason},{},{:.1},{:.1},{},{}\n",
-            self.set.last_written.as_deref().unwrap_or_default(),
+            "{file},{},{},{reason},{},{:.1},{:.1},{},{}\n",
             step.foot,
             step.step,
             c.flags,
@@ -263,7 +330,11 @@ impl Writer {
             .write_all(line.as_bytes())
             .and_then(|_| self.kept.flush())
             .map_err(|e| crate::capture::io("append to", &self.kept_path, e))?;
-        counts.written += 1;
+        if known.is_some() {
+            counts.session += 1;
+        } else {
+            counts.written += 1;
+        }
         Ok(())
     }
 }

@@ -26,8 +26,13 @@
 //!
 //! The reason travels on the bus (TerrainClass `UnknownReason`, `FlagEnergy`), in the node's
 //! statistics and in recordings, so a monitor can count unknowns per reason.
+//!
+//! What becomes of unknown ground: [`keep`] writes the stances off the node's thread,
+//! [`discover`] groups them into proposed terrains, [`add`] makes one a terrain of the model.
 
+pub mod add;
 pub mod checks;
+pub mod discover;
 pub mod energy;
 pub mod energy_fit;
 pub mod keep;

@@ -27,6 +27,7 @@ mod calibrate;
 mod cross_fit;
 mod density;
 pub mod error;
+mod extend;
 mod fit;
 mod refit;
 
@@ -37,6 +38,7 @@ pub use calibrate::{
 pub use cross_fit::{CROSS_FIT_BLOCKS, TIME_BLOCKS, time_blocks, time_blocks_of};
 pub use density::loo_log_densities;
 pub use error::TrainError;
+pub use extend::{Basis, ExtendError, MIN_NEW_STANCES, ToldApart, add_class, told_apart};
 pub use fit::{Labelled, Split, resolve_crop, train, train_with_max_dims};
 pub use refit::{RefitError, refit};
 // What the modules share among themselves and with the rest of the crate.

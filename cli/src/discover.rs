@@ -1,0 +1,38 @@
+//! `presrs` argument types: DiscoverArgs.
+
+use std::path::PathBuf;
+
+#[derive(clap::Args)]
+pub struct DiscoverArgs {
+    /// A folder of stances the node kept as unknown (`presrs node --keep-unknown DIR`).
+    pub dir: PathBuf,
+    /// The model the node ran with: its known terrains are what a group is new against.
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Write each stance's group (groups.csv) and a contact sheet per group (group-N.png)
+    /// into this directory. Default: the table on stdout only.
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// Add a group as a new terrain of this name: writes the model with it (--out-model) and
+    /// its entry in the terrains file (--terrains) when the catalog does not have the name.
+    #[arg(long, value_name = "NAME", requires = "out_model")]
+    pub add: Option<String>,
+    /// The group --add adds, as numbered in the table. Default: the one new-ground group.
+    #[arg(long, value_name = "N", requires = "add")]
+    pub group: Option<usize>,
+    /// Where --add writes the model with the new terrain (a new file; the node's own model
+    /// is not touched until you move this one in place and send SIGHUP).
+    #[arg(long, value_name = "FILE")]
+    pub out_model: Option<PathBuf>,
+    /// The terrains file the node runs with: the new terrain's entry is added to it (the file
+    /// made if missing), and the node reads it again on SIGHUP.
+    #[arg(long, value_name = "FILE")]
+    pub terrains: Option<PathBuf>,
+    /// One JSON object on stdout instead of the table.
+    #[arg(long)]
+    pub json: bool,
+    /// A fixed separation for new ground instead of the known terrains' own (for measuring
+    /// the default: scripts/discover_study.py).
+    #[arg(long, hide = true)]
+    pub min_separation: Option<f64>,
+}

@@ -1,0 +1,198 @@
+//! A proposed group made a terrain of the model (`presrs discover --add NAME`), the way of
+//! fitting it chosen by measurement on the lab's own run.
+//!
+//! Four candidates: the PCA subspace extended by the new terrain's directions or fitted
+//! again ([`Basis`]), each without or with the run's own known stances (the keep's
+//! `session/`, labelled by the running model at 90% or more) stored as samples of their
+//! terrains: the new terrain's stances all come from this run, and without known ground
+//! from the same run, what the run shares with them (its load, its sensor, its day) is taken
+//! for the new terrain's signature and draws known ground to it. Each is scored on what the lab cares about: of the run's known stances it was
+//! not calibrated on (every other one of each terrain), the share still decided as the
+//! running model decided them, plus the share of the new terrain's stored stances decided as
+//! the new terrain with each left out. The best sum wins; on a tie the one that has seen the
+//! run's known ground (the held-out half is small: a tie is common, and the run's own
+//! stances were never worse on the simulator's leave-one-terrain-out runs), then `extend`,
+//! the one that changes least. A keep without known stances (written before they were kept)
+//! scores the known terrains on their stored stances instead.
+//!
+//! Why measured and not fixed: on the simulator's leave-one-terrain-out runs no candidate
+//! kept the known terrains best on every seed (docs/decisions/discover-grouping.md).
+
+use crate::classifier::model::ClassInfo;
+use crate::classifier::train::{Basis, ToldApart, add_class, told_apart};
+use crate::classifier::{Classifier, Model, PressureImage};
+
+use super::discover::{DiscoverError, Discovery, KeptStance};
+
+/// One way of adding the terrain, and how it scored.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Candidate {
+    /// How the subspace took the terrain in.
+    pub basis: Basis,
+    /// The run's known stances stored as samples too.
+    pub session: bool,
+    /// The run's held-out known stances decided as before, and how many there were
+    /// (`None` without any: the stored stances scored instead, in `stored_known`).
+    pub known_kept: Option<(usize, usize)>,
+    /// The known terrains' stored stances decided right with each left out, and how many.
+    pub stored_known: (usize, usize),
+    /// The new terrain's stored stances decided as it with each left out, and how many.
+    pub new_right: (usize, usize),
+}
+
+impl Candidate {
+    /// The score: the known share (held-out run stances, else stored) plus the new share.
+    pub fn score(&self) -> f64 {
+        let share = |(a, n): (usize, usize)| a as f64 / n.max(1) as f64;
+        share(self.known_kept.unwrap_or(self.stored_known)) + share(self.new_right)
+    }
+
+    /// Its name in the table: `extend`, `refit+session`, ...
+    pub fn name(&self) -> String {
+        format!(
+            "{}{}",
+            self.basis.name(),
+            if self.session { "+session" } else { "" }
+        )
+    }
+}
+
+/// A proposed group made a terrain of the model ([`add_group`]).
+pub struct Added {
+    /// The model with the terrain added.
+    pub model: Model,
+    /// The group's index in the [`Discovery`].
+    pub group: usize,
+    /// The run's known stances the keep holds (its `session/`).
+    pub session_refs: usize,
+    /// The candidates measured, and which was chosen.
+    pub candidates: Vec<Candidate>,
+    /// The index of the chosen one.
+    pub chosen: usize,
+    /// Each class of the model before, its stored stances decided each without itself.
+    pub before: Vec<ToldApart>,
+    /// The same for the model with the terrain added (the new terrain last).
+    pub after: Vec<ToldApart>,
+}
+
+/// `model` with group `group` of `d` (an index; None: the one new-ground group) added as
+/// terrain `terrain` (its name and id from the lab's catalog). See the module docs.
+pub fn add_group(
+    model: &Model,
+    d: &Discovery,
+    stances: &[KeptStance],
+    group: Option<usize>,
+    terrain: ClassInfo,
+) -> Result<Added, DiscoverError> {
+    let add = |m: String| DiscoverError::Add(m);
+    let group = pick(d, group)?;
+    let images: Vec<PressureImage> = d.groups[group]
+        .members
+        .iter()
+        .filter_map(|&i| stances.get(i).map(|s| s.image.clone()))
+        .collect();
+    // The run's known stances of terrains the model has, every other one of each terrain to
+    // calibrate on and the rest to score with.
+    let mut seen = vec![0usize; model.classes.len()];
+    let (mut calibrate, mut check, mut all) = (Vec::new(), Vec::new(), Vec::new());
+    for s in stances {
+        let Some(name) = s.known.as_deref() else {
+            continue;
+        };
+        let Some(k) = model.classes.iter().position(|c| c.name == name) else {
+            continue;
+        };
+        all.push((&s.image, k));
+        if seen[k].is_multiple_of(2) {
+            calibrate.push((&s.image, k));
+        } else {
+            check.push((&s.image, k));
+        }
+        seen[k] += 1;
+    }
+    let fit = |session: &[(&PressureImage, usize)], basis| {
+        add_class(model, terrain.clone(), &images, session, basis).map_err(|e| add(e.to_string()))
+    };
+    let mut candidates = Vec::new();
+    // The run's own known ground first: on a tie, the model that has seen this run.
+    for basis in [Basis::Extend, Basis::Refit] {
+        if !calibrate.is_empty() {
+            candidates.push(score(&fit(&calibrate, basis)?, basis, true, &check));
+        }
+        candidates.push(score(&fit(&[], basis)?, basis, false, &check));
+    }
+    let mut chosen = 0;
+    for (i, c) in candidates.iter().enumerate() {
+        if c.score() > candidates[chosen].score() + 1e-9 {
+            chosen = i;
+        }
+    }
+    let pick = &candidates[chosen];
+    // With all of the run's known stances for the model that goes to the robot.
+    let m = fit(if pick.session { &all } else { &[] }, pick.basis)?;
+    Ok(Added {
+        session_refs: all.len(),
+        before: told_apart(model),
+        after: told_apart(&m),
+        model: m,
+        group,
+        candidates,
+        chosen,
+    })
+}
+
+/// The group to add: `group` if it is one, else the one new-ground group.
+fn pick(d: &Discovery, group: Option<usize>) -> Result<usize, DiscoverError> {
+    let add = |m: String| DiscoverError::Add(m);
+    if let Some(g) = group {
+        if g >= d.groups.len() {
+            return Err(add(format!(
+                "--group {}: there are {} groups; pick one from the table",
+                g + 1,
+                d.groups.len()
+            )));
+        }
+        return Ok(g);
+    }
+    let new: Vec<usize> = d.new_ground().map(|(g, _)| g).collect();
+    match new[..] {
+        [g] => Ok(g),
+        [] => Err(add(
+            "no group is new ground: nothing to add (a group the table calls known ground can \
+             still be added with --group N)"
+                .into(),
+        )),
+        _ => Err(add(format!(
+            "{} groups are new ground: say which with --group N",
+            new.len()
+        ))),
+    }
+}
+
+/// Candidate `m`'s scores (see the module docs).
+fn score(m: &Model, basis: Basis, session: bool, check: &[(&PressureImage, usize)]) -> Candidate {
+    let told = told_apart(m);
+    let k_new = m.classes.len() - 1;
+    let stored_known = told[..k_new.min(told.len())]
+        .iter()
+        .fold((0, 0), |(a, n), t| (a + t.right, n + t.stances));
+    let new_right = told.get(k_new).map_or((0, 0), |t| (t.right, t.stances));
+    let known_kept = (!check.is_empty()).then(|| {
+        let mut c = Classifier::new(m.clone());
+        let kept = check
+            .iter()
+            .filter(|(img, k)| {
+                c.classify_image(img, false)
+                    .is_ok_and(|d| d.class == Some(*k))
+            })
+            .count();
+        (kept, check.len())
+    });
+    Candidate {
+        basis,
+        session,
+        known_kept,
+        stored_known,
+        new_right,
+    }
+}

@@ -1,0 +1,416 @@
+//! New ground from the stances a node kept as unknown (`presrs node --keep-unknown DIR`):
+//! `presrs discover` groups them into proposed terrains.
+//!
+//! **Where.** Each stance is taken to its spectrum's shape ([`BANDS`] log-spaced bands of the
+//! model's feature vector, log mean magnitude, less the mean): by band a ground's texture
+//! shows while one stance's speckle averages out, and less the mean a hop that lands harder
+//! is the same ground. The model's stored stances, its known terrains, are taken there too.
+//!
+//! **Linking.** Two kept stances are linked when they lie nearer each other than they lie, on
+//! average, to the nearest stored stance: no distance scale has to be chosen, and a chain
+//! does not run through known ground. A linked group of [`MIN_GROUP`] or more is a proposal;
+//! smaller ones are scattered stances.
+//!
+//! **New or known.** A group's separation is the median, over its members, of the distance to
+//! known ground over the distance to the nearest other member. The known terrains measure
+//! what the edge of a band looks like: each terrain's quarter of stored stances farthest from
+//! its mean, taken as a group against the model's other stored stances; a group is new ground
+//! when it stands apart at least as much as the most separated of those edges, else it is
+//! known ground at the edge of its band. A group of a run's first [`SETTLING_STEPS`] steps
+//! alone is the robot settling into its gait.
+//!
+//! Why these and not the candidates measured beside them (the whole feature vector, its PCA
+//! projection, a distance quantile of the model's, other linking rules):
+//! docs/decisions/discover-grouping.md. Off the robot's hot path: this runs on a folder.
+
+use std::path::Path;
+
+use crate::classifier::dataset::read_image;
+use crate::classifier::{Classifier, Model, PressureImage};
+use crate::order_stats::median;
+
+/// A run's first steps, in which the robot settles into its gait (a launch lands from another
+/// height at another speed): a group of them alone is no ground.
+pub const SETTLING_STEPS: usize = 10;
+
+/// The fewest stances a proposed terrain holds: fewer are a stumble, not ground.
+pub const MIN_GROUP: usize = 5;
+
+/// One stance of a keep folder (a line of its `kept.csv` and its image).
+#[derive(Clone, Debug)]
+pub struct KeptStance {
+    /// The image, relative to the folder (`unknown/<name>.pgm`).
+    pub file: String,
+    /// The foot.
+    pub foot: u8,
+    /// The step number the node gave it.
+    pub step: u16,
+    /// Why the node called it unknown.
+    pub reason: String,
+    /// The run it was kept from.
+    pub source: String,
+    /// For a known stance kept as the session's reference (reason `known`), the terrain the
+    /// node decided; None for an unknown one.
+    pub known: Option<String>,
+    /// The stance image.
+    pub image: PressureImage,
+}
+
+/// Why a keep folder cannot be grouped.
+#[derive(Debug, thiserror::Error)]
+pub enum DiscoverError {
+    /// The folder is not a keep folder, or holds nothing.
+    #[error("{dir}: {msg}")]
+    Folder {
+        /// The folder.
+        dir: String,
+        /// What is wrong and how to fix it.
+        msg: String,
+    },
+    /// A group cannot be added as a terrain.
+    #[error("{0}")]
+    Add(String),
+    /// One stance does not fit the model.
+    #[error("{file}: {msg}")]
+    Stance {
+        /// The stance's image.
+        file: String,
+        /// What does not fit.
+        msg: String,
+    },
+}
+
+/// Reads a keep folder: its `kept.csv` and every image it names.
+pub fn read_kept(dir: &Path) -> Result<Vec<KeptStance>, DiscoverError> {
+    let folder = |msg: String| DiscoverError::Folder {
+        dir: dir.display().to_string(),
+        msg,
+    };
+    let table = dir.join("kept.csv");
+    let text = std::fs::read_to_string(&table).map_err(|e| {
+        folder(format!(
+            "no kept.csv ({e}): not a folder of kept stances; write one with `presrs node \
+             --keep-unknown DIR`"
+        ))
+    })?;
+    let mut out = Vec::new();
+    for (n, line) in text.lines().enumerate().skip(1) {
+        let line = line.strip_suffix('\r').unwrap_or(line);
+        if line.is_empty() {
+            continue;
+        }
+        let f: Vec<&str> = line.splitn(9, ',').collect();
+        let bad = |what: &str| folder(format!("kept.csv line {}: {what}", n + 1));
+        if f.len() != 9 {
+            return Err(bad("not the 9 columns of `presrs node --keep-unknown`"));
+        }
+        let image = read_image(&dir.join(f[0])).map_err(|e| DiscoverError::Stance {
+            file: f[0].to_string(),
+            msg: e.to_string(),
+        })?;
+        out.push(KeptStance {
+            file: f[0].to_string(),
+            foot: f[1].parse().map_err(|_| bad("foot is not a number"))?,
+            step: f[2].parse().map_err(|_| bad("step is not a number"))?,
+            reason: f[3].to_string(),
+            source: f[8].to_string(),
+            known: (f[3] == "known")
+                .then(|| f[0].split('/').nth(1).map(str::to_string))
+                .flatten(),
+            image,
+        });
+    }
+    if out.is_empty() {
+        return Err(folder(
+            "kept.csv lists no stance: the node kept nothing from its run".into(),
+        ));
+    }
+    Ok(out)
+}
+
+/// One proposed group.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Group {
+    /// Its stances, indices into the stances given, in order.
+    pub members: Vec<usize>,
+    /// The median distance of a member to its nearest other member (spectrum shapes).
+    pub spread: f64,
+    /// The median distance of a member to the nearest stored stance of a known terrain.
+    pub to_known: f64,
+    /// The median, over members, of the distance to known ground over the distance to the
+    /// nearest other member: how much more the group is its own than any known terrain's.
+    pub separation: f64,
+    /// The known terrain nearest the group (a class index of the model).
+    pub nearest_class: usize,
+    /// Whether the group is new ground: it stands apart from known ground at least as the
+    /// edge of a known terrain's band does ([`Discovery::min_separation`]), and it is not
+    /// only the first [`SETTLING_STEPS`] steps of its runs.
+    pub new_ground: bool,
+    /// Every member is one of the first [`SETTLING_STEPS`] steps of its run: the robot
+    /// settling into its gait, not ground.
+    pub settling: bool,
+}
+
+/// What [`discover`] found.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Discovery {
+    /// The separation a group needs to be new ground: the most the edge of a known terrain's
+    /// band shows (the quarter of its stored stances farthest from its mean shape, taken as a
+    /// group against the model's other stored stances).
+    pub min_separation: f64,
+    /// The known terrain whose edge that is (a class index).
+    pub least_separated: usize,
+    /// The groups of at least [`MIN_GROUP`] stances, largest first.
+    pub groups: Vec<Group>,
+    /// Each stance's group (an index into `groups`), `None` for scattered stances and those
+    /// without contact.
+    pub group_of: Vec<Option<usize>>,
+    /// Stances without contact (the model's test): no ground to group.
+    pub no_contact: Vec<usize>,
+}
+
+impl Discovery {
+    /// The groups that are new ground.
+    pub fn new_ground(&self) -> impl Iterator<Item = (usize, &Group)> {
+        self.groups.iter().enumerate().filter(|(_, g)| g.new_ground)
+    }
+}
+
+/// Groups `stances` against `model`'s known terrains (see the module docs).
+pub fn discover(model: &Model, stances: &[KeptStance]) -> Result<Discovery, DiscoverError> {
+    discover_at(model, stances, None)
+}
+
+/// [`discover`] with a fixed separation for new ground instead of the known terrains' own
+/// (for measuring the choice: `scripts/discover_study.py`).
+pub fn discover_at(
+    model: &Model,
+    stances: &[KeptStance],
+    min_separation: Option<f64>,
+) -> Result<Discovery, DiscoverError> {
+    let mut c = Classifier::new(model.clone());
+    let known = Shapes::of_stored(model, &mut c);
+    let no_distance = || DiscoverError::Folder {
+        dir: "the model".into(),
+        msg: "holds no training images (an older file) or fewer than two of a terrain: no \
+              distance to group by; retrain it with `presrs train`"
+            .into(),
+    };
+    let (own, least_separated) = edge_separation(model, &known).ok_or_else(no_distance)?;
+    let min_separation = min_separation.unwrap_or(own);
+    let (mut points, mut at, mut no_contact) = (Shapes::default(), Vec::new(), Vec::new());
+    for (i, s) in stances
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| s.known.is_none())
+    {
+        c.classify_image(&s.image, false)
+            .map_err(|e| DiscoverError::Stance {
+                file: s.file.clone(),
+                msg: format!("{e}: keep and discover with the model of this sensor"),
+            })?;
+        if c.in_contact() {
+            points.push(c.features());
+            at.push(i);
+        } else {
+            no_contact.push(i);
+        }
+    }
+    let n = at.len();
+    let near_known: Vec<(f64, usize)> = (0..n)
+        .map(|a| {
+            (0..known.len())
+                .map(|j| (known.dist(j, points.get(a)), model.sample_classes[j]))
+                .min_by(|x, y| x.0.total_cmp(&y.0))
+                .unwrap_or((f64::INFINITY, 0))
+        })
+        .collect();
+    let mut parent: Vec<usize> = (0..n).collect();
+    let mut nearest_member = vec![f64::INFINITY; n];
+    for a in 0..n {
+        for b in a + 1..n {
+            let d = points.dist(a, points.get(b));
+            // An identical image (the same stance kept from two copies of a log) is no
+            // neighbour to measure a spread by.
+            if d > 0.0 {
+                nearest_member[a] = nearest_member[a].min(d);
+                nearest_member[b] = nearest_member[b].min(d);
+            }
+            // Linked when nearer each other than they are, on average, to known ground: no
+            // distance scale to choose, and a chain does not run through a known terrain.
+            // (Nearer than either: a terrain splits in two; than both: known ground's edge
+            // joins it. docs/decisions/discover-grouping.md.)
+            if d < 0.5 * (near_known[a].0 + near_known[b].0) {
+                let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
+                parent[ra.max(rb)] = ra.min(rb);
+            }
+        }
+    }
+    let mut components: Vec<Vec<usize>> = vec![Vec::new(); n];
+    for a in 0..n {
+        let r = root(&mut parent, a);
+        components[r].push(a);
+    }
+    components.retain(|m| m.len() >= MIN_GROUP);
+    components.sort_by_key(|m| std::cmp::Reverse(m.len()));
+    let mut group_of = vec![None; stances.len()];
+    let mut groups = Vec::new();
+    for (g, members) in components.into_iter().enumerate() {
+        let mut classes = vec![0usize; model.classes.len()];
+        for &a in &members {
+            if let Some(c) = classes.get_mut(near_known[a].1) {
+                *c += 1;
+            }
+            group_of[at[a]] = Some(g);
+        }
+        let med = |f: &dyn Fn(usize) -> f64| {
+            median(&mut members.iter().map(|&a| f(a)).collect::<Vec<_>>())
+        };
+        let separation = med(&|a| near_known[a].0 / nearest_member[a].max(f64::MIN_POSITIVE));
+        let settling = members
+            .iter()
+            .all(|&a| stances[at[a]].step as usize <= SETTLING_STEPS);
+        groups.push(Group {
+            spread: med(&|a| nearest_member[a]),
+            to_known: med(&|a| near_known[a].0),
+            separation,
+            nearest_class: (0..classes.len()).max_by_key(|&k| classes[k]).unwrap_or(0),
+            new_ground: separation >= min_separation && !settling,
+            settling,
+            members: members.iter().map(|&a| at[a]).collect(),
+        });
+    }
+    Ok(Discovery {
+        min_separation,
+        least_separated,
+        groups,
+        group_of,
+        no_contact,
+    })
+}
+
+/// The bands a spectrum's shape is taken over.
+pub const BANDS: usize = 24;
+
+/// Spectrum shapes, [`BANDS`] numbers each: the log mean magnitude of the feature vector in
+/// log-spaced frequency bands, less their mean. By band, a ground's texture shows and one
+/// stance's speckle averages out (a grass stance's bins are as far from another grass
+/// stance's as from wood's); less the mean, a hop that lands harder is the same ground.
+#[derive(Default)]
+struct Shapes(Vec<f32>);
+
+impl Shapes {
+    fn push(&mut self, features: &[f32]) {
+        let h = features.len().max(1);
+        let edge =
+            |i: usize| ((h as f64).powf(i as f64 / BANDS as f64).round() as usize).clamp(1, h);
+        let start = self.0.len();
+        for i in 0..BANDS {
+            let lo = edge(i).min(h - 1);
+            let hi = edge(i + 1).max(lo + 1).min(h);
+            let band = features.get(lo..hi).unwrap_or(&[]);
+            let mean = band.iter().map(|x| x.abs()).sum::<f32>() / band.len().max(1) as f32;
+            self.0.push((mean + 1e-3).ln());
+        }
+        let shape = &mut self.0[start..];
+        let level = shape.iter().sum::<f32>() / BANDS as f32;
+        shape.iter_mut().for_each(|x| *x -= level);
+    }
+
+    /// The shapes of the model's stored stances (from its stored working images), in the
+    /// order of its samples; empty for a model without them.
+    fn of_stored(model: &Model, c: &mut Classifier) -> Self {
+        let mut out = Shapes::default();
+        let Some(stored) = &model.images else {
+            return out;
+        };
+        if stored.pixels.len() != model.sample_classes.len() {
+            return out;
+        }
+        for work in &stored.pixels {
+            if work.len() != c.work_mut().len() {
+                return Shapes::default();
+            }
+            c.classify_work(work);
+            out.push(c.features());
+        }
+        out
+    }
+
+    fn len(&self) -> usize {
+        self.0.len() / BANDS
+    }
+
+    fn get(&self, i: usize) -> &[f32] {
+        &self.0[i * BANDS..(i + 1) * BANDS]
+    }
+
+    fn dist(&self, i: usize, p: &[f32]) -> f64 {
+        self.get(i)
+            .iter()
+            .zip(p)
+            .map(|(x, y)| ((*x - *y) as f64).powi(2))
+            .sum::<f64>()
+            .sqrt()
+    }
+}
+
+/// The separation known ground at the edge of its band shows (see
+/// [`Discovery::min_separation`]), the most of any known terrain's, and whose it is; None when
+/// no terrain stores [`MIN_GROUP`] + 1 stances. A terrain's edge: the quarter of its stored
+/// stances farthest from its mean shape (at least [`MIN_GROUP`]), taken as a group against
+/// the rest of the model's stances.
+fn edge_separation(model: &Model, known: &Shapes) -> Option<(f64, usize)> {
+    let m = known.len();
+    if m == 0 || m != model.sample_classes.len() {
+        return None;
+    }
+    let class = &model.sample_classes;
+    let mut worst: Option<(f64, usize)> = None;
+    for k in 0..model.classes.len() {
+        let own: Vec<usize> = (0..m).filter(|&i| class[i] == k).collect();
+        let n_edge = (own.len() / 4).max(MIN_GROUP);
+        if own.len() <= n_edge {
+            continue;
+        }
+        let mut mean = [0f32; BANDS];
+        for &i in &own {
+            mean.iter_mut()
+                .zip(known.get(i))
+                .for_each(|(m, x)| *m += x / own.len() as f32);
+        }
+        let mut by_far: Vec<(f64, usize)> =
+            own.iter().map(|&i| (known.dist(i, &mean), i)).collect();
+        by_far.sort_by(|a, b| b.0.total_cmp(&a.0));
+        let edge: Vec<usize> = by_far[..n_edge].iter().map(|&(_, i)| i).collect();
+        let mut ratios: Vec<f64> = edge
+            .iter()
+            .map(|&i| {
+                let (mut member, mut rest) = (f64::INFINITY, f64::INFINITY);
+                for j in (0..m).filter(|&j| j != i) {
+                    let d = known.dist(j, known.get(i));
+                    if edge.contains(&j) {
+                        member = member.min(d);
+                    } else {
+                        rest = rest.min(d);
+                    }
+                }
+                rest / member.max(f64::MIN_POSITIVE)
+            })
+            .collect();
+        let r = median(&mut ratios);
+        if worst.is_none_or(|(w, _)| r > w) {
+            worst = Some((r, k));
+        }
+    }
+    worst
+}
+
+/// The union-find root of `a`, halving the path on the way.
+fn root(parent: &mut [usize], mut a: usize) -> usize {
+    while parent[a] != a {
+        parent[a] = parent[parent[a]];
+        a = parent[a];
+    }
+    a
+}

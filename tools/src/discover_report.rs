@@ -1,0 +1,253 @@
+//! What `presrs discover` shows of a [`Discovery`]: the table, its JSON, and on disk each
+//! stance's group (`groups.csv`) with a contact sheet per group.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use node::classifier::Model;
+use node::classifier::train::ToldApart;
+use node::unknown::add::Added;
+use node::unknown::discover::{Discovery, KeptStance, MIN_GROUP};
+
+use crate::contact_sheet::contact_sheet;
+use crate::plot::PlotError;
+
+/// Why the report could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum ReportError {
+    /// A file or folder.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file or folder.
+        path: String,
+        /// What the OS said.
+        source: std::io::Error,
+    },
+    /// A contact sheet.
+    #[error("{path}: {source}")]
+    Sheet {
+        /// The sheet.
+        path: String,
+        /// What the drawing said.
+        source: PlotError,
+    },
+}
+
+fn verdict(d: &Discovery, g: usize, model: &Model) -> String {
+    let grp = &d.groups[g];
+    let near = model
+        .classes
+        .get(grp.nearest_class)
+        .map_or("?", |c| c.name.as_str());
+    if grp.settling {
+        "the runs' first steps (settling into the gait)".to_string()
+    } else if !grp.new_ground {
+        format!("known ground at the edge of {near}'s band")
+    } else {
+        "new ground".to_string()
+    }
+}
+
+/// The kept stances that are unknown ones (not the session's known references).
+fn unknown(kept: &[KeptStance]) -> usize {
+    kept.iter().filter(|k| k.known.is_none()).count()
+}
+
+/// The table `presrs discover` prints.
+pub fn table(d: &Discovery, kept: &[KeptStance], model: &Model, dir: &str) -> String {
+    let grouped: usize = d.groups.iter().map(|g| g.members.len()).sum();
+    let mut s = format!(
+        "{} unknown stances kept in {dir} ({} without contact; {} known ones of the run beside \
+         them); stances linked when nearer each other \
+         than, on average, to known ground, groups of {MIN_GROUP} or more; new ground when a \
+         group stands apart by {:.2} or more (as much as the edge of {}'s band does, the most \
+         of any known terrain):\n",
+        unknown(kept),
+        d.no_contact.len(),
+        kept.len() - unknown(kept),
+        d.min_separation,
+        model
+            .classes
+            .get(d.least_separated)
+            .map_or("?", |c| c.name.as_str())
+    );
+    s.push_str("group  stances  separation  nearest known  verdict\n");
+    for (g, grp) in d.groups.iter().enumerate() {
+        let near = model
+            .classes
+            .get(grp.nearest_class)
+            .map_or("?", |c| c.name.as_str());
+        let _ = writeln!(
+            s,
+            "{:>5}  {:>7}  {:>10.2}  {near:<13}  {}",
+            g + 1,
+            grp.members.len(),
+            grp.separation,
+            verdict(d, g, model)
+        );
+    }
+    let new = d.new_ground().count();
+    let _ = writeln!(
+        s,
+        "{} stances in no group; {new} proposed new terrain{} (separation: a member's distance \
+         to known ground over its distance to the group, the median)",
+        unknown(kept) - grouped - d.no_contact.len(),
+        if new == 1 { "" } else { "s" }
+    );
+    s
+}
+
+/// The same as one JSON object (`--json`).
+pub fn json(d: &Discovery, kept: &[KeptStance], model: &Model) -> serde_json::Value {
+    serde_json::json!({
+        "stances": unknown(kept),
+        "session_stances": kept.len() - unknown(kept),
+        "no_contact": d.no_contact.len(),
+        "min_separation": d.min_separation,
+        "groups": d.groups.iter().enumerate().map(|(g, grp)| serde_json::json!({
+            "group": g + 1,
+            "stances": grp.members.len(),
+            "spread": grp.spread,
+            "to_known": grp.to_known,
+            "separation": grp.separation,
+            "nearest_known": model.classes.get(grp.nearest_class).map(|c| c.name.clone()),
+            "new_ground": grp.new_ground,
+            "settling": grp.settling,
+            "files": grp.members.iter().map(|&i| kept[i].file.clone()).collect::<Vec<_>>(),
+        })).collect::<Vec<_>>(),
+    })
+}
+
+/// Writes `out/groups.csv` (every stance, its group or none) and a contact sheet per group
+/// (`out/group-N.png`).
+pub fn write_out(
+    out: &Path,
+    d: &Discovery,
+    kept: &[KeptStance],
+    model: &Model,
+) -> Result<(), ReportError> {
+    let io = |p: &Path| {
+        let p = p.display().to_string();
+        move |source| ReportError::Io { path: p, source }
+    };
+    std::fs::create_dir_all(out).map_err(io(out))?;
+    let mut csv = String::from("file,foot,step,reason,group,source\n");
+    for (i, k) in kept.iter().enumerate() {
+        let g = d.group_of[i].map_or(String::new(), |g| (g + 1).to_string());
+        let _ = writeln!(
+            csv,
+            "{},{},{},{},{g},{}",
+            k.file, k.foot, k.step, k.reason, k.source
+        );
+    }
+    let path = out.join("groups.csv");
+    std::fs::write(&path, csv).map_err(io(&path))?;
+    for (g, grp) in d.groups.iter().enumerate() {
+        let images: Vec<_> = grp
+            .members
+            .iter()
+            .map(|&i| {
+                (
+                    &kept[i].image,
+                    format!("foot {} step {}", kept[i].foot, kept[i].step),
+                )
+            })
+            .collect();
+        let title = format!(
+            "group {}: {} stances, {}",
+            g + 1,
+            grp.members.len(),
+            verdict(d, g, model)
+        );
+        let png = out.join(format!("group-{}.png", g + 1));
+        contact_sheet(&images, &title, &png).map_err(|e| ReportError::Sheet {
+            path: png.display().to_string(),
+            source: e,
+        })?;
+    }
+    Ok(())
+}
+
+/// What `presrs discover --add` says: how well each terrain is told apart before and after
+/// (each stored stance decided without itself), and what to do next.
+pub fn added(
+    a: &Added,
+    old: &Model,
+    name: &str,
+    id: u8,
+    out_model: &Path,
+    terrains: Option<&Path>,
+    in_catalog: bool,
+) -> String {
+    let pct = |n: usize, of: usize| 100.0 * n as f64 / of.max(1) as f64;
+    let mut s = format!(
+        "added group {} as `{name}` (terrain id {id}{}) to {}: each terrain's stored stances \
+         decided without themselves (right / unknown / other terrain):\n",
+        a.group + 1,
+        if in_catalog {
+            ", from the catalog".to_string()
+        } else {
+            terrains.map_or(String::new(), |t| format!(", added to {}", t.display()))
+        },
+        out_model.display()
+    );
+    s.push_str("terrain         before                 after\n");
+    for (k, c) in a.model.classes.iter().enumerate() {
+        let cell = |t: Option<&ToldApart>| {
+            t.map_or("-".to_string(), |t| {
+                format!(
+                    "{:>3.0}% / {:>3.0}% / {:>3.0}%",
+                    pct(t.right, t.stances),
+                    pct(t.unknown, t.stances),
+                    pct(t.wrong, t.stances)
+                )
+            })
+        };
+        let before = if k < old.classes.len() {
+            a.before.get(k)
+        } else {
+            None
+        };
+        let _ = writeln!(
+            s,
+            "{:<14}  {:<21}  {}",
+            c.name,
+            cell(before),
+            cell(a.after.get(k))
+        );
+    }
+    let _ = writeln!(
+        s,
+        "fitted as `{}`, the best of {} ways measured on this run ({} of its known stances \
+         in the keep; held out: every other one of each terrain):",
+        a.candidates[a.chosen].name(),
+        a.candidates.len(),
+        a.session_refs
+    );
+    s.push_str("  way             known ground kept   new terrain right   score\n");
+    for (i, c) in a.candidates.iter().enumerate() {
+        let (kept, of, on) = match c.known_kept {
+            Some((k, n)) => (k, n, "run"),
+            None => (c.stored_known.0, c.stored_known.1, "stored"),
+        };
+        let _ = writeln!(
+            s,
+            "{} {:<14}  {:>3}/{:<3} ({on:<6})      {:>3}/{:<3}           {:.3}",
+            if i == a.chosen { "*" } else { " " },
+            c.name(),
+            kept,
+            of,
+            c.new_right.0,
+            c.new_right.1,
+            c.score()
+        );
+    }
+    let _ = writeln!(
+        s,
+        "next: move {} to the node's model path and send it SIGHUP (it reads the model and its \
+         terrains file again); the controller takes its safe gait on `{name}` until its \
+         terrain_gaits gives one ({name} = N)",
+        out_model.display()
+    );
+    s
+}
