@@ -53,6 +53,51 @@ def added(a, d, kept, model, group, left, log2, labels2):
             "known_before": round(known(before), 3), "known_after": round(known(after), 3)}
 
 
+def pairs(a, d, data, log, labels, log2, labels2, seed):
+    """Two terrains left out together: a proposal for each, and after adding the first the
+    second still unknown on the fresh run."""
+    out = []
+    for pair in [("clay", "carpet"), ("clay", "grass"), ("carpet", "grass")]:
+        tag = "+".join(pair)
+        ds = os.path.join(d, f"data-{tag}")
+        shutil.copytree(data, ds)
+        for t in pair:
+            shutil.rmtree(os.path.join(ds, t))
+        model = os.path.join(d, f"model-{tag}.json")
+        run([a.bin, "train", "--data", ds, "--out", model] + a.train_args.split())
+        kept = os.path.join(d, f"kept-{tag}")
+        lines = run([a.bin, "node", "--replay", log, "--model", model, "--keep-unknown", kept,
+                     "--json"]).splitlines()
+        times = {(v["foot"], v["step"]): v["t_us"] * 1e-6 for v in map(json.loads, lines)}
+        rows = [r for r in csv.DictReader(open(os.path.join(kept, "kept.csv"))) if r["reason"] != "known"]
+        g = json.loads(run([a.bin, "discover", kept, "--model", model, "--json"]))
+        of = {r["file"]: truth_at(labels, times.get((int(r["foot"]), int(r["step"])), -1)) for r in rows}
+        new = [x for x in g["groups"] if x["new_ground"]]
+        res = {"seed": seed, "pair": tag, "new_groups": len(new)}
+        best = {}
+        for t in pair:
+            steps = sum(1 for v in times.values() if truth_at(labels, v) == t)
+            b = max(new, key=lambda x: sum(of[f] == t for f in x["files"]), default=None)
+            if b:
+                hit = sum(of[f] == t for f in b["files"])
+                res[t] = (round(hit / max(steps, 1), 2), round(hit / len(b["files"]), 2), b["group"])
+                best[t] = b["group"]
+        res["distinct"] = len(set(best.values())) == 2
+        # The first added; on the fresh run, the second's steps called unknown before and after.
+        if pair[0] in best:
+            new_model = os.path.join(d, f"added-{tag}.json")
+            terrains = os.path.join(d, f"terrains-{tag}.toml")
+            run([a.bin, "discover", kept, "--model", model, "--add", "newground", "--group",
+                 str(best[pair[0]]), "--out-model", new_model, "--terrains", terrains])
+            second = lambda ds: round(sum(c == "unknown" for t, c in ds if t == pair[1])
+                                      / max(sum(t == pair[1] for t, _ in ds), 1), 2)
+            res["second_unknown"] = (second(decisions(a, log2, model, terrains, labels2)),
+                                     second(decisions(a, log2, new_model, terrains, labels2)))
+        print(json.dumps(res), flush=True)
+        out.append(res)
+    return out
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--bin", default="target/debug/presrs")
@@ -62,6 +107,7 @@ def main():
     ap.add_argument("--train-args", default="", help="extra `presrs train` options")
     ap.add_argument("--only", default=None, help="left-out terrains, comma-separated (none: the known-only run)")
     ap.add_argument("--no-add", action="store_true", help="discover only")
+    ap.add_argument("--pairs", action="store_true", help="two terrains left out together")
     a = ap.parse_args()
     lo, hi = (int(x) for x in a.seeds.split("-"))
     work = tempfile.mkdtemp(prefix="presrs-discover-study-")
@@ -83,6 +129,9 @@ def main():
         data = os.path.join(d, "data")
         run([a.bin, "lab", "dataset", "dynamic", "--out", data, "--n", "30", "--seed",
              str(100 + seed)])
+        if a.pairs:
+            rows += pairs(a, d, data, log, labels, log2, labels2, seed)
+            continue
         lefts = TERRAINS + [None]
         if a.only:
             lefts = [None if x == "none" else x for x in a.only.split(",")]
@@ -138,6 +187,8 @@ def main():
         shutil.rmtree(work, ignore_errors=True)
     else:
         print(work)
+    if a.pairs:
+        return
     print("summary:")
     for left in TERRAINS + ["(none)"]:
         rs = [r for r in rows if r["left_out"] == left]

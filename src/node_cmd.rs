@@ -77,14 +77,14 @@ pub fn run(a: NodeArgs) -> Result<ExitCode> {
             while !signals.stopping() && running.is_running() {
                 if signals.take_reload() {
                     // The terrains file again too: `presrs discover --add` may have added one.
-                    let catalog = match protocol::TerrainCatalog::load(terrains.as_deref()) {
-                        Ok(c) => Some(c),
+                    let reloaded = match protocol::TerrainCatalog::load(terrains.as_deref()) {
+                        Ok(c) => running.reload(&a.model, c),
                         Err(e) => {
                             tracing::error!("SIGHUP: {e}; keeping the terrains read at start");
-                            None
+                            running.reload_model(&a.model)
                         }
                     };
-                    match running.reload(&a.model, catalog) {
+                    match reloaded {
                         Ok(id) => {
                             tracing::info!(model = %a.model.display(), model_id = id, "SIGHUP: model reloaded")
                         }

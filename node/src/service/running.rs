@@ -14,24 +14,24 @@ impl RunningNode {
     /// Loads and checks the model at `path` on the caller's thread, then hands it to the
     /// pipeline, which installs it between two frames; returns its id. A bad file is an error
     /// here and the running model stays.
-    pub fn reload_model(&mut self, path: &Path) -> Result<u64, ServiceError> {
-        self.reload(path, None)
+    pub fn reload_model(&self, path: &Path) -> Result<u64, ServiceError> {
+        let model = Model::load(path)?;
+        model.check_catalog(&self.catalog)?;
+        self.install(model, self.catalog.clone())
     }
 
     /// [`Self::reload_model`] with the terrains read again (`catalog`, from the node's
     /// terrains file): a terrain added since start (`presrs discover --add`) is reported by
     /// its name. A catalog that drops a terrain the model has is refused with the model.
-    pub fn reload(
-        &mut self,
-        path: &Path,
-        catalog: Option<TerrainCatalog>,
-    ) -> Result<u64, ServiceError> {
+    pub fn reload(&mut self, path: &Path, catalog: TerrainCatalog) -> Result<u64, ServiceError> {
         let model = Model::load(path)?;
-        model.check_catalog(catalog.as_ref().unwrap_or(&self.catalog))?;
-        if let Some(c) = catalog {
-            self.catalog = c;
-        }
-        let catalog = self.catalog.clone();
+        model.check_catalog(&catalog)?;
+        let id = self.install(model, catalog.clone())?;
+        self.catalog = catalog;
+        Ok(id)
+    }
+
+    fn install(&self, model: Model, catalog: TerrainCatalog) -> Result<u64, ServiceError> {
         let id = model.id();
         let installed = self
             .threads
