@@ -6,11 +6,9 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result};
 use node::classifier::Model;
-use node::classifier::model::ClassInfo;
-use node::unknown::add::add_group;
+use node::unknown::add::{add_group, new_terrain, write_added};
 use node::unknown::discover::{discover_at, read_kept};
 use presrs_cli::discover::DiscoverArgs;
-use protocol::TerrainCatalog;
 use tools::discover_report::{added, json, table, write_out};
 
 pub fn run(a: DiscoverArgs) -> Result<ExitCode> {
@@ -39,49 +37,21 @@ pub fn run(a: DiscoverArgs) -> Result<ExitCode> {
         "--out-model {}: the file exists; give a new path (nothing was written)",
         out_model.display()
     );
-    // A terrains file not made yet is the paper's catalog; --add makes it.
-    let catalog =
-        TerrainCatalog::load(a.terrains.as_deref().filter(|p| p.exists())).context("--terrains")?;
-    let (id, in_catalog) = match catalog.by_name(name) {
-        Some(t) => (t.id(), true),
-        None => {
-            anyhow::ensure!(
-                a.terrains.is_some(),
-                "--add {name}: the catalog has no `{name}`; give --terrains FILE (the node's \
-                 terrains file, made if missing) for its entry"
-            );
-            let id = catalog
-                .free_id()
-                .context("--terrains: every terrain id is taken")?;
-            (id, false)
-        }
-    };
+    let t = new_terrain(name, a.terrains.as_deref())?;
     let group = a.group.map(|g| g.saturating_sub(1));
-    let terrain = ClassInfo {
-        name: name.clone(),
-        terrain_id: id,
-    };
-    let add =
-        add_group(&model, &d, &kept, group, terrain).with_context(|| format!("--add {name}"))?;
-    add.model.save(out_model).context("--out-model")?;
-    Model::load(out_model).context("--out-model: reading the written model back")?;
-    if let (false, Some(path)) = (in_catalog, &a.terrains)
-        && let Err(e) = protocol::terrain::append_entry(path, id, name)
-    {
-        // The model names a terrain no catalog has: not left behind.
-        let _ = std::fs::remove_file(out_model);
-        return Err(e).context("--terrains (the model was not written)");
-    }
+    let add = add_group(&model, &d, &kept, group, t.class.clone())
+        .with_context(|| format!("--add {name}"))?;
+    write_added(&add, &t, out_model, a.terrains.as_deref())?;
     eprint!(
         "{}",
         added(
             &add,
             &model,
             name,
-            id,
+            t.class.terrain_id,
             out_model,
             a.terrains.as_deref(),
-            in_catalog
+            t.in_catalog
         )
     );
     Ok(ExitCode::SUCCESS)

@@ -10,13 +10,16 @@
 //! not calibrated on (every other one of each terrain), the share still decided as the
 //! running model decided them, plus the share of the new terrain's stored stances decided as
 //! the new terrain with each left out. The best sum wins; on a tie the one that has seen the
-//! run's known ground (the held-out half is small: a tie is common, and the run's own
-//! stances were never worse on the simulator's leave-one-terrain-out runs), then `extend`,
-//! the one that changes least. A keep without known stances (written before they were kept)
+//! run's known ground (the held-out half is small, so ties are common), then `extend`, the
+//! one that changes least. A keep without known stances (written before they were kept)
 //! scores the known terrains on their stored stances instead.
 //!
 //! Why measured and not fixed: on the simulator's leave-one-terrain-out runs no candidate
 //! kept the known terrains best on every seed (docs/decisions/discover-grouping.md).
+
+use std::path::Path;
+
+use protocol::terrain::{TerrainCatalog, append_entry};
 
 use crate::classifier::model::ClassInfo;
 use crate::classifier::train::{Basis, ToldApart, add_class, told_apart};
@@ -139,6 +142,74 @@ pub fn add_group(
         candidates,
         chosen,
     })
+}
+
+/// The terrain `--add NAME` makes: the catalog's own (its id) when the node's terrains file
+/// (`terrains`; the paper's catalog without one, or before it is made) has the name, else
+/// the next free lab id, for a new entry in `terrains`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NewTerrain {
+    /// Its name and id.
+    pub class: ClassInfo,
+    /// The catalog has it already: no entry to write.
+    pub in_catalog: bool,
+}
+
+/// [`NewTerrain`] for `name`; an error names `--terrains` when an entry is needed and there is
+/// no file to write it to.
+pub fn new_terrain(name: &str, terrains: Option<&Path>) -> Result<NewTerrain, DiscoverError> {
+    let add = |m: String| DiscoverError::Add(m);
+    let catalog = TerrainCatalog::load(terrains.filter(|p| p.exists()))
+        .map_err(|e| add(format!("--terrains: {e}")))?;
+    if let Some(t) = catalog.by_name(name) {
+        return Ok(NewTerrain {
+            class: ClassInfo {
+                name: name.into(),
+                terrain_id: t.id(),
+            },
+            in_catalog: true,
+        });
+    }
+    if terrains.is_none() {
+        return Err(add(format!(
+            "--add {name}: the catalog has no `{name}`; give --terrains FILE (the node's \
+             terrains file, made if missing) for its entry"
+        )));
+    }
+    let id = catalog
+        .free_id()
+        .ok_or_else(|| add("--terrains: every terrain id is taken".into()))?;
+    Ok(NewTerrain {
+        class: ClassInfo {
+            name: name.into(),
+            terrain_id: id,
+        },
+        in_catalog: false,
+    })
+}
+
+/// Writes `a`'s model to `out` (read back: a file every command loads) and, for a terrain the
+/// catalog lacks, its entry in `terrains`; when the entry cannot be written the model is
+/// removed again (it would name a terrain no catalog has).
+pub fn write_added(
+    a: &Added,
+    t: &NewTerrain,
+    out: &Path,
+    terrains: Option<&Path>,
+) -> Result<(), DiscoverError> {
+    let add = |m: String| DiscoverError::Add(m);
+    a.model
+        .save(out)
+        .map_err(|e| add(format!("--out-model: {e}")))?;
+    Model::load(out)
+        .map_err(|e| add(format!("--out-model: reading the written model back: {e}")))?;
+    if let (false, Some(path)) = (t.in_catalog, terrains)
+        && let Err(e) = append_entry(path, t.class.terrain_id, &t.class.name)
+    {
+        let _ = std::fs::remove_file(out);
+        return Err(add(format!("--terrains (the model was not written): {e}")));
+    }
+    Ok(())
 }
 
 /// The group to add: `group` if it is one, else the one new-ground group.

@@ -276,10 +276,6 @@ fn extend_basis(
     Ok(())
 }
 
-fn count_new(labels: &[usize], k_new: usize) -> usize {
-    labels.iter().filter(|&&k| k == k_new).count()
-}
-
 /// The PCA dimensions of `model` with one terrain more: its own, and its dimensions per
 /// terrain for the new one, up to the most there are.
 fn dims_with_one_more(model: &Model) -> usize {
@@ -329,11 +325,12 @@ fn redraw_checks(m: &mut Model, old: &Model, pixels: Vec<Vec<u16>>, labels: Vec<
         let (pixels, labels) = if !cal.pixels.is_empty() && cal.pixels.len() == cal.classes.len() {
             // The new terrain's and the session's, stored after the model's own.
             let n_old = old.images.as_ref().map_or(0, |s| s.pixels.len());
+            let first_session = n_old + labels.iter().filter(|&&k| k == k_new).count();
             let new = pixels
                 .iter()
                 .zip(&labels)
                 .enumerate()
-                .filter(|(i, (_, k))| **k == k_new || *i >= n_old + count_new(&labels, k_new))
+                .filter(|(i, (_, k))| **k == k_new || *i >= first_session)
                 .map(|(_, pk)| pk);
             let (p, c): (Vec<Vec<u16>>, Vec<usize>) = cal
                 .pixels
