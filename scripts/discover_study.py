@@ -40,7 +40,7 @@ def added(a, d, kept, model, group, left, log2, labels2):
     """`discover --add` of `group` as `newground`; the old and the new model on the fresh run."""
     new_model = os.path.join(d, f"added-{left}.json")
     terrains = os.path.join(d, f"terrains-{left}.toml")
-    run([a.bin, "discover", kept, "--model", model, "--add", "newground", "--group",
+    run([a.bin, "discover", kept, "--model", model] + a.discover_args.split() + ["--add", "newground", "--group",
          str(group), "--out-model", new_model, "--terrains", terrains])
     before = decisions(a, log2, model, terrains, labels2)
     after = decisions(a, log2, new_model, terrains, labels2)
@@ -70,7 +70,7 @@ def pairs(a, d, data, log, labels, log2, labels2, seed):
                      "--json"]).splitlines()
         times = {(v["foot"], v["step"]): v["t_us"] * 1e-6 for v in map(json.loads, lines)}
         rows = [r for r in csv.DictReader(open(os.path.join(kept, "kept.csv"))) if r["reason"] != "known"]
-        g = json.loads(run([a.bin, "discover", kept, "--model", model, "--json"]))
+        g = json.loads(run([a.bin, "discover", kept, "--model", model] + a.discover_args.split() + ["--json"]))
         of = {r["file"]: truth_at(labels, times.get((int(r["foot"]), int(r["step"])), -1)) for r in rows}
         new = [x for x in g["groups"] if x["new_ground"]]
         res = {"seed": seed, "pair": tag, "new_groups": len(new)}
@@ -87,7 +87,7 @@ def pairs(a, d, data, log, labels, log2, labels2, seed):
         if pair[0] in best:
             new_model = os.path.join(d, f"added-{tag}.json")
             terrains = os.path.join(d, f"terrains-{tag}.toml")
-            run([a.bin, "discover", kept, "--model", model, "--add", "newground", "--group",
+            run([a.bin, "discover", kept, "--model", model] + a.discover_args.split() + ["--add", "newground", "--group",
                  str(best[pair[0]]), "--out-model", new_model, "--terrains", terrains])
             second = lambda ds: round(sum(c == "unknown" for t, c in ds if t == pair[1])
                                       / max(sum(t == pair[1] for t, _ in ds), 1), 2)
@@ -107,6 +107,7 @@ def main():
     ap.add_argument("--train-args", default="", help="extra `presrs train` options")
     ap.add_argument("--only", default=None, help="left-out terrains, comma-separated (none: the known-only run)")
     ap.add_argument("--no-add", action="store_true", help="discover only")
+    ap.add_argument("--discover-args", default="", help="extra `presrs discover` options (--no-split)")
     ap.add_argument("--pairs", action="store_true", help="two terrains left out together")
     a = ap.parse_args()
     lo, hi = (int(x) for x in a.seeds.split("-"))
@@ -160,7 +161,7 @@ def main():
                 res.update(new_groups=0, recall=None, purity=None)
                 rows.append(res)
                 continue
-            g = json.loads(run([a.bin, "discover", kept, "--model", model, "--json"]
+            g = json.loads(run([a.bin, "discover", kept, "--model", model] + a.discover_args.split() + ["--json"]
                                + (["--min-separation", a.min_separation] if a.min_separation else [])))
             res["min_sep"] = round(g["min_separation"], 2)
             terrain_of = {r["file"]: truth_at(labels, times.get((int(r["foot"]), int(r["step"])), -1))

@@ -17,7 +17,7 @@
 use std::process::ExitCode;
 
 use anyhow::{Context, Result};
-use lab::load::{self, Feet, SIDE, WARMUP_US};
+use lab::load::{self, Beside, Feet, SIDE, WARMUP_US};
 use presrs_cli::bench_node::BenchNodeArgs;
 use protocol::ids::IdConfig;
 
@@ -42,12 +42,7 @@ pub fn run(a: BenchNodeArgs) -> Result<ExitCode> {
         !(a.keep_unknown.is_some() && (a.ros2.any() || a.iface.is_some())),
         "--keep-unknown measures the in-process node with and without keeping; drop --ros2 and --iface"
     );
-    // Each feet count alone, then with the part measured beside it.
-    let runs: &[Beside] = match (a.ros2.any(), a.keep_unknown.is_some()) {
-        (true, _) => &[Beside::Nothing, Beside::Bridge],
-        (_, true) => &[Beside::Nothing, Beside::Keep],
-        _ => &[Beside::Nothing],
-    };
+    let runs = Beside::plan(a.ros2.any(), a.keep_unknown.is_some());
     let mut reports = Vec::new();
     for (&n, &beside) in a.feet.iter().flat_map(|n| runs.iter().map(move |b| (n, b))) {
         let (text, json) = bench_one(&a, n, &model, beside)?;
@@ -69,27 +64,6 @@ pub fn run(a: BenchNodeArgs) -> Result<ExitCode> {
         }
     }
     Ok(ExitCode::SUCCESS)
-}
-
-/// What runs beside the node in one measurement.
-#[derive(Clone, Copy, PartialEq)]
-enum Beside {
-    Nothing,
-    /// The ROS 2 bridge (`--ros2`).
-    Bridge,
-    /// The unknown stances kept (`--keep-unknown`).
-    Keep,
-}
-
-impl Beside {
-    fn heading(self, runs: usize) -> Option<&'static str> {
-        match (self, runs) {
-            (_, 1) => None,
-            (Beside::Bridge, _) => Some("with the ROS 2 bridge:"),
-            (Beside::Keep, _) => Some("keeping unknown stances:"),
-            (Beside::Nothing, _) => Some("alone:"),
-        }
-    }
 }
 
 /// One measurement with `feet_n` feet (the node in this process, or as a process on

@@ -7,14 +7,19 @@ use std::process::ExitCode;
 use anyhow::{Context, Result};
 use node::classifier::Model;
 use node::unknown::add::{add_group, new_terrain, write_added};
-use node::unknown::discover::{discover_at, read_kept};
+use node::unknown::discover::{Grouping, discover_at, read_kept};
 use presrs_cli::discover::DiscoverArgs;
 use tools::discover_report::{added, json, table, write_out};
 
 pub fn run(a: DiscoverArgs) -> Result<ExitCode> {
     let model = Model::load(&a.model).context("--model")?;
     let kept = read_kept(&a.dir)?;
-    let d = discover_at(&model, &kept, a.min_separation)
+    let how = Grouping {
+        min_separation: a.min_separation,
+        no_split: a.no_split,
+        split_at: a.split_at,
+    };
+    let d = discover_at(&model, &kept, how)
         .with_context(|| format!("--model {}", a.model.display()))?;
     if a.json {
         println!("{}", json(&d, &kept, &model));
@@ -38,8 +43,8 @@ pub fn run(a: DiscoverArgs) -> Result<ExitCode> {
         out_model.display()
     );
     let t = new_terrain(name, a.terrains.as_deref())?;
-    let group = a.group.map(|g| g.saturating_sub(1));
-    let add = add_group(&model, &d, &kept, group, t.class.clone())
+    let groups: Vec<usize> = a.group.iter().map(|g| g - 1).collect();
+    let add = add_group(&model, &d, &kept, &groups, t.class.clone())
         .with_context(|| format!("--add {name}"))?;
     write_added(&add, &t, out_model, a.terrains.as_deref())?;
     eprint!(

@@ -4,7 +4,6 @@
 
 use std::path::Path;
 use std::process::ExitCode;
-use std::time::Duration;
 
 use anyhow::{Context, Result};
 use node::NodeService;
@@ -74,25 +73,7 @@ pub fn run(a: NodeArgs) -> Result<ExitCode> {
                 BusSource::Iface(iface.clone()),
                 outputs.recorder.as_ref().map(|r| r.bus_tap()),
             )?;
-            while !signals.stopping() && running.is_running() {
-                if signals.take_reload() {
-                    // The terrains file again too: `presrs discover --add` may have added one.
-                    let reloaded = match protocol::TerrainCatalog::load(terrains.as_deref()) {
-                        Ok(c) => running.reload(&a.model, c),
-                        Err(e) => {
-                            tracing::error!("SIGHUP: {e}; keeping the terrains read at start");
-                            running.reload_model(&a.model)
-                        }
-                    };
-                    match reloaded {
-                        Ok(id) => {
-                            tracing::info!(model = %a.model.display(), model_id = id, "SIGHUP: model reloaded")
-                        }
-                        Err(e) => tracing::error!("SIGHUP: {e}; keeping the model already loaded"),
-                    }
-                }
-                std::thread::sleep(Duration::from_millis(50));
-            }
+            running.serve(&signals, &a.model, terrains.as_deref());
             running.stop();
             outputs.finish();
             if let (Some(s), Some(path)) = (steps, &a.csv) {
@@ -136,49 +117,12 @@ fn finish_keep(keep: Option<node::unknown::keep::KeepWriter>, a: &NodeArgs) -> R
 
 /// The log through the node on the log's own clock ([`node::replay`]), each decision printed.
 fn replay(mut node: NodeService, log: &Path, json: bool, csv: Option<&Path>) -> Result<ExitCode> {
-    use std::io::Write;
-    // Checked to its end before the first decision is printed, then streamed.
-    let file = protocol::candump::LogFile::check(log)?;
-    let mut records = file.records()?;
-    let catalog = node.catalog().clone();
-    let mut table = match csv {
-        Some(p) => {
-            let f = std::fs::File::create(p).with_context(|| format!("--csv {}", p.display()))?;
-            let mut w = std::io::BufWriter::new(f);
-            writeln!(w, "{}", node::step_table::HEADER)?;
-            Some(w)
-        }
-        None => None,
-    };
-    let mut write_err = None;
-    let summary = node::replay::replay_log(&mut node, &mut records, &mut |(t_us, o)| {
-        if let (Some(w), Some(row)) = (table.as_mut(), node::step_table::StepRow::of(t_us, &o))
-            && write_err.is_none()
-            && let Err(e) = writeln!(w, "{}", row.to_csv(&catalog))
-        {
-            write_err = Some(e);
-        }
-        let node::service::Output::Class {
-            foot, class, gait, ..
-        } = o
-        else {
-            return;
-        };
-        if json {
-            let line = node::replay::class_json(t_us, foot, &class, gait, &catalog);
-            println!("{line}");
-        } else {
-            println!("{}", node::replay::class_line(t_us, foot, &class, &catalog));
-        }
-    });
-    records.finish()?;
-    if let (Some(p), Some(e)) = (csv, write_err) {
-        return Err(e).with_context(|| format!("--csv {}", p.display()));
-    }
-    if let (Some(p), Some(mut w)) = (csv, table) {
-        w.flush()
-            .with_context(|| format!("--csv {}", p.display()))?;
-    }
+    let mut stdout = std::io::stdout().lock();
+    let summary =
+        node::replay::replay_file(&mut node, log, json, csv, &mut stdout).map_err(|e| match e {
+            node::replay::ReplayFileError::Table { .. } => anyhow::Error::new(e).context("--csv"),
+            e => e.into(),
+        })?;
     eprintln!("{summary}");
     Ok(ExitCode::SUCCESS)
 }

@@ -442,6 +442,24 @@ fn keep_unknown_keeps_each_step_called_unknown_on_its_image_and_nothing_twice() 
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && err.contains("`wood`"), "{err}");
     assert!(!dir.join("wood.json").exists());
+    // Groups that are not there, or 0 (the table counts from 1): refused, nothing written.
+    for bad in ["1,1", "0", "9"] {
+        let o = Command::new(env!("CARGO_BIN_EXE_presrs"))
+            .arg("discover")
+            .arg(&kept)
+            .arg("--model")
+            .arg(&model_path)
+            .args(["--add", "silt", "--group", bad, "--out-model"])
+            .arg(dir.join("silt.json"))
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            !o.status.success() && err.contains("--group"),
+            "{bad}: {err}"
+        );
+        assert!(!dir.join("silt.json").exists(), "{bad}");
+    }
     let mut fresh = SimRobot::new(SimConfig::default(), 6);
     let log2 = dir.join("run2.log");
     let mut w = std::io::BufWriter::new(std::fs::File::create(&log2).unwrap());

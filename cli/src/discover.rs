@@ -17,9 +17,11 @@ pub struct DiscoverArgs {
     /// its entry in the terrains file (--terrains) when the catalog does not have the name.
     #[arg(long, value_name = "NAME", requires = "out_model")]
     pub add: Option<String>,
-    /// The group --add adds, as numbered in the table. Default: the one new-ground group.
-    #[arg(long, value_name = "N", requires = "add")]
-    pub group: Option<usize>,
+    /// The group --add adds, as numbered in the table; N,M adds several as one terrain (one
+    /// ground its stances split in two modes). Default: the one new-ground group.
+    #[arg(long, value_name = "N[,M...]", requires = "add", value_delimiter = ',',
+          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
+    pub group: Vec<usize>,
     /// Where --add writes the model with the new terrain (a new file; the node's own model
     /// is not touched until you move this one in place and send SIGHUP).
     #[arg(long, value_name = "FILE")]
@@ -35,4 +37,10 @@ pub struct DiscoverArgs {
     /// the default: scripts/discover_study.py).
     #[arg(long, hide = true)]
     pub min_separation: Option<f64>,
+    /// Leave each linked group whole (for measuring the split: scripts/discover_study.py).
+    #[arg(long, hide = true)]
+    pub no_split: bool,
+    /// A fixed separation for splitting a linked group instead of the known terrains' own.
+    #[arg(long, hide = true)]
+    pub split_at: Option<f64>,
 }

@@ -109,6 +109,90 @@ pub fn replay_log<R: Borrow<LogRecord>>(
     }
 }
 
+/// Why [`replay_file`] stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum ReplayFileError {
+    /// The log cannot be read, or changed while it was replayed.
+    #[error(transparent)]
+    Log(#[from] protocol::candump::LogFileError),
+    /// The step table cannot be written.
+    #[error("step table {}: {source}", path.display())]
+    Table {
+        /// The table's file.
+        path: std::path::PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The decisions cannot be written (their output closed).
+    #[error("writing the decisions: {0}")]
+    Out(std::io::Error),
+}
+
+/// `presrs node --replay`: the log at `log`, checked to its end before the first decision,
+/// through `node`; each decision a line to `out` ([`class_line`], or [`class_json`] with
+/// `json`) and each step a row of the step table at `table` when given.
+pub fn replay_file(
+    node: &mut NodeService,
+    log: &std::path::Path,
+    json: bool,
+    table: Option<&std::path::Path>,
+    out: &mut dyn std::io::Write,
+) -> Result<ReplaySummary, ReplayFileError> {
+    use std::io::Write;
+    let file = protocol::candump::LogFile::check(log)?;
+    let mut records = file.records()?;
+    let catalog = node.catalog().clone();
+    let table_err = |path: &std::path::Path| {
+        let path = path.to_path_buf();
+        move |source| ReplayFileError::Table { path, source }
+    };
+    let mut rows = match table {
+        Some(p) => {
+            let f = std::fs::File::create(p).map_err(table_err(p))?;
+            let mut w = std::io::BufWriter::new(f);
+            writeln!(w, "{}", crate::step_table::HEADER).map_err(table_err(p))?;
+            Some(w)
+        }
+        None => None,
+    };
+    // The first write error of each output, kept: the replay's closure cannot return one.
+    let (mut row_err, mut out_err) = (None, None);
+    let summary = replay_log(node, &mut records, &mut |(t_us, o)| {
+        if let (Some(w), Some(row)) = (rows.as_mut(), crate::step_table::StepRow::of(t_us, &o))
+            && row_err.is_none()
+            && let Err(e) = writeln!(w, "{}", row.to_csv(&catalog))
+        {
+            row_err = Some(e);
+        }
+        let Output::Class {
+            foot, class, gait, ..
+        } = o
+        else {
+            return;
+        };
+        let line = if json {
+            class_json(t_us, foot, &class, gait, &catalog).to_string()
+        } else {
+            class_line(t_us, foot, &class, &catalog)
+        };
+        if out_err.is_none()
+            && let Err(e) = writeln!(out, "{line}")
+        {
+            out_err = Some(e);
+        }
+    });
+    records.finish()?;
+    if let Some(e) = out_err {
+        return Err(ReplayFileError::Out(e));
+    }
+    if let (Some(p), Some(mut w)) = (table, rows) {
+        row_err
+            .map_or_else(|| w.flush(), Err)
+            .map_err(table_err(p))?;
+    }
+    Ok(summary)
+}
+
 /// One TerrainClass as a line for people: time (s), foot, step, terrain name, confidence
 /// (`-` for unknown ground: no terrain was chosen, and the rejected class's posterior would
 /// read as certainty), damage and flags.

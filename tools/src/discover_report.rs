@@ -183,7 +183,11 @@ pub fn added(
     let mut s = format!(
         "added group {} as `{name}` (terrain id {id}{}) to {}: each terrain's stored stances \
          decided without themselves (right / unknown / other terrain):\n",
-        a.group + 1,
+        a.groups
+            .iter()
+            .map(|g| (g + 1).to_string())
+            .collect::<Vec<_>>()
+            .join("+"),
         if in_catalog {
             ", from the catalog".to_string()
         } else {

@@ -24,12 +24,14 @@ use protocol::ids::IdConfig;
 use protocol::messages::{self, FootContact, Message, TerrainClass, flags};
 use protocol::tactile::{ImageRef, SegmentError, Segmenter, Variant};
 
+mod beside;
 mod feet;
 mod measure;
 mod proc_stats;
 mod report;
 mod run;
 
+pub use beside::Beside;
 pub use feet::{Feet, Sampled, image_pool};
 pub use measure::{Tally, measure};
 pub use proc_stats::{memory_mb, task_cpu_ns, task_slices};

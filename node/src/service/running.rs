@@ -31,6 +31,35 @@ impl RunningNode {
         Ok(id)
     }
 
+    /// Runs until `signals` say stop or a thread ends, each SIGHUP reloading the model at
+    /// `model` with the terrains file `terrains` read again (`presrs discover --add` may have
+    /// added one); a file that fails keeps what is loaded, and says so in the log.
+    pub fn serve(
+        &mut self,
+        signals: &protocol::component::Signals,
+        model: &Path,
+        terrains: Option<&Path>,
+    ) {
+        while !signals.stopping() && self.is_running() {
+            if signals.take_reload() {
+                let reloaded = match TerrainCatalog::load(terrains) {
+                    Ok(c) => self.reload(model, c),
+                    Err(e) => {
+                        tracing::error!("SIGHUP: {e}; keeping the terrains read at start");
+                        self.reload_model(model)
+                    }
+                };
+                match reloaded {
+                    Ok(id) => {
+                        tracing::info!(model = %model.display(), model_id = id, "SIGHUP: model reloaded")
+                    }
+                    Err(e) => tracing::error!("SIGHUP: {e}; keeping the model already loaded"),
+                }
+            }
+            std::thread::sleep(std::time::Duration::from_millis(50));
+        }
+    }
+
     fn install(&self, model: Model, catalog: TerrainCatalog) -> Result<u64, ServiceError> {
         let id = model.id();
         let installed = self

@@ -7,12 +7,14 @@
 //! tactile header), so a replay decides exactly as the live run did. Nothing here allocates per
 //! frame: buffers are sized when the model is installed.
 //!
-//! One concept in one file (over 600 lines): the pipeline's per-foot state machine; its parts
-//! (debounce, sample, decision, adapt) are already the submodules.
+//! One concept in one file (near 700 lines): the pipeline driving each foot's state; that
+//! state ([`foot`]) and the pipeline's parts (debounce, sample, decision, adapt) are the
+//! submodules.
 
 mod adapt;
 mod ahead;
 mod debounce;
+mod foot;
 mod sample;
 mod step_decision;
 mod timing;
@@ -28,11 +30,11 @@ use std::sync::Arc;
 use crate::classifier::{Classifier, Model};
 use crate::config::NodeConfig;
 use crate::health::LineHealth;
-use crate::unknown::energy::{Balance, EnergyObservation};
+use crate::unknown::energy::EnergyObservation;
 use crate::unknown::{self, Reason, ReasonCounts};
-use adapt::{Adaptation, Adapted, Refitter, classify};
-use debounce::{Edge, Switch};
-use timing::ImageClock;
+use adapt::{Adaptation, Refitter, classify};
+use debounce::Edge;
+use foot::Foot;
 
 /// Counters per stage, for NodeStatus and the logs.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -61,51 +63,6 @@ pub struct Counters {
     pub refits: u64,
 }
 
-/// One foot's stance state.
-struct Foot {
-    switch: Switch,
-    touchdown_us: u32,
-    /// The touchdown on the receiver's clock ([`Decided::touchdown_us`]).
-    touchdown_rx_us: u64,
-    decided: bool,
-    step: u16,
-    /// Single frame: the best candidate so far (|dt - sample| in µs) and its pixels.
-    best_err: Option<u32>,
-    best_rx_us: u64,
-    /// The best candidate's pixels (the first `best_len`), geometry and sample time.
-    best: Vec<u16>,
-    best_len: usize,
-    best_shape: (u8, u8, u8),
-    best_ts: u32,
-    /// Multi-frame: summed log-posteriors (one per class of the model) and frames used.
-    sum_lp: Vec<f64>,
-    used: u32,
-    /// Multi-frame: how near the sample time the nearest frame so far was (|dt - sample| in
-    /// µs), and its verdict for each class: the checks were calibrated on images at the sample
-    /// time, so that frame's verdict on the class the summed posterior decides is the step's.
-    sample_err: Option<u32>,
-    sample_verdicts: Vec<Option<Reason>>,
-    /// An image of this stance was looked at and showed no contact.
-    no_contact: bool,
-    /// A line of this stance's frames was filled.
-    repaired: bool,
-    health: LineHealth,
-    /// The model refitted to this foot's dead lines, used while they are still the dead lines.
-    adapted: Option<Adapted>,
-    /// The dead lines a refit was last asked for (pending, done or failed): asked once per set.
-    asked: Option<(Vec<bool>, Vec<bool>)>,
-    /// When this foot's images come, on its clock and on the receiver's.
-    clock: ImageClock,
-    /// The last frame heard from this foot: its receive time and the foot's timestamp in it,
-    /// so [`StancePipeline::tick`] can tell the foot's time from the receiver's.
-    heard: Option<(u64, u32)>,
-    /// The hop's energy balance over this foot's stances.
-    balance: Balance,
-    /// Capture mode: per offset of [`FRAME_OFFSETS_MS`], the image nearest it so far (|dt -
-    /// offset| in µs) and its pixels (empty outside capture).
-    frames: Vec<(Option<u32>, Vec<u16>)>,
-}
-
 /// The times after touchdown (ms) at which `presrs capture` keeps a stance's frames beside its
 /// sampled image: the candidates `train` measures the deciding frame among.
 pub const FRAME_OFFSETS_MS: [u32; 9] = [30, 50, 70, 90, 110, 130, 150, 170, 190];
@@ -116,47 +73,6 @@ const FRAME_NEAR_US: u32 = 5_000;
 
 /// Capture mode decides a stance once its frames are past the last offset (or at liftoff).
 const CAPTURE_DONE_US: u32 = (FRAME_OFFSETS_MS[FRAME_OFFSETS_MS.len() - 1] * 1000) + FRAME_NEAR_US;
-
-impl Foot {
-    /// Keeps `img` as the stance's candidate image.
-    fn keep(&mut self, img: &protocol::tactile::TactileImage, rx_us: u64) {
-        let n = img.len();
-        self.best[..n].copy_from_slice(img.pixels());
-        self.best_len = n;
-        self.best_shape = (img.rows, img.cols, img.bits);
-        self.best_ts = img.timestamp_us;
-        self.best_rx_us = rx_us;
-    }
-
-    fn new(input: usize, classes: usize, health: LineHealth) -> Self {
-        Self {
-            switch: Switch::default(),
-            touchdown_us: 0,
-            touchdown_rx_us: 0,
-            decided: true,
-            step: 0,
-            best_err: None,
-            best_rx_us: 0,
-            best: vec![0; input],
-            best_len: input,
-            best_shape: (0, 0, 8),
-            best_ts: 0,
-            sum_lp: vec![0.0; classes],
-            used: 0,
-            sample_err: None,
-            sample_verdicts: vec![None; classes],
-            no_contact: false,
-            repaired: false,
-            health,
-            adapted: None,
-            asked: None,
-            clock: ImageClock::default(),
-            heard: None,
-            balance: Balance::default(),
-            frames: Vec::new(),
-        }
-    }
-}
 
 /// The node's pipeline, one thread's worth.
 pub struct StancePipeline {

@@ -64,8 +64,8 @@ impl Candidate {
 pub struct Added {
     /// The model with the terrain added.
     pub model: Model,
-    /// The group's index in the [`Discovery`].
-    pub group: usize,
+    /// The groups' indices in the [`Discovery`] (more than one: a ground the split parted).
+    pub groups: Vec<usize>,
     /// The run's known stances the keep holds (its `session/`).
     pub session_refs: usize,
     /// The candidates measured, and which was chosen.
@@ -78,20 +78,20 @@ pub struct Added {
     pub after: Vec<ToldApart>,
 }
 
-/// `model` with group `group` of `d` (an index; None: the one new-ground group) added as
+/// `model` with groups `groups` of `d` (indices; none: the one new-ground group) added as one
 /// terrain `terrain` (its name and id from the lab's catalog). See the module docs.
 pub fn add_group(
     model: &Model,
     d: &Discovery,
     stances: &[KeptStance],
-    group: Option<usize>,
+    groups: &[usize],
     terrain: ClassInfo,
 ) -> Result<Added, DiscoverError> {
     let add = |m: String| DiscoverError::Add(m);
-    let group = pick(d, group)?;
-    let images: Vec<PressureImage> = d.groups[group]
-        .members
+    let groups = pick(d, groups)?;
+    let images: Vec<PressureImage> = groups
         .iter()
+        .flat_map(|&g| &d.groups[g].members)
         .filter_map(|&i| stances.get(i).map(|s| s.image.clone()))
         .collect();
     // The run's known stances of terrains the model has, every other one of each terrain to
@@ -138,7 +138,7 @@ pub fn add_group(
         before: told_apart(model),
         after: told_apart(&m),
         model: m,
-        group,
+        groups,
         candidates,
         chosen,
     })
@@ -212,29 +212,35 @@ pub fn write_added(
     Ok(())
 }
 
-/// The group to add: `group` if it is one, else the one new-ground group.
-fn pick(d: &Discovery, group: Option<usize>) -> Result<usize, DiscoverError> {
+/// The groups to add: `groups` if each is one (once), else the one new-ground group.
+fn pick(d: &Discovery, groups: &[usize]) -> Result<Vec<usize>, DiscoverError> {
     let add = |m: String| DiscoverError::Add(m);
-    if let Some(g) = group {
+    for (i, &g) in groups.iter().enumerate() {
         if g >= d.groups.len() {
             return Err(add(format!(
-                "--group {}: there are {} groups; pick one from the table",
+                "--group {}: there are {} groups; pick from the table",
                 g + 1,
                 d.groups.len()
             )));
         }
-        return Ok(g);
+        if groups[..i].contains(&g) {
+            return Err(add(format!("--group {} is given twice", g + 1)));
+        }
+    }
+    if !groups.is_empty() {
+        return Ok(groups.to_vec());
     }
     let new: Vec<usize> = d.new_ground().map(|(g, _)| g).collect();
     match new[..] {
-        [g] => Ok(g),
+        [g] => Ok(vec![g]),
         [] => Err(add(
             "no group is new ground: nothing to add (a group the table calls known ground can \
              still be added with --group N)"
                 .into(),
         )),
         _ => Err(add(format!(
-            "{} groups are new ground: say which with --group N",
+            "{} groups are new ground: say which with --group N (or N,M for one ground in \
+             several groups: the contact sheets show which look alike)",
             new.len()
         ))),
     }
@@ -265,5 +271,51 @@ fn score(m: &Model, basis: Basis, session: bool, check: &[(&PressureImage, usize
         known_kept,
         stored_known,
         new_right,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::unknown::discover::Group;
+
+    fn discovery(new: &[bool]) -> Discovery {
+        let group = |new_ground| Group {
+            members: vec![],
+            spread: 1.0,
+            to_known: 2.0,
+            separation: 2.0,
+            nearest_class: 0,
+            new_ground,
+            settling: false,
+        };
+        Discovery {
+            min_separation: 1.5,
+            least_separated: 0,
+            groups: new.iter().map(|&n| group(n)).collect(),
+            group_of: vec![],
+            no_contact: vec![],
+        }
+    }
+
+    #[test]
+    fn the_groups_to_add_are_the_ones_named_or_the_one_new_ground() {
+        let d = discovery(&[true, false, true]);
+        assert_eq!(pick(&d, &[0, 2]).unwrap(), vec![0, 2]);
+        assert_eq!(pick(&d, &[1]).unwrap(), vec![1]);
+        let err = |g: &[usize]| pick(&d, g).unwrap_err().to_string();
+        assert!(err(&[]).contains("2 groups are new ground"), "{}", err(&[]));
+        assert!(
+            err(&[3]).contains("--group 4: there are 3 groups"),
+            "{}",
+            err(&[3])
+        );
+        assert!(
+            err(&[0, 0]).contains("--group 1 is given twice"),
+            "{}",
+            err(&[0, 0])
+        );
+        assert_eq!(pick(&discovery(&[false, true]), &[]).unwrap(), vec![1]);
+        assert!(pick(&discovery(&[false]), &[]).is_err());
     }
 }

@@ -9,7 +9,9 @@
 //! **Linking.** Two kept stances are linked when they lie nearer each other than they lie, on
 //! average, to the nearest stored stance: no distance scale has to be chosen, and a chain
 //! does not run through known ground. A linked group of [`MIN_GROUP`] or more is a proposal;
-//! smaller ones are scattered stances.
+//! smaller ones are scattered stances. Two new grounds in one run may each lie nearer the
+//! other than known ground: a group is split in two (two Gaussians, each its own spread) where
+//! one part stands apart from the other twice as much as new ground must from known ground.
 //!
 //! **New or known.** A group's separation is the median, over its members, of the distance to
 //! known ground over the distance to the nearest other member. The known terrains measure
@@ -178,15 +180,26 @@ impl Discovery {
 
 /// Groups `stances` against `model`'s known terrains (see the module docs).
 pub fn discover(model: &Model, stances: &[KeptStance]) -> Result<Discovery, DiscoverError> {
-    discover_at(model, stances, None)
+    discover_at(model, stances, Grouping::default())
 }
 
-/// [`discover`] with a fixed separation for new ground instead of the known terrains' own
-/// (for measuring the choice: `scripts/discover_study.py`).
+/// How [`discover_at`] groups: the defaults are [`discover`]'s; the others are there to
+/// measure them (`scripts/discover_study.py`).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Grouping {
+    /// A fixed separation for new ground instead of the known terrains' own.
+    pub min_separation: Option<f64>,
+    /// Leave linked groups whole: no split of two grounds the link joined.
+    pub no_split: bool,
+    /// A fixed separation for a split instead of the known terrains' own ([`split_floor`]).
+    pub split_at: Option<f64>,
+}
+
+/// [`discover`] grouped as `how` says.
 pub fn discover_at(
     model: &Model,
     stances: &[KeptStance],
-    min_separation: Option<f64>,
+    how: Grouping,
 ) -> Result<Discovery, DiscoverError> {
     let mut c = Classifier::new(model.clone());
     let known = Shapes::of_stored(model, &mut c);
@@ -197,34 +210,116 @@ pub fn discover_at(
             .into(),
     };
     let (own, least_separated) = edge_separation(model, &known).ok_or_else(no_distance)?;
-    let min_separation = min_separation.unwrap_or(own);
-    let (mut points, mut at, mut no_contact) = (Shapes::default(), Vec::new(), Vec::new());
-    for (i, s) in stances
-        .iter()
-        .enumerate()
-        .filter(|(_, s)| s.known.is_none())
-    {
-        c.classify_image(&s.image, false)
-            .map_err(|e| DiscoverError::Stance {
-                file: s.file.clone(),
-                msg: format!("{e}: keep and discover with the model of this sensor"),
-            })?;
-        if c.in_contact() {
-            points.push(c.features());
-            at.push(i);
-        } else {
-            no_contact.push(i);
-        }
-    }
-    let n = at.len();
-    let near_known: Vec<(f64, usize)> = (0..n)
+    let min_separation = how.min_separation.unwrap_or(own);
+    let kept = KeptShapes::of(&mut c, stances)?;
+    let near_known: Vec<(f64, usize)> = (0..kept.at.len())
         .map(|a| {
             (0..known.len())
-                .map(|j| (known.dist(j, points.get(a)), model.sample_classes[j]))
+                .map(|j| (known.dist(j, kept.points.get(a)), model.sample_classes[j]))
                 .min_by(|x, y| x.0.total_cmp(&y.0))
                 .unwrap_or((f64::INFINITY, 0))
         })
         .collect();
+    let (linked, nearest_member) = link(&kept.points, &near_known);
+    let split_at = how
+        .split_at
+        .unwrap_or_else(|| split_floor(model, &known).max(min_separation));
+    // Each group, and whether it is a part of a linked group split.
+    let mut components: Vec<(Vec<usize>, bool)> = Vec::new();
+    for members in linked.into_iter().filter(|m| m.len() >= MIN_GROUP) {
+        let mut parts = Vec::new();
+        if how.no_split {
+            parts.push(members);
+        } else {
+            split(&kept.points, members, split_at, &mut parts);
+        }
+        let whole = parts.len() == 1;
+        components.extend(parts.into_iter().map(|p| (p, !whole)));
+    }
+    components.sort_by_key(|(m, _)| std::cmp::Reverse(m.len()));
+    let mut group_of = vec![None; stances.len()];
+    let mut groups = Vec::new();
+    for (g, (members, part)) in components.into_iter().enumerate() {
+        let mut classes = vec![0usize; model.classes.len()];
+        for &a in &members {
+            if let Some(c) = classes.get_mut(near_known[a].1) {
+                *c += 1;
+            }
+            group_of[kept.at[a]] = Some(g);
+        }
+        // A part of a split group: its spread among its own members (the nearest kept stance
+        // may be in the other part).
+        let own = |a: usize| match part {
+            true => nearest_in(&kept.points, a, &members),
+            false => nearest_member[a],
+        };
+        let med = |f: &dyn Fn(usize) -> f64| {
+            median(&mut members.iter().map(|&a| f(a)).collect::<Vec<_>>())
+        };
+        let separation = med(&|a| near_known[a].0 / own(a).max(f64::MIN_POSITIVE));
+        let settling = members
+            .iter()
+            .all(|&a| stances[kept.at[a]].step as usize <= SETTLING_STEPS);
+        groups.push(Group {
+            spread: med(&own),
+            to_known: med(&|a| near_known[a].0),
+            separation,
+            nearest_class: (0..classes.len()).max_by_key(|&k| classes[k]).unwrap_or(0),
+            new_ground: separation >= min_separation && !settling,
+            settling,
+            members: members.iter().map(|&a| kept.at[a]).collect(),
+        });
+    }
+    Ok(Discovery {
+        min_separation,
+        least_separated,
+        groups,
+        group_of,
+        no_contact: kept.no_contact,
+    })
+}
+
+/// The kept unknown stances in contact, as spectrum shapes.
+struct KeptShapes {
+    points: Shapes,
+    /// Each point's stance (an index into the stances given).
+    at: Vec<usize>,
+    /// The stances without contact.
+    no_contact: Vec<usize>,
+}
+
+impl KeptShapes {
+    fn of(c: &mut Classifier, stances: &[KeptStance]) -> Result<Self, DiscoverError> {
+        let mut out = KeptShapes {
+            points: Shapes::default(),
+            at: Vec::new(),
+            no_contact: Vec::new(),
+        };
+        for (i, s) in stances
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| s.known.is_none())
+        {
+            c.classify_image(&s.image, false)
+                .map_err(|e| DiscoverError::Stance {
+                    file: s.file.clone(),
+                    msg: format!("{e}: keep and discover with the model of this sensor"),
+                })?;
+            if c.in_contact() {
+                out.points.push(c.features());
+                out.at.push(i);
+            } else {
+                out.no_contact.push(i);
+            }
+        }
+        Ok(out)
+    }
+}
+
+/// The linked groups of `points` (each point's index in one), and each point's distance to
+/// its nearest other point.
+fn link(points: &Shapes, near_known: &[(f64, usize)]) -> (Vec<Vec<usize>>, Vec<f64>) {
+    let n = points.len();
     let mut parent: Vec<usize> = (0..n).collect();
     let mut nearest_member = vec![f64::INFINITY; n];
     for a in 0..n {
@@ -251,42 +346,168 @@ pub fn discover_at(
         let r = root(&mut parent, a);
         components[r].push(a);
     }
-    components.retain(|m| m.len() >= MIN_GROUP);
-    components.sort_by_key(|m| std::cmp::Reverse(m.len()));
-    let mut group_of = vec![None; stances.len()];
-    let mut groups = Vec::new();
-    for (g, members) in components.into_iter().enumerate() {
-        let mut classes = vec![0usize; model.classes.len()];
-        for &a in &members {
-            if let Some(c) = classes.get_mut(near_known[a].1) {
-                *c += 1;
-            }
-            group_of[at[a]] = Some(g);
+    components.retain(|m| !m.is_empty());
+    (components, nearest_member)
+}
+
+/// The distance from point `a` to the nearest other (not identical) point of `members`.
+fn nearest_in(points: &Shapes, a: usize, members: &[usize]) -> f64 {
+    members
+        .iter()
+        .map(|&b| points.dist(b, points.get(a)))
+        .filter(|&d| d > 0.0)
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// Pushes `members` to `out`, split in two (each part again) where the link joined two
+/// grounds: one part stands apart from the other at least twice `at` and the other is nearer
+/// its own members than the first's ([`apart`]). Two new terrains in one run may each lie
+/// nearer the other than known ground, which the link cannot tell from one terrain; a ground
+/// whose stances fall in two modes (carpet, landing in two ways) stands apart from itself
+/// too, but less (docs/decisions/discover-grouping.md).
+fn split(points: &Shapes, members: Vec<usize>, at: f64, out: &mut Vec<Vec<usize>>) {
+    if members.len() >= 2 * MIN_GROUP
+        && let Some((a, b)) = two_means(points, &members)
+        && a.len() >= MIN_GROUP
+        && b.len() >= MIN_GROUP
+    {
+        let (ab, ba) = (apart(points, &a, &b), apart(points, &b, &a));
+        if ab.max(ba) >= 2.0 * at && ab.min(ba) >= 1.0 {
+            split(points, a, at, out);
+            split(points, b, at, out);
+            return;
         }
-        let med = |f: &dyn Fn(usize) -> f64| {
-            median(&mut members.iter().map(|&a| f(a)).collect::<Vec<_>>())
-        };
-        let separation = med(&|a| near_known[a].0 / nearest_member[a].max(f64::MIN_POSITIVE));
-        let settling = members
-            .iter()
-            .all(|&a| stances[at[a]].step as usize <= SETTLING_STEPS);
-        groups.push(Group {
-            spread: med(&|a| nearest_member[a]),
-            to_known: med(&|a| near_known[a].0),
-            separation,
-            nearest_class: (0..classes.len()).max_by_key(|&k| classes[k]).unwrap_or(0),
-            new_ground: separation >= min_separation && !settling,
-            settling,
-            members: members.iter().map(|&a| at[a]).collect(),
-        });
     }
-    Ok(Discovery {
-        min_separation,
-        least_separated,
-        groups,
-        group_of,
-        no_contact,
-    })
+    out.push(members);
+}
+
+/// How far apart the two parts of one ground stand: the most that any known terrain's stored
+/// stances, split in two as [`split`] splits, stand apart (the lesser of the two parts'
+/// [`apart`]). [`split`] measures against this or the separation of new ground from known
+/// ground, the larger. Infinite (no split) when no terrain stores enough stances to split.
+fn split_floor(model: &Model, known: &Shapes) -> f64 {
+    let m = known.len();
+    if m != model.sample_classes.len() {
+        return f64::INFINITY;
+    }
+    (0..model.classes.len())
+        .filter_map(|k| {
+            let own: Vec<usize> = (0..m).filter(|&i| model.sample_classes[i] == k).collect();
+            if own.len() < 2 * MIN_GROUP {
+                return None;
+            }
+            let (a, b) = two_means(known, &own)?;
+            Some(apart(known, &a, &b).min(apart(known, &b, &a)))
+        })
+        .filter(|r| r.is_finite())
+        .reduce(f64::max)
+        .unwrap_or(f64::INFINITY)
+}
+
+/// The median, over `a`'s members, of the distance to the nearest of `b` over that to the
+/// nearest other of `a`: a group's separation with `b` for known ground.
+fn apart(points: &Shapes, a: &[usize], b: &[usize]) -> f64 {
+    let mut r: Vec<f64> = a
+        .iter()
+        .map(|&i| {
+            let other = b
+                .iter()
+                .map(|&j| points.dist(j, points.get(i)))
+                .fold(f64::INFINITY, f64::min);
+            other / nearest_in(points, i, a).max(f64::MIN_POSITIVE)
+        })
+        .collect();
+    median(&mut r)
+}
+
+/// `members` in two: started from the two sides of their widest direction (a farthest pair
+/// would start from an outlier), then two Gaussians each with its own spread. None when
+/// they do not part.
+fn two_means(points: &Shapes, members: &[usize]) -> Option<(Vec<usize>, Vec<usize>)> {
+    let mean = |side: &dyn Fn(usize) -> bool| {
+        let mut m = [0f64; BANDS];
+        let mut n = 0usize;
+        for (_, &i) in members.iter().enumerate().filter(|(k, _)| side(*k)) {
+            m.iter_mut()
+                .zip(points.get(i))
+                .for_each(|(m, x)| *m += *x as f64);
+            n += 1;
+        }
+        (n > 0).then(|| m.map(|x| (x / n as f64) as f32))
+    };
+    let centre = mean(&|_| true)?;
+    // The widest direction by power iteration from the member farthest from the centre.
+    let dev = |i: usize| -> [f64; BANDS] {
+        let mut d = [0f64; BANDS];
+        for ((d, x), c) in d.iter_mut().zip(points.get(i)).zip(&centre) {
+            *d = (*x - *c) as f64;
+        }
+        d
+    };
+    let far = *members
+        .iter()
+        .max_by(|&&x, &&y| points.dist(x, &centre).total_cmp(&points.dist(y, &centre)))?;
+    let mut axis = dev(far);
+    for _ in 0..30 {
+        let mut next = [0f64; BANDS];
+        for &i in members {
+            let d = dev(i);
+            let t: f64 = d.iter().zip(&axis).map(|(a, b)| a * b).sum();
+            next.iter_mut().zip(&d).for_each(|(n, x)| *n += t * x);
+        }
+        let norm = next.iter().map(|x| x * x).sum::<f64>().sqrt();
+        if norm.is_nan() || norm <= 0.0 {
+            return None;
+        }
+        axis = next.map(|x| x / norm);
+    }
+    let mut side: Vec<bool> = members
+        .iter()
+        .map(|&i| dev(i).iter().zip(&axis).map(|(a, b)| a * b).sum::<f64>() > 0.0)
+        .collect();
+    // Two isotropic Gaussians, each with its own spread (EM, hard assignments): a tight
+    // ground inside a scattered one parts where equal spreads (2-means) would cut the
+    // scattered one.
+    for _ in 0..30 {
+        let centres = [mean(&|i| !side[i])?, mean(&|i| side[i])?];
+        // Per part: its spread (variance per band) and the log of its share.
+        let fit = |k: usize| {
+            let (mut n, mut ss) = (0usize, 0f64);
+            for (_, &m) in members
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| side[*i] == (k == 1))
+            {
+                n += 1;
+                ss += points.dist(m, &centres[k]).powi(2);
+            }
+            let var = (ss / (n as f64 * BANDS as f64)).max(1e-9);
+            (var, (n as f64 / members.len() as f64).ln())
+        };
+        let parts = [fit(0), fit(1)];
+        let log_likelihood = |m: usize, k: usize| {
+            let (var, share) = parts[k];
+            -points.dist(m, &centres[k]).powi(2) / (2.0 * var) - 0.5 * BANDS as f64 * var.ln()
+                + share
+        };
+        let next: Vec<bool> = members
+            .iter()
+            .map(|&m| log_likelihood(m, 1) > log_likelihood(m, 0))
+            .collect();
+        if next == side {
+            break;
+        }
+        side = next;
+    }
+    let part = |k: bool| -> Vec<usize> {
+        members
+            .iter()
+            .zip(&side)
+            .filter(|(_, s)| **s == k)
+            .map(|(&i, _)| i)
+            .collect()
+    };
+    Some((part(false), part(true)))
 }
 
 /// The bands a spectrum's shape is taken over.
@@ -413,4 +634,58 @@ fn root(parent: &mut [usize], mut a: usize) -> usize {
         a = parent[a];
     }
     a
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `n` points around `centre` in every band, scattered by `spread` (a fixed generator:
+    /// the same points every run).
+    fn blob(out: &mut Shapes, n: usize, centre: f32, spread: f32, seed: u64) {
+        let mut x = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        for _ in 0..n {
+            for _ in 0..BANDS {
+                x = x
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                let u = ((x >> 40) as f32 / (1u64 << 24) as f32) - 0.5;
+                out.0.push(centre + spread * u);
+            }
+        }
+    }
+
+    fn parts(points: &Shapes, at: f64) -> Vec<usize> {
+        let mut out = Vec::new();
+        split(points, (0..points.len()).collect(), at, &mut out);
+        let mut sizes: Vec<usize> = out.iter().map(Vec::len).collect();
+        sizes.sort_unstable();
+        sizes
+    }
+
+    #[test]
+    fn two_grounds_the_link_joined_are_split_and_one_ground_is_not() {
+        let mut one = Shapes::default();
+        blob(&mut one, 40, 0.0, 1.0, 1);
+        // One ground's halves stand no further apart than its members do from each other.
+        let (a, b) = two_means(&one, &(0..40).collect::<Vec<_>>()).unwrap();
+        let halves = apart(&one, &a, &b).min(apart(&one, &b, &a));
+        assert!(halves < 1.5, "{halves}");
+        assert_eq!(parts(&one, 1.5), vec![40]);
+        // Two grounds: a tight one and a scattered one, apart.
+        let mut two = Shapes::default();
+        blob(&mut two, 12, 0.0, 0.3, 2);
+        blob(&mut two, 25, 1.5, 1.0, 3);
+        assert_eq!(parts(&two, 1.5), vec![12, 25]);
+        // Too few for two groups of MIN_GROUP: left whole.
+        let mut small = Shapes::default();
+        blob(&mut small, 4, 0.0, 0.3, 4);
+        blob(&mut small, 4, 3.0, 0.3, 5);
+        assert_eq!(parts(&small, 1.5), vec![8]);
+        // Identical stances do not part.
+        let same = Shapes(vec![0.5; BANDS * 12]);
+        assert_eq!(parts(&same, 1.5), vec![12]);
+    }
 }
