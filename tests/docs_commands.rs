@@ -160,7 +160,12 @@ fn the_readme_path_for_a_labs_robot_runs_as_written() {
             .cloned()
             .collect()
     };
-    let captures = find(&["capture", "--replay"]);
+    // The robot's path labels each log as one terrain (`--label`); the simulator's path
+    // (`--labels`, the next test) has its own.
+    let captures: Vec<Vec<String>> = find(&["capture", "--replay"])
+        .into_iter()
+        .filter(|c| c.iter().any(|w| w == "--label"))
+        .collect();
     let train = find(&["train", "--data", "set"]);
     let replay = find(&["node", "--replay", "run.log"]);
     let mcap = find(&["mcap", "run.log"]);
@@ -239,5 +244,61 @@ fn the_readme_path_for_a_labs_robot_runs_as_written() {
             .unwrap_or(0);
         assert!(len > 0, "`{made}` was not written");
     }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The README's "Try it on the simulator" path to a model of one's own and the new ground it
+/// meets, run as written in a scratch folder: a recorded session, its stances, `train`, a run
+/// on sand, the node's keep of it and `discover`.
+#[test]
+fn the_readme_path_on_the_simulator_runs_as_written() {
+    let root = common::root();
+    let readme = std::fs::read_to_string(root.join("README.md")).unwrap();
+    let commands: Vec<Vec<String>> = shell_lines(&readme)
+        .iter()
+        .flat_map(|l| presrs_commands(l))
+        // Paths in the repository, from the scratch folder.
+        .map(|c| {
+            c.into_iter()
+                .map(|w| match w.strip_prefix("examples/") {
+                    Some(f) => root.join("examples").join(f).display().to_string(),
+                    None => w,
+                })
+                .collect()
+        })
+        .collect();
+    let has = |c: &[String], w: &str| c.iter().any(|x| x == w);
+    let path: Vec<&Vec<String>> = commands
+        .iter()
+        .filter(|c| {
+            (c[0] == "demo" && has(c, "--candump") && has(c, "--truth"))
+                || (c[0] == "capture" && has(c, "--labels"))
+                || (c[0] == "node" && has(c, "--keep-unknown") && has(c, "--replay"))
+                || c[0] == "discover" && !has(c, "--add")
+        })
+        .collect();
+    let kinds: Vec<&str> = path.iter().map(|c| c[0].as_str()).collect();
+    assert_eq!(
+        kinds,
+        ["demo", "capture", "demo", "node", "discover"],
+        "the README's simulator path changed: {path:?}"
+    );
+    let dir = std::env::temp_dir().join(format!("presrs-readme-sim-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let train = words(&["train", "--data", "set", "--out", "model.json"]);
+    for c in &path[..2] {
+        run(&dir, c);
+    }
+    run(&dir, &train);
+    for c in &path[2..] {
+        run(&dir, c);
+    }
+    let out = run(&dir, path[4]);
+    let table = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        table.contains("unknown stances kept in kept") && table.contains("kept for"),
+        "{table}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -353,6 +353,18 @@ fn keep_unknown_keeps_each_step_called_unknown_on_its_image_and_nothing_twice() 
         .map(|f| f.as_str().unwrap())
         .collect();
     let clay_in = files.iter().filter(|f| clay_of(f)).count();
+    // Why the node kept them, per reason: counts that add up to the group, each a reason
+    // of kept.csv.
+    let reasons = new[0]["reasons"].as_object().unwrap();
+    let counted: u64 = reasons.values().map(|n| n.as_u64().unwrap()).sum();
+    assert_eq!(counted as usize, files.len(), "{d}");
+    for r in reasons.keys() {
+        assert!(
+            rows.iter()
+                .any(|row| row.split(',').nth(3) == Some(r.as_str())),
+            "{r}: {d}"
+        );
+    }
     eprintln!(
         "discover: {} groups, the new one {} stances, {clay_in} of them clay (of {clay_steps} clay steps)",
         d["groups"].as_array().unwrap().len(),
@@ -442,15 +454,16 @@ fn keep_unknown_keeps_each_step_called_unknown_on_its_image_and_nothing_twice() 
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && err.contains("`wood`"), "{err}");
     assert!(!dir.join("wood.json").exists());
-    // Groups that are not there, or 0 (the table counts from 1): refused, nothing written.
+    // Groups that are not there, or 0 (the table counts from 1): refused, nothing written
+    // (clay: a name of the paper's catalog, which the model left out).
     for bad in ["1,1", "0", "9"] {
         let o = Command::new(env!("CARGO_BIN_EXE_presrs"))
             .arg("discover")
             .arg(&kept)
             .arg("--model")
             .arg(&model_path)
-            .args(["--add", "silt", "--group", bad, "--out-model"])
-            .arg(dir.join("silt.json"))
+            .args(["--add", "clay", "--group", bad, "--out-model"])
+            .arg(dir.join("clay.json"))
             .output()
             .unwrap();
         let err = String::from_utf8_lossy(&o.stderr);
@@ -458,7 +471,7 @@ fn keep_unknown_keeps_each_step_called_unknown_on_its_image_and_nothing_twice() 
             !o.status.success() && err.contains("--group"),
             "{bad}: {err}"
         );
-        assert!(!dir.join("silt.json").exists(), "{bad}");
+        assert!(!dir.join("clay.json").exists(), "{bad}");
     }
     let mut fresh = SimRobot::new(SimConfig::default(), 6);
     let log2 = dir.join("run2.log");

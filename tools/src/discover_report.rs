@@ -48,6 +48,23 @@ fn verdict(d: &Discovery, g: usize, model: &Model) -> String {
     }
 }
 
+/// Why the node kept a group's stances: each reason and its count, the most first.
+fn reasons(members: &[usize], kept: &[KeptStance]) -> Vec<(String, usize)> {
+    let mut out: Vec<(String, usize)> = Vec::new();
+    for r in members
+        .iter()
+        .filter_map(|&i| kept.get(i))
+        .map(|k| &k.reason)
+    {
+        match out.iter_mut().find(|(name, _)| name == r) {
+            Some((_, n)) => *n += 1,
+            None => out.push((r.clone(), 1)),
+        }
+    }
+    out.sort_by(|a, b| b.1.cmp(&a.1).then_with(|| a.0.cmp(&b.0)));
+    out
+}
+
 /// The kept stances that are unknown ones (not the session's known references).
 fn unknown(kept: &[KeptStance]) -> usize {
     kept.iter().filter(|k| k.known.is_none()).count()
@@ -71,18 +88,23 @@ pub fn table(d: &Discovery, kept: &[KeptStance], model: &Model, dir: &str) -> St
             .get(d.least_separated)
             .map_or("?", |c| c.name.as_str())
     );
-    s.push_str("group  stances  separation  nearest known  verdict\n");
+    s.push_str("group  stances  separation  nearest known  kept for            verdict\n");
+    let mut energy_known = false;
     for (g, grp) in d.groups.iter().enumerate() {
         let near = model
             .classes
             .get(grp.nearest_class)
             .map_or("?", |c| c.name.as_str());
+        let why = reasons(&grp.members, kept);
+        energy_known |= !grp.new_ground && why.first().is_some_and(|(r, _)| r == "energy");
+        let why: Vec<String> = why.iter().map(|(r, n)| format!("{r} {n}")).collect();
         let _ = writeln!(
             s,
-            "{:>5}  {:>7}  {:>10.2}  {near:<13}  {}",
+            "{:>5}  {:>7}  {:>10.2}  {near:<13}  {:<17}  {}",
             g + 1,
             grp.members.len(),
             grp.separation,
+            why.join(", "),
             verdict(d, g, model)
         );
     }
@@ -94,6 +116,13 @@ pub fn table(d: &Discovery, kept: &[KeptStance], model: &Model, dir: &str) -> St
         unknown(kept) - grouped - d.no_contact.len(),
         if new == 1 { "" } else { "s" }
     );
+    if energy_known {
+        s.push_str(
+            "a group kept by the energy check passed the image checks: its images look like \
+             known ground, the hops on it did not; look at its contact sheet (--out DIR) and \
+             add it with --group N if it is one ground\n",
+        );
+    }
     s
 }
 
@@ -113,6 +142,8 @@ pub fn json(d: &Discovery, kept: &[KeptStance], model: &Model) -> serde_json::Va
             "nearest_known": model.classes.get(grp.nearest_class).map(|c| c.name.clone()),
             "new_ground": grp.new_ground,
             "settling": grp.settling,
+            "reasons": reasons(&grp.members, kept).into_iter()
+                .map(|(r, n)| (r, serde_json::Value::from(n))).collect::<serde_json::Map<_, _>>(),
             "files": grp.members.iter().map(|&i| kept[i].file.clone()).collect::<Vec<_>>(),
         })).collect::<Vec<_>>(),
     })

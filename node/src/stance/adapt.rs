@@ -1,6 +1,6 @@
 //! Adaptation to a damaged sensor: the model refitted to a foot's dead sensor lines (see
-//! [`crate::classifier::train::refit`]), inline or on a background thread, and the per-frame
-//! decision that uses it ([`classify`]: crop, repair, the refitted or the installed model).
+//! [`crate::classifier::train::refit`]), inline or on a background thread; the per-frame
+//! decision that uses it is [`super::classify`].
 
 use std::sync::Arc;
 
@@ -8,8 +8,8 @@ use crossbeam_channel::{Receiver, Sender};
 
 use super::{Counters, Foot};
 use crate::classifier::train::{RefitError, refit};
-use crate::classifier::{Classifier, Decision, Model};
-use crate::config::{NodeConfig, RefitMode, RepairMode};
+use crate::classifier::{Classifier, Model};
+use crate::config::RefitMode;
 use crate::health::LineHealth;
 
 /// A model refitted to one foot's dead lines, and the lines it was fitted for.
@@ -178,76 +178,4 @@ impl Refitter {
             let _ = tx.send(job);
         }
     }
-}
-
-/// What a decision adapts with: the config (repair mode, refit mode), the refitter and the
-/// counters it counts refits in.
-pub(super) struct Adaptation<'a> {
-    pub cfg: &'a NodeConfig,
-    pub refitter: &'a mut Refitter,
-    pub counters: &'a mut Counters,
-}
-
-/// What a multi-frame decision keeps of a frame: its log posteriors added to the stance's
-/// sum, and (for the frame nearest the sample time) the checks' verdict for each class.
-pub(super) struct FrameSums<'a> {
-    pub sum_lp: &'a mut Vec<f64>,
-    pub verdicts: Option<&'a mut Vec<Option<crate::unknown::Reason>>>,
-}
-
-/// Crop, repair and decision for one frame (the foot's `best`). Returns the decision and
-/// whether any line was filled; `observe` feeds the frame to the stance history (once per
-/// stance); `sums` (multi-frame) gets the decision's log posteriors and verdicts. With history
-/// repair, a model refitted to the foot's current dead lines decides. An image without contact
-/// is neither learned from nor repaired.
-pub(super) fn classify(
-    cls: &mut Classifier,
-    foot: u8,
-    f: &mut Foot,
-    (rows, cols): (usize, usize),
-    observe: bool,
-    sums: Option<FrameSums<'_>>,
-    ctx: Adaptation<'_>,
-) -> Option<(Decision, bool)> {
-    let Adaptation {
-        cfg,
-        refitter,
-        counters,
-    } = ctx;
-    cls.prepare(&f.best[..f.best_len], rows, cols).ok()?;
-    // Measured once here: the decisions below skip the check.
-    if !cls.in_contact() {
-        return Some((Decision::NO_CONTACT, false));
-    }
-    let add = |sums: Option<FrameSums<'_>>, c: &mut Classifier| {
-        if let Some(s) = sums {
-            for (a, b) in s.sum_lp.iter_mut().zip(c.log_posteriors()) {
-                *a += b;
-            }
-            if let Some(v) = s.verdicts {
-                c.verdicts_per_class(v);
-            }
-        }
-    };
-    let repaired = match cfg.repair {
-        RepairMode::None => false,
-        RepairMode::PerImage => cls.repair_work() > 0,
-        RepairMode::History => {
-            if observe {
-                f.health.observe(cls.work_mut(), cfg.dead_after_stances);
-                refitter.request(cfg.refit, foot, f, counters);
-            }
-            if let Some(a) = f.adapted.as_mut().filter(|a| a.fits(&f.health)) {
-                a.cls.work_mut().copy_from_slice(cls.work_mut());
-                let repaired = f.health.repair(a.cls.work_mut()) > 0;
-                let d = a.cls.decide_in_contact();
-                add(sums, &mut a.cls);
-                return Some((d, repaired));
-            }
-            f.health.repair(cls.work_mut()) > 0
-        }
-    };
-    let d = cls.decide_in_contact();
-    add(sums, cls);
-    Some((d, repaired))
 }

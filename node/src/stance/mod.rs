@@ -13,6 +13,7 @@
 
 mod adapt;
 mod ahead;
+mod classify;
 mod debounce;
 mod foot;
 mod sample;
@@ -32,7 +33,8 @@ use crate::config::NodeConfig;
 use crate::health::LineHealth;
 use crate::unknown::energy::EnergyObservation;
 use crate::unknown::{self, Reason, ReasonCounts};
-use adapt::{Adaptation, Refitter, classify};
+use adapt::Refitter;
+use classify::{Adaptation, FrameSums, classify};
 use debounce::Edge;
 use foot::Foot;
 
@@ -493,7 +495,7 @@ impl StancePipeline {
                     refitter: &mut self.refitter,
                     counters: &mut self.counters,
                 };
-                let sums = adapt::FrameSums {
+                let sums = FrameSums {
                     sum_lp: &mut sum_lp,
                     verdicts: nearest.then_some(&mut verdicts),
                 };
