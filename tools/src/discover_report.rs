@@ -259,15 +259,17 @@ pub fn added(
         a.candidates.len(),
         a.session_refs
     );
-    s.push_str("  way             known ground kept   new terrain right   score\n");
+    s.push_str("  way             known ground kept           new terrain right   score\n");
     for (i, c) in a.candidates.iter().enumerate() {
+        // Judged on the run's held-out known stances, or (a keep without them) on the
+        // model's stored ones each left out.
         let (kept, of, on) = match c.known_kept {
-            Some((k, n)) => (k, n, "run"),
-            None => (c.stored_known.0, c.stored_known.1, "stored"),
+            Some((k, n)) => (k, n, "of the run's"),
+            None => (c.stored_known.0, c.stored_known.1, "of the stored"),
         };
         let _ = writeln!(
             s,
-            "{} {:<14}  {:>3}/{:<3} ({on:<6})      {:>3}/{:<3}           {:.3}",
+            "{} {:<14}  {:>3}/{:<3} {on:<13}       {:>3}/{:<3}           {:.3}",
             if i == a.chosen { "*" } else { " " },
             c.name(),
             kept,
