@@ -64,8 +64,7 @@ cross cargo clippy --quiet --target "$triple" -p presrs-node -p presrs-protocol 
 # not prove; docs/decisions/test-command-time.md).
 # Of those, the ones that run code whose aarch64 build differs (the kernels, the planner, the
 # model files' arithmetic): the classifier's unit tests and train_classify but its 17-class
-# model (class counts are the same code on every CPU: 31 s of its 52 s under qemu; the node's
-# other unit tests 32 s of 34 s; fresh 2-core machine, 2026-12-04).
+# model (class counts are the same code on every CPU). Times: docs/decisions/test-command-time.md.
 node_tests=(--quiet --release --target "$triple" -p presrs-node)
 if [ "$build_only" = 1 ]; then
   step "node crate tests: the aarch64 build"
@@ -86,8 +85,8 @@ mkdir -p "$target_dir/debian" && cp "$cross_dir/debian/presrs_${version}_arm64.d
 # host's test binary, the one ./test-all.sh's `cargo test` built (scripts/test-exe.sh).
 step "CLI classification tests on the arm64 binary under qemu-aarch64"
 cli_tests=$(scripts/test-exe.sh cli_classifier)
-# The one that trains, evaluates, classifies, repairs and reads bad input (57 s under qemu);
-# the calibration test (47 s) checks what the host's run of it checks, with the same code.
+# The one that trains, evaluates, classifies, repairs and reads bad input; the calibration
+# test checks what the host's run of it checks, with the same code (times: the same doc).
 PRESRS_TEST_BIN="$cross_dir/$triple/release/presrs" \
   PRESRS_TEST_RUNNER="qemu-aarch64 -L /usr/aarch64-linux-gnu" "$cli_tests" --quiet \
   --exact train_eval_classify_features_repair
