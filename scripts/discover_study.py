@@ -103,6 +103,7 @@ def main():
     ap.add_argument("--bin", default="target/debug/presrs")
     ap.add_argument("--seeds", default="1-5")
     ap.add_argument("--seconds", type=float, default=40.0)
+    ap.add_argument("--n", type=int, default=30, help="stances per terrain the model is trained on")
     ap.add_argument("--min-separation", default=None)
     ap.add_argument("--train-args", default="", help="extra `presrs train` options")
     ap.add_argument("--only", default=None, help="left-out terrains, comma-separated (none: the known-only run)")
@@ -128,7 +129,7 @@ def main():
         labels2 = [(float(r["start_s"]), float(r["end_s"]), r["terrain"])
                    for r in csv.DictReader(open(labels2_csv))]
         data = os.path.join(d, "data")
-        run([a.bin, "lab", "dataset", "dynamic", "--out", data, "--n", "30", "--seed",
+        run([a.bin, "lab", "dataset", "dynamic", "--out", data, "--n", str(a.n), "--seed",
              str(100 + seed)])
         if a.pairs:
             rows += pairs(a, d, data, log, labels, log2, labels2, seed)
