@@ -16,8 +16,11 @@ pub fn run(a: DiscoverArgs) -> Result<ExitCode> {
     let kept = read_kept(&a.dir)?;
     let how = Grouping {
         min_separation: a.min_separation,
-        no_split: a.no_split,
-        split_at: a.split_at,
+        split_at: if a.no_split {
+            Some(f64::INFINITY)
+        } else {
+            a.split_at
+        },
     };
     let d = discover_at(&model, &kept, how)
         .with_context(|| format!("--model {}", a.model.display()))?;

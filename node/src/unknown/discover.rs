@@ -189,9 +189,8 @@ pub fn discover(model: &Model, stances: &[KeptStance]) -> Result<Discovery, Disc
 pub struct Grouping {
     /// A fixed separation for new ground instead of the known terrains' own.
     pub min_separation: Option<f64>,
-    /// Leave linked groups whole: no split of two grounds the link joined.
-    pub no_split: bool,
-    /// A fixed separation for a split instead of the known terrains' own ([`split_floor`]).
+    /// A fixed separation for a split instead of the known terrains' own ([`split_floor`]);
+    /// infinite: each linked group left whole.
     pub split_at: Option<f64>,
 }
 
@@ -228,11 +227,7 @@ pub fn discover_at(
     let mut components: Vec<(Vec<usize>, bool)> = Vec::new();
     for members in linked.into_iter().filter(|m| m.len() >= MIN_GROUP) {
         let mut parts = Vec::new();
-        if how.no_split {
-            parts.push(members);
-        } else {
-            split(&kept.points, members, split_at, &mut parts);
-        }
+        split(&kept.points, members, split_at, &mut parts);
         let whole = parts.len() == 1;
         components.extend(parts.into_iter().map(|p| (p, !whole)));
     }
@@ -427,7 +422,7 @@ fn two_means(points: &Shapes, members: &[usize]) -> Option<(Vec<usize>, Vec<usiz
     let mean = |side: &dyn Fn(usize) -> bool| {
         let mut m = [0f64; BANDS];
         let mut n = 0usize;
-        for (_, &i) in members.iter().enumerate().filter(|(k, _)| side(*k)) {
+        for (_, &i) in members.iter().enumerate().filter(|&(k, _)| side(k)) {
             m.iter_mut()
                 .zip(points.get(i))
                 .for_each(|(m, x)| *m += *x as f64);
