@@ -15,7 +15,7 @@ pub fn train(a: &TrainArgs) -> Result<ExitCode> {
     let (data, out, opts) = (&a.data, &a.out, &a.opts);
     let catalog = a.terrains.catalog()?;
     let (set, _) = TrainingSet::load(data, &catalog, a.skip_bad)?;
-    if let Some(note) = set.gait_note() {
+    if let Some(note) = set.gait_note(a.verbose) {
         println!("{note}");
     }
     let cal = match &a.calibrate {
@@ -35,15 +35,11 @@ pub fn train(a: &TrainArgs) -> Result<ExitCode> {
     let trained = set.train_calibrated(opts, cal.as_ref().map(|(s, n)| (s, n.as_slice())))?;
     let took = t0.elapsed();
     trained.model.save(out)?;
-    print!(
-        "{}",
-        trained.report(
-            opts.unknown_rate,
-            took,
-            &out.display().to_string(),
-            a.verbose
-        )
-    );
+    let out = out.display().to_string();
+    match a.verbose {
+        true => print!("{}", trained.report(opts.unknown_rate, took, &out, true)),
+        false => print!("{}", trained.summary(opts.unknown_rate, took, &out)),
+    }
     Ok(ExitCode::SUCCESS)
 }
 

@@ -245,7 +245,7 @@ fn a_capture_of_the_whole_bus_records_each_stances_gait_and_train_lists_them() {
         presrs()
             .args(["train", "--data", s(data), "--out", s(&model)])
             .args(["--per-class", "12", "--train", "8", "--normalize-load"])
-            .args(["--crop", "0,3,6,0"])
+            .args(["--crop", "0,3,6,0", "--verbose"])
             .output()
             .unwrap()
     };

@@ -129,7 +129,10 @@ fn an_offset_slowly_loading_foot_gets_its_own_crop_and_deciding_frame() {
             "capture", "--replay", &log, "--labels", &csv, "--out", "set",
         ],
     );
-    let report = presrs(&dir, &["train", "--data", "set", "--out", "model.json"]);
+    let report = presrs(
+        &dir,
+        &["train", "--data", "set", "--out", "model.json", "--verbose"],
+    );
     let model = node::classifier::Model::load(&dir.join("model.json")).unwrap();
 
     // The crop keeps every loaded row and column: the footprint's own box, nothing of it cut.

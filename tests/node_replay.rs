@@ -473,6 +473,26 @@ fn keep_unknown_keeps_each_step_called_unknown_on_its_image_and_nothing_twice() 
         );
         assert!(!dir.join("clay.json").exists(), "{bad}");
     }
+    // A name the catalog has (the paper's clay, which the model left out): added under the
+    // catalog's id, and the terrains file is left as it was, said so.
+    let before = std::fs::read(&terrains).unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_presrs"))
+        .arg("discover")
+        .arg(&kept)
+        .arg("--model")
+        .arg(&model_path)
+        .args(["--add", "clay", "--group", "1", "--out-model"])
+        .arg(dir.join("clay.json"))
+        .arg("--terrains")
+        .arg(&terrains)
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        o.status.success() && said.contains("no terrains entry written"),
+        "{said}"
+    );
+    assert_eq!(std::fs::read(&terrains).unwrap(), before);
     let mut fresh = SimRobot::new(SimConfig::default(), 6);
     let log2 = dir.join("run2.log");
     let mut w = std::io::BufWriter::new(std::fs::File::create(&log2).unwrap());

@@ -18,8 +18,8 @@ pub struct TrainArgs {
     /// Skip unreadable files (counted) instead of stopping.
     #[arg(long)]
     pub skip_bad: bool,
-    /// List every candidate of the unknown-ground choice, not only the kept one and the best
-    /// single option.
+    /// The whole account: the images per session, every candidate of the unknown-ground
+    /// choice with its figures, and why each setting was chosen (default: a short summary).
     #[arg(long)]
     pub verbose: bool,
     /// Calibrate the unknown-terrain rejection on this dataset (DIR/<terrain>/<images>: another

@@ -238,7 +238,12 @@ mod tests {
             vec![Some(2); n],
             "a simulated set knows its gait"
         );
-        let note = set.gait_note().unwrap();
+        assert_eq!(
+            set.gait_note(false),
+            None,
+            "every terrain in each: nothing to act on"
+        );
+        let note = set.gait_note(true).unwrap();
         assert!(
             note.starts_with(&format!(
                 "gaits at touchdown (capture manifest): G2 {n}; every"
@@ -255,7 +260,8 @@ mod tests {
         set.runs.extend(g3.runs);
         set.gaits.extend(g3.gaits);
         set.gaits[0] = None;
-        let note = set.gait_note().unwrap();
+        let short = set.gait_note(false).unwrap();
+        let note = set.gait_note(true).unwrap();
         let first = &set.classes[0].name;
         assert!(
             note.contains(&format!(
@@ -269,8 +275,12 @@ mod tests {
             note.contains(&format!("; not captured: {first} in G3. ")),
             "{note}"
         );
+        assert!(
+            short.contains(&format!("; not captured: {first} in G3: ")) && short.len() < 300,
+            "{short}"
+        );
         set.gaits.iter_mut().for_each(|g| *g = None);
-        assert_eq!(set.gait_note(), None);
+        assert_eq!(set.gait_note(true), None);
     }
 
     #[test]

@@ -152,6 +152,7 @@ proptest! {
                 prop_assert!(back.is_ok(), "the model train wrote does not load: {:?}", back.err());
                 // What `presrs train` prints never panics either.
                 let _ = t.report(opts.unknown_rate, std::time::Duration::ZERO, "m.json", true);
+                let _ = t.summary(opts.unknown_rate, std::time::Duration::ZERO, "m.json");
             }
             Err(e) => {
                 let msg = e.to_string();

@@ -220,7 +220,11 @@ pub fn added(
             .collect::<Vec<_>>()
             .join("+"),
         if in_catalog {
-            ", from the catalog".to_string()
+            // Said plainly: a lab that passed --terrains looks for a new entry there.
+            format!(
+                ", already in the catalog{}: no terrains entry written",
+                terrains.map_or(String::new(), |t| format!(" {}", t.display()))
+            )
         } else {
             terrains.map_or(String::new(), |t| format!(", added to {}", t.display()))
         },

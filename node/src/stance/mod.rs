@@ -13,9 +13,9 @@
 
 mod adapt;
 mod ahead;
-mod classify;
 mod debounce;
 mod foot;
+mod frame_decision;
 mod sample;
 mod step_decision;
 mod timing;
@@ -34,9 +34,9 @@ use crate::health::LineHealth;
 use crate::unknown::energy::EnergyObservation;
 use crate::unknown::{self, Reason, ReasonCounts};
 use adapt::Refitter;
-use classify::{Adaptation, FrameSums, classify};
 use debounce::Edge;
 use foot::Foot;
+use frame_decision::{Adaptation, FrameSums, decide_frame};
 
 /// Counters per stage, for NodeStatus and the logs.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -499,7 +499,7 @@ impl StancePipeline {
                     sum_lp: &mut sum_lp,
                     verdicts: nearest.then_some(&mut verdicts),
                 };
-                let decided = classify(cls, foot, f, (rows, cols), observe, Some(sums), ctx);
+                let decided = decide_frame(cls, foot, f, (rows, cols), observe, Some(sums), ctx);
                 (f.sum_lp, f.sample_verdicts) = (sum_lp, verdicts);
                 match decided {
                     Some((d, repaired)) if d.contact => {
@@ -600,86 +600,25 @@ impl StancePipeline {
         }
     }
 
+    /// A stance's decision, in three steps: the image's (the frames summed, or the sampled
+    /// frame), how the step ended and its verdict, then the bus's fields.
     fn decide(&mut self, foot: u8, out: &mut (impl Emit<Decided> + ?Sized)) {
-        let cfg = &self.cfg;
-        let f = &mut self.feet[foot as usize];
-        f.decided = true;
-        // Why the step's image is unknown ground, if it is (`unknown::image_verdict`).
-        let mut image_reason = None;
+        self.feet[foot as usize].decided = true;
         let mut tc = TerrainClass {
-            step: f.step,
+            step: self.feet[foot as usize].step,
             terrain: messages::TERRAIN_UNKNOWN,
             confidence_pct: 0.0,
             damage_pct: 0.0,
             flags: 0,
             latency_us: 0,
         };
-        match self.classifier.as_mut() {
-            Some(cls) if cfg.multi_frame && f.used > 0 => {
-                let m = cls.model();
-                let lp = f.sum_lp.get(..m.classes.len()).unwrap_or(&f.sum_lp);
-                let (best, pct) = step_decision::combine(lp);
-                tc.confidence_pct = pct;
-                tc.flags |= flags::MULTI_FRAME;
-                // The checks' verdict on the class the frames decided, at the sample-time frame.
-                image_reason = f
-                    .sample_err
-                    .and_then(|_| f.sample_verdicts.get(best).copied().flatten());
-                if image_reason.is_none() {
-                    tc.terrain = m.classes[best].terrain_id;
-                }
-                f.balance.class = image_reason.is_none().then_some(best);
-            }
-            Some(cls) if !cfg.multi_frame && f.best_err.is_some() => {
-                let m = cls.model();
-                let (rows, cols) = (m.input_rows, m.input_cols);
-                let ctx = Adaptation {
-                    cfg,
-                    refitter: &mut self.refitter,
-                    counters: &mut self.counters,
-                };
-                match classify(cls, foot, f, (rows, cols), true, None, ctx) {
-                    Some((d, _)) if !d.contact => f.no_contact = true,
-                    Some((d, repaired)) => {
-                        f.repaired = repaired;
-                        tc.terrain = d.terrain_id;
-                        tc.confidence_pct = d.confidence * 100.0;
-                        image_reason = d.reason;
-                        f.balance.class = d.class;
-                    }
-                    None => {}
-                }
-            }
-            _ => {}
-        }
-        let sampled = f.used > 0 || (!cfg.multi_frame && f.best_err.is_some());
-        let outcome =
-            step_decision::outcome(f.no_contact, f.used, sampled, self.classifier.is_some());
-        match outcome {
-            step_decision::Outcome::NoContact => self.counters.no_contact += 1,
-            step_decision::Outcome::NoSample => self.counters.no_sample += 1,
-            step_decision::Outcome::Classified => self.counters.classified += 1,
-        }
-        step_decision::set_flags(&mut tc, outcome, cfg.low_confidence, f.repaired);
-        // The step's verdict, in one place for both paths: the image's checks, then the
-        // energy check (the texture's terrain took energy out of the last hop that it does
-        // not: other ground that looks like it).
-        let reason = match outcome {
-            step_decision::Outcome::NoContact => Some(Reason::NoContact),
-            step_decision::Outcome::NoSample => Some(Reason::NoSample),
-            step_decision::Outcome::Classified => unknown::step_verdict(
-                image_reason,
-                f.balance.class.is_some_and(|k| f.balance.rejects(k)),
-            ),
+        let image_reason = if self.cfg.multi_frame {
+            self.decide_frames(foot, &mut tc)
+        } else {
+            self.decide_sampled(foot, &mut tc)
         };
-        if let Some(r) = reason {
-            tc.terrain = messages::TERRAIN_UNKNOWN;
-            tc.flags |= r.flag_bits();
-            self.counters.unknown_by_reason.add(r);
-            if r == Reason::Energy {
-                self.counters.energy_unknown += 1;
-            }
-        }
+        self.verdict(foot, &mut tc, image_reason);
+        let f = &self.feet[foot as usize];
         tc.damage_pct = f.health.damage_pct();
         // From the receipt of the sampled frame to now (the decision made, handed to the
         // send queue), saturated as the CAN field is; 0 when no frame was sampled (flag
@@ -696,5 +635,87 @@ impl StancePipeline {
             class: tc,
             touchdown_us: f.touchdown_rx_us,
         });
+    }
+
+    /// The multi-frame decision: the class of the stance's summed log posteriors, and the
+    /// checks' verdict on it at the sample-time frame (why the image is unknown ground, if it
+    /// is).
+    fn decide_frames(&mut self, foot: u8, tc: &mut TerrainClass) -> Option<Reason> {
+        let f = &mut self.feet[foot as usize];
+        let cls = self.classifier.as_ref().filter(|_| f.used > 0)?;
+        let m = cls.model();
+        let lp = f.sum_lp.get(..m.classes.len()).unwrap_or(&f.sum_lp);
+        let (best, pct) = step_decision::combine(lp);
+        tc.confidence_pct = pct;
+        tc.flags |= flags::MULTI_FRAME;
+        let reason = f
+            .sample_err
+            .and_then(|_| f.sample_verdicts.get(best).copied().flatten());
+        if reason.is_none() {
+            tc.terrain = m.classes[best].terrain_id;
+        }
+        f.balance.class = reason.is_none().then_some(best);
+        reason
+    }
+
+    /// The single-frame decision on the frame nearest the sample time: crop, repair, the
+    /// classifier's terrain and the checks' verdict.
+    fn decide_sampled(&mut self, foot: u8, tc: &mut TerrainClass) -> Option<Reason> {
+        let f = &mut self.feet[foot as usize];
+        let cls = self.classifier.as_mut().filter(|_| f.best_err.is_some())?;
+        let (rows, cols) = (cls.model().input_rows, cls.model().input_cols);
+        let ctx = Adaptation {
+            cfg: &self.cfg,
+            refitter: &mut self.refitter,
+            counters: &mut self.counters,
+        };
+        match decide_frame(cls, foot, f, (rows, cols), true, None, ctx)? {
+            (d, _) if !d.contact => {
+                f.no_contact = true;
+                None
+            }
+            (d, repaired) => {
+                f.repaired = repaired;
+                tc.terrain = d.terrain_id;
+                tc.confidence_pct = d.confidence * 100.0;
+                f.balance.class = d.class;
+                d.reason
+            }
+        }
+    }
+
+    /// How the step ended, counted, and its verdict in one place for both paths: the image's
+    /// checks, then the energy check (the texture's terrain took energy out of the last hop
+    /// that it does not: other ground that looks like it). Unknown ground sets TERRAIN_UNKNOWN
+    /// and the reason's flags.
+    fn verdict(&mut self, foot: u8, tc: &mut TerrainClass, image_reason: Option<Reason>) {
+        let f = &self.feet[foot as usize];
+        let multi = self.cfg.multi_frame;
+        let sampled = f.used > 0 || (!multi && f.best_err.is_some());
+        let outcome =
+            step_decision::outcome(f.no_contact, f.used, sampled, self.classifier.is_some());
+        let c = &mut self.counters;
+        match outcome {
+            step_decision::Outcome::NoContact => c.no_contact += 1,
+            step_decision::Outcome::NoSample => c.no_sample += 1,
+            step_decision::Outcome::Classified => c.classified += 1,
+        }
+        step_decision::set_flags(tc, outcome, self.cfg.low_confidence, f.repaired);
+        let reason = match outcome {
+            step_decision::Outcome::NoContact => Some(Reason::NoContact),
+            step_decision::Outcome::NoSample => Some(Reason::NoSample),
+            step_decision::Outcome::Classified => unknown::step_verdict(
+                image_reason,
+                f.balance.class.is_some_and(|k| f.balance.rejects(k)),
+            ),
+        };
+        if let Some(r) = reason {
+            tc.terrain = messages::TERRAIN_UNKNOWN;
+            tc.flags |= r.flag_bits();
+            c.unknown_by_reason.add(r);
+            if r == Reason::Energy {
+                c.energy_unknown += 1;
+            }
+        }
     }
 }

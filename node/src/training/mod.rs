@@ -8,6 +8,7 @@ pub mod footprint;
 pub mod frame;
 mod report;
 mod set;
+mod summary;
 
 pub use report::{SessionCount, Trained, no_training_run_images_note};
 pub use set::{LoadError, NotInCatalog, RunSplit, TrainCalibratedError, TrainingSet};

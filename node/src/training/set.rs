@@ -197,11 +197,12 @@ impl TrainingSet {
 
     /// `presrs train`'s account of the gaits the set's stances touched down in (the capture
     /// manifest's `gait`), and the terrains that lack one of them; `None` when no image has a
-    /// gait (a folder not captured from a bus that carried GaitStatus).
+    /// gait (a folder not captured from a bus that carried GaitStatus). With `why`, what a
+    /// missing gait costs, measured; without, a short note only when a terrain lacks one.
     ///
     /// Why it matters: a gait between trained ones is known ground, one beyond them is not
     /// (docs/decisions/figures-behind-comments.md, gait-coverage).
-    pub fn gait_note(&self) -> Option<String> {
+    pub fn gait_note(&self, why: bool) -> Option<String> {
         use std::collections::{BTreeMap, BTreeSet};
         use std::fmt::Write;
         if self.gaits.iter().all(Option::is_none) {
@@ -240,8 +241,15 @@ impl TrainingSet {
             .collect();
         if lacking.is_empty() {
             o.push_str("; every terrain in each");
-        } else {
-            let _ = write!(o, "; not captured: {}", lacking.join(", "));
+            return why.then_some(o);
+        }
+        let _ = write!(o, "; not captured: {}", lacking.join(", "));
+        if !why {
+            o.push_str(
+                ": a gait a terrain was not captured in can make it look new; capture each \
+                 terrain in the slowest and the fastest gait the robot will run",
+            );
+            return Some(o);
         }
         // The controller runs a terrain in its own gait, so a set captured from the robot's
         // runs lacks gaits per terrain; the robot still meets them (the last terrain's gait at

@@ -70,7 +70,7 @@ impl Checks {
     /// The verdict on an image measured as `m` ([`super::image_verdict`] with this model's
     /// bands).
     #[inline]
-    pub fn image_verdict(
+    pub fn judge(
         &self,
         m: super::Measured,
         roughness: impl FnOnce() -> f64,

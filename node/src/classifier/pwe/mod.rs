@@ -207,7 +207,7 @@ impl Classifier {
 
     /// The decision for a working image in contact whose load is `load`: the feature vector
     /// and its projection, the residual, the Parzen posterior, then what the unknown-ground
-    /// checks say of the best class ([`crate::unknown::checks::Checks::image_verdict`]).
+    /// checks say of the best class ([`crate::unknown::checks::Checks::judge`]).
     fn decide_with_load(&mut self, load: u64) -> Decision {
         let m = &self.model;
         // Only when the model scales or checks the load.
@@ -247,7 +247,7 @@ impl Classifier {
         let (w, rows, cols, avx2) = (&self.work, self.work_rows, self.work_cols, self.avx2_fma);
         self.model
             .unknown
-            .image_verdict(m, || super::texture::roughness_with(w, rows, cols, avx2))
+            .judge(m, || super::texture::roughness_with(w, rows, cols, avx2))
     }
 
     /// After a decision: the verdict of the checks on the same image had its class been each

@@ -28,7 +28,7 @@ pub(super) struct FrameSums<'a> {
 /// stance); `sums` (multi-frame) gets the decision's log posteriors and verdicts. With history
 /// repair, a model refitted to the foot's current dead lines decides. An image without contact
 /// is neither learned from nor repaired.
-pub(super) fn classify(
+pub(super) fn decide_frame(
     cls: &mut Classifier,
     foot: u8,
     f: &mut Foot,

@@ -1,0 +1,176 @@
+//! `presrs train`'s short account: what was written, what was chosen for this foot and its
+//! data, and every warning, in a few lines. The whole account, every candidate and every
+//! reason, is [`Trained::report`] (`train --verbose`).
+//!
+//! A line here is either a choice (crop, PCA dimensions, deciding frame, unknown-ground
+//! checks, calibration) with the one number it was chosen by, or a warning the lab must act
+//! on (a crop that cuts load, a check that calls too much known ground unknown, one session
+//! only, thin calibration terrains). Nothing is said here that the long account does not say.
+
+use std::fmt::Write;
+
+use super::report::Trained;
+use crate::unknown::novelty::CalibrationSource;
+
+/// A left-out terrain the kept checks find less than this share of is named in the summary:
+/// new ground like it will mostly be taken for known ground.
+const WEAK_FOUND: f64 = 0.5;
+
+impl Trained {
+    /// The short account of a model written to `out` in `took`; see the module docs.
+    pub fn summary(&self, unknown_rate: f64, took: std::time::Duration, out: &str) -> String {
+        // Writing to a String cannot fail.
+        let mut o = String::new();
+        let (m, split) = (&self.model, &self.split);
+        let names: Vec<&str> = m.classes.iter().map(|c| c.name.as_str()).collect();
+        let _ = writeln!(
+            o,
+            "wrote {out}: {} terrains ({}), trained on {} + {} images, {} left for testing, in \
+             {:.1} s",
+            names.len(),
+            names.join(", "),
+            split.train.len(),
+            split.validation.len(),
+            split.test.len(),
+            took.as_secs_f64()
+        );
+        let _ = writeln!(o, "{}", self.settings_line());
+        if unknown_rate > 0.0 {
+            let _ = writeln!(o, "{}", self.unknown_line());
+        }
+        let _ = writeln!(o, "{}", self.calibration_short(unknown_rate));
+        for w in self.warnings() {
+            let _ = writeln!(o, "{w}");
+        }
+        let _ = writeln!(
+            o,
+            "(`presrs train --verbose`: every candidate measured and why each was chosen)"
+        );
+        o
+    }
+
+    /// `crop 0,3,6,0 (measured) · h = 12 PCA dimensions · deciding frame 120 ms (measured)`.
+    fn settings_line(&self) -> String {
+        let m = &self.model;
+        let crop = match (&self.footprint, self.crop_given) {
+            (Some(_), false) => format!("crop {} (measured on the stances' load)", m.crop),
+            (_, true) => format!("crop {} (as given)", m.crop),
+            (None, false) => format!("crop {} (no stance carried load to measure)", m.crop),
+        };
+        let frame = match &self.frame {
+            Some(f) => format!(
+                "deciding frame {} ms after touchdown (measured)",
+                f.scores[f.chosen].offset_ms
+            ),
+            None => "deciding frame: the node's sample time (no stance frames kept)".into(),
+        };
+        format!("{crop}; h = {} PCA dimensions; {frame}", m.h)
+    }
+
+    /// The kept unknown-ground checks and what they found on the left-out terrains.
+    fn unknown_line(&self) -> String {
+        let c = &self.choice;
+        let Some(o) = c.chosen.map(|i| &c.outcomes[i]) else {
+            return format!(
+                "unknown ground: {} ({})",
+                c.candidate,
+                c.why.as_deref().unwrap_or("not measured")
+            );
+        };
+        let weak: Vec<String> = c
+            .classes
+            .iter()
+            .zip(&o.found_per_class)
+            .filter(|(_, v)| **v < WEAK_FOUND)
+            .map(|(t, v)| format!("{t} {:.0}%", 100.0 * v))
+            .collect();
+        let weak = match weak.is_empty() {
+            true => String::new(),
+            false => format!(" (least: {})", weak.join(", ")),
+        };
+        format!(
+            "unknown ground: {}; with each terrain left out in turn, it finds {:.0}% of it{weak} \
+             and calls {:.1}% of known ground unknown",
+            c.candidate,
+            100.0 * o.found,
+            100.0 * o.known_unknown
+        )
+    }
+
+    /// Where the thresholds come from, in one clause; with one session, what to do about it.
+    fn calibration_short(&self, unknown_rate: f64) -> String {
+        let Some(nv) = &self.model.unknown.novelty else {
+            return match unknown_rate > 0.0 {
+                true => "unknown ground: no calibration image showed contact".into(),
+                false => "unknown ground: rejection off (--unknown-rate 0)".into(),
+            };
+        };
+        let c = &nv.calibration;
+        let from = match c.source {
+            CalibrationSource::HeldOutRuns => format!("held-out runs ({})", c.runs.join(", ")),
+            CalibrationSource::SameRun => "the training run's unused images".into(),
+            CalibrationSource::LeaveOneOut => "the stored samples, leave-one-out".into(),
+            CalibrationSource::TimeBlocks => "this one session, in time blocks".into(),
+        };
+        let mut line = format!(
+            "thresholds at --unknown-rate {unknown_rate} from {from}, {} images",
+            c.images
+        );
+        if c.margin != 1.0 || c.source == CalibrationSource::TimeBlocks {
+            line.push_str(&format!(", margin {:.2}", c.margin));
+        }
+        if c.source == CalibrationSource::TimeBlocks {
+            line.push_str(
+                ": one session cannot measure the next; expect more of the next session's known \
+                 ground unknown, and record a second session (--calibrate DIR, or capture two)",
+            );
+        }
+        line
+    }
+
+    /// What the lab must act on, one line each.
+    fn warnings(&self) -> Vec<String> {
+        let mut w = Vec::new();
+        if let (Some(f), true) = (&self.footprint, self.crop_given)
+            && f.cut_by(&self.model.crop).1 > 0
+        {
+            w.push(self.crop_line());
+        }
+        let c = &self.choice;
+        if let Some(o) = c.chosen.map(|i| &c.outcomes[i])
+            && o.known_unknown > c.budget + 1e-12
+        {
+            w.push(format!(
+                "warning: the kept checks call {:.1}% of known ground unknown (at most {:.1}% \
+                 wanted): expect that share of known steps in the safe gait; capture a longer \
+                 calibration run, or raise --unknown-rate",
+                100.0 * o.known_unknown,
+                100.0 * c.budget
+            ));
+        }
+        if !c.thin.is_empty() {
+            let each: Vec<String> = c.thin.iter().map(|(t, n)| format!("{t} ({n})")).collect();
+            w.push(format!(
+                "warning: too few calibration images of {} to judge them as known ground; \
+                 capture more",
+                each.join(", ")
+            ));
+        }
+        if let Some(cal) = self
+            .model
+            .unknown
+            .novelty
+            .as_ref()
+            .map(|nv| &nv.calibration)
+            && cal.source == CalibrationSource::HeldOutRuns
+            && cal.training_run_images() == 0
+        {
+            w.push(
+                "warning: the calibration holds none of the training run's images: expect more \
+                 unknowns than --unknown-rate on the next run (draw fewer --per-class)"
+                    .into(),
+            );
+        }
+        w
+    }
+}
