@@ -32,15 +32,15 @@ pub struct BenchNodeArgs {
     /// pipeline and send), to measure one against the other (docs/decisions/node-threads.md).
     #[arg(long, default_value = "1")]
     pub node_threads: node::NodeThreads,
-    /// `--ros2`: measure each feet count twice in one run, without and then with the ROS 2
-    /// bridge beside the node on the same bus (publishing on Zenoh, as `presrs bridge` does);
-    /// the report adds the bridge's CPU and drops.
-    #[command(flatten)]
-    pub ros2: ros2::Ros2Options,
     /// Measure each feet count twice in one run, without and then with the node keeping its
     /// unknown stances in DIR (`presrs node --keep-unknown`); the report adds what it wrote and
     /// dropped. With the demo's model little of the load is unknown: give `--model` one that
     /// lacks a terrain of the load to keep many.
     #[arg(long, value_name = "DIR")]
     pub keep_unknown: Option<std::path::PathBuf>,
+    /// `--ros2`: measure each feet count twice in one run, without and then with the ROS 2
+    /// bridge beside the node on the same bus (publishing on Zenoh, as `presrs bridge` does);
+    /// the report adds the bridge's CPU and drops.
+    #[command(flatten, next_help_heading = "ROS 2 (Zenoh, rmw_zenoh)")]
+    pub ros2: ros2::Ros2Options,
 }

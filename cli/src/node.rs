@@ -37,9 +37,9 @@ pub struct NodeArgs {
     /// Overrides the config's `terrains` key.
     #[command(flatten)]
     pub terrains: protocol::TerrainsArg,
-    #[command(flatten)]
+    #[command(flatten, next_help_heading = "Record and view")]
     pub live: record::LiveOptions,
     /// `--ros2`: the node's bus as ROS 2 topics on Zenoh; `--ros2-bag DIR`: as a rosbag2.
-    #[command(flatten)]
+    #[command(flatten, next_help_heading = "ROS 2 (Zenoh, rmw_zenoh)")]
     pub ros2: ros2::Ros2Options,
 }

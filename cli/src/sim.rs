@@ -42,25 +42,40 @@ pub struct SimArgs {
     /// The leg as two motors of this protocol (moteus, odrive, mit): the simulator takes their
     /// commands from a leg bridge (`presrs leg`) instead of LegCommand and answers as the
     /// drivers do; LegState is then the bridge's.
-    #[arg(long, value_name = "PROTOCOL", conflicts_with = "log")]
+    #[arg(
+        long,
+        value_name = "PROTOCOL",
+        conflicts_with = "log",
+        help_heading = "The leg through motors"
+    )]
     pub leg: Option<leg::DriverKind>,
     /// The leg's config for `--leg` (the same file `presrs leg` runs with); default: the
     /// built-in prismatic leg on that protocol's motors.
-    #[arg(long, value_name = "FILE", requires = "leg")]
+    #[arg(
+        long,
+        value_name = "FILE",
+        requires = "leg",
+        help_heading = "The leg through motors"
+    )]
     pub leg_config: Option<PathBuf>,
     /// Mass the hopper carries, kg (0 to 2; its body is 2 kg): the robot's run with a load its
     /// model and energy maps were not made with.
     #[arg(long, value_name = "KG", default_value_t = 0.0)]
     pub payload: f64,
     /// Fault drill for `--leg`: the length joint's driver goes silent at this robot time (s).
-    #[arg(long, value_name = "SECONDS", requires = "leg")]
+    #[arg(
+        long,
+        value_name = "SECONDS",
+        requires = "leg",
+        help_heading = "The leg through motors"
+    )]
     pub leg_silent_at: Option<f64>,
     /// `--mcap FILE`: every frame on the bus (or, with --log, every frame the robot sends) and
     /// the simulator's truth per leg (`/sim/legN`: speed, position, true terrain) as MCAP;
     /// `--foxglove`: the same live.
-    #[command(flatten)]
+    #[command(flatten, next_help_heading = "Record and view")]
     pub live: record::LiveOptions,
     /// `--ros2`: the bus as ROS 2 topics on Zenoh; `--ros2-bag DIR`: as a rosbag2.
-    #[command(flatten)]
+    #[command(flatten, next_help_heading = "ROS 2 (Zenoh, rmw_zenoh)")]
     pub ros2: ros2::Ros2Options,
 }

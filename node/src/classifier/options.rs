@@ -13,10 +13,24 @@ use crate::unknown::novelty::NoveltyScore;
 #[cfg_attr(feature = "clap", derive(clap::Args))]
 pub struct TrainOptions {
     /// Images drawn per class (section 7.2: 20).
-    #[cfg_attr(feature = "clap", arg(long, default_value_t = 20))]
+    #[cfg_attr(
+        feature = "clap",
+        arg(
+            long,
+            default_value_t = 20,
+            help_heading = "The fit (the paper's split; the crop measured)"
+        )
+    )]
     pub per_class: usize,
     /// Of those, images to train on; the rest validate the kernel width (13 of 20).
-    #[cfg_attr(feature = "clap", arg(long, default_value_t = 13))]
+    #[cfg_attr(
+        feature = "clap",
+        arg(
+            long,
+            default_value_t = 13,
+            help_heading = "The fit (the paper's split; the crop measured)"
+        )
+    )]
     pub train: usize,
     /// Rows/columns removed before the features: `auto` keeps the rows and columns that carry
     /// your stances' load (each at least 0.25% of it; on the simulator's foot that is the
@@ -24,41 +38,78 @@ pub struct TrainOptions {
     /// 0,3,6,0 on its foot): a given crop that cuts loaded lines is warned about.
     #[cfg_attr(
         feature = "clap",
-        arg(long, default_value = "auto", value_name = "auto|T,B,L,R")
+        arg(
+            long,
+            default_value = "auto",
+            value_name = "auto|T,B,L,R",
+            help_heading = "The fit (the paper's split; the crop measured)"
+        )
     )]
     pub crop: CropSpec,
     /// Keep every k-th row and column after the crop (1 = full resolution, at most 8).
-    #[cfg_attr(feature = "clap", arg(long, default_value_t = 1, value_parser = parse_downsample))]
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 1, value_parser = parse_downsample, help_heading = "The fit (the paper's split; the crop measured)"))]
     pub downsample: usize,
     /// Scale each image to the training set's mean total intensity (the paper's intensity
     /// scaling). Without it, `train` measures whether it finds more unknown ground (see
     /// --unknown-checks).
-    #[cfg_attr(feature = "clap", arg(long))]
+    #[cfg_attr(
+        feature = "clap",
+        arg(
+            long,
+            help_heading = "Unknown ground (measured on your runs, unless given)"
+        )
+    )]
     pub normalize_load: bool,
     /// PCA dimensions. Without it, `train` measures which finds more unknown ground: the most
     /// the samples support (up to the paper's 52) or the number that classifies the validation
     /// images best (see --unknown-checks).
-    #[cfg_attr(feature = "clap", arg(long = "dims", value_name = "N"))]
+    #[cfg_attr(
+        feature = "clap",
+        arg(
+            long = "dims",
+            value_name = "N",
+            help_heading = "Unknown ground (measured on your runs, unless given)"
+        )
+    )]
     pub h: Option<usize>,
     /// Seed of the random split.
-    #[cfg_attr(feature = "clap", arg(long, default_value_t = 1))]
+    #[cfg_attr(
+        feature = "clap",
+        arg(
+            long,
+            default_value_t = 1,
+            help_heading = "The fit (the paper's split; the crop measured)"
+        )
+    )]
     pub seed: u64,
     /// The share of known-terrain images the model may call unknown (0..=0.5): the novelty
     /// threshold is set so that this share of held-out known images scores above it. 0 keeps
     /// the paper's classifier without the novelty score, which rejects almost nothing.
     #[cfg_attr(
         feature = "clap",
-        arg(long, default_value_t = DEFAULT_UNKNOWN_RATE, value_parser = parse_rate)
+        arg(long, default_value_t = DEFAULT_UNKNOWN_RATE, value_parser = parse_rate, help_heading = "Unknown ground (measured on your runs, unless given)")
     )]
     pub unknown_rate: f64,
     /// Always call unknown an image whose load (summed working image, before normalisation)
     /// lies outside its terrain's band. Without it, `train` measures whether the check finds
     /// more unknown ground (see --unknown-checks).
-    #[cfg_attr(feature = "clap", arg(long))]
+    #[cfg_attr(
+        feature = "clap",
+        arg(
+            long,
+            help_heading = "Unknown ground (measured on your runs, unless given)"
+        )
+    )]
     pub check_load: bool,
     /// Always call unknown an image whose roughness lies outside its terrain's band. Without it,
     /// `train` measures whether the check finds more unknown ground (see --unknown-checks).
-    #[cfg_attr(feature = "clap", arg(long))]
+    #[cfg_attr(
+        feature = "clap",
+        arg(
+            long,
+            help_heading = "Unknown ground (measured on your runs, unless given)"
+        )
+    )]
     pub check_texture: bool,
     /// How the unknown-ground checks are chosen. `auto`: `train` leaves each terrain out in
     /// turn, scores every combination of novelty score, load normalisation, PCA dimensions and
@@ -70,7 +121,12 @@ pub struct TrainOptions {
     /// flags above pin their part in either case.
     #[cfg_attr(
         feature = "clap",
-        arg(long, default_value = "auto", value_name = "LIST")
+        arg(
+            long,
+            default_value = "auto",
+            value_name = "LIST",
+            help_heading = "Unknown ground (measured on your runs, unless given)"
+        )
     )]
     pub unknown_checks: UnknownChecks,
 }
