@@ -174,12 +174,18 @@ fn lockstep(
         use std::io::Write;
         w.flush()
             .with_context(|| format!("--candump {}: writing the log", p.display()))?;
+        eprintln!("wrote {}: the run's bus as a candump log", p.display());
     }
     if let Some(p) = &a.truth {
         // The last step's range to a second after its touchdown (the log's clock).
         let end = run.truth.last().map_or(0, |s| s.touchdown_us) + 1_000_000;
         std::fs::write(p, sim::runner::truth_labels(&run.truth, end))
             .with_context(|| format!("writing --truth {}", p.display()))?;
+        eprintln!(
+            "wrote {}: the true terrain of its {} steps (`presrs capture --labels`)",
+            p.display(),
+            run.truth.len()
+        );
     }
     let falls = run.falls();
     Ok((falls, run.rows, run.leg_state.zip(run.leg_counters)))

@@ -75,7 +75,10 @@ pub enum Cmd {
     View(mcap::ViewArgs),
     /// The lab bench: the simulator and its datasets, the paper's experiments, the node's
     /// benchmark, the classifier's parts (classify, features, repair), the DBC, the energy fit.
-    #[command(subcommand)]
+    #[command(
+        subcommand,
+        after_help = "On a real robot's recordings or bus: adaptation (a run's speed per terrain and gait), energy (the energy check's fit), dbc (the bus for cantools, SavvyCAN, ...), bench-node --iface (the node on the robot's computer), classify, features, repair (image files). On the simulator: sim, dataset, experiment."
+    )]
     Lab(LabCmd),
 }
 

@@ -380,7 +380,15 @@ pub fn value_table(name: &str, terrains: &TerrainCatalog) -> Vec<(u32, String)> 
             "bus_off",
         ]),
         "GaitReason" => fixed(&["initial", "terrain", "unknown", "node_lost"]),
-        "UnknownReason" => fixed(&["none", "novelty", "load", "texture"]),
+        // The image checks' 2-bit codes, named as the reasons name themselves (0: none).
+        "UnknownReason" => std::iter::once((0, "none".to_string()))
+            .chain(
+                crate::messages::UnknownReason::ALL
+                    .iter()
+                    .filter(|r| r.code() > 0)
+                    .map(|r| (u32::from(r.code()), r.name().to_string())),
+            )
+            .collect(),
         "LegMode" => fixed(&[
             "waiting",
             "running",

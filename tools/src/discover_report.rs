@@ -222,8 +222,11 @@ pub fn added(
         if in_catalog {
             // Said plainly: a lab that passed --terrains looks for a new entry there.
             format!(
-                ", already in the catalog{}: no terrains entry written",
-                terrains.map_or(String::new(), |t| format!(" {}", t.display()))
+                ", the catalog's own{}",
+                terrains.map_or(String::new(), |t| format!(
+                    "; {} left as it was (the catalog has `{name}`)",
+                    t.display()
+                ))
             )
         } else {
             terrains.map_or(String::new(), |t| format!(", added to {}", t.display()))
@@ -263,7 +266,9 @@ pub fn added(
         a.candidates.len(),
         a.session_refs
     );
-    s.push_str("  way             known ground kept           new terrain right   score\n");
+    // "still right": of the known stances held out, those the refitted model still decides
+    // as their terrain (the table above counts the model's stored stances instead).
+    s.push_str("  way             known still right           new terrain right   score\n");
     for (i, c) in a.candidates.iter().enumerate() {
         // Judged on the run's held-out known stances, or (a keep without them) on the
         // model's stored ones each left out.

@@ -247,7 +247,8 @@ impl TrainingSet {
         if !why {
             o.push_str(
                 ": a gait a terrain was not captured in can make it look new; capture each \
-                 terrain in the slowest and the fastest gait the robot will run",
+                 terrain in the slowest and the fastest gait the robot will run (on the \
+                 simulator: `presrs demo --sweep N`)",
             );
             return Some(o);
         }

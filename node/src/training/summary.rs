@@ -25,13 +25,13 @@ impl Trained {
         let names: Vec<&str> = m.classes.iter().map(|c| c.name.as_str()).collect();
         let _ = writeln!(
             o,
-            "wrote {out}: {} terrains ({}), trained on {} + {} images, {} left for testing, in \
-             {:.1} s",
+            "wrote {out}: {} terrains ({}), trained on {} + {} images of {} (fit + kernel \
+             width), in {:.1} s",
             names.len(),
             names.join(", "),
             split.train.len(),
             split.validation.len(),
-            split.test.len(),
+            self.train_images,
             took.as_secs_f64()
         );
         let _ = writeln!(o, "{}", self.settings_line());
@@ -44,7 +44,9 @@ impl Trained {
         }
         let _ = writeln!(
             o,
-            "(`presrs train --verbose`: every candidate measured and why each was chosen)"
+            "next: `presrs eval --model {out} --data DIR` on a capture it was not trained on, \
+             `presrs node --replay LOG --model {out}` on a run; `train --verbose`: every \
+             candidate measured and why each was chosen"
         );
         o
     }

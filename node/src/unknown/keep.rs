@@ -102,15 +102,12 @@ pub struct KeepWriter {
 
 /// Whether a step's verdict rests on a real stance image (and so is worth keeping).
 pub fn keepable(class: &TerrainClass) -> bool {
-    matches!(
-        class.unknown_reason(),
-        Some(
-            UnknownReason::Novelty
-                | UnknownReason::Load
-                | UnknownReason::Texture
-                | UnknownReason::Energy
-        )
-    )
+    // Exhaustive: a new reason must say whether it rests on the image.
+    match class.unknown_reason() {
+        Some(UnknownReason::Novelty | UnknownReason::Load | UnknownReason::Texture) => true,
+        Some(UnknownReason::Energy) => true,
+        Some(UnknownReason::NoSample | UnknownReason::NoContact) | None => false,
+    }
 }
 
 impl UnknownKeeper {
