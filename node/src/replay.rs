@@ -47,14 +47,23 @@ impl fmt::Display for ReplaySummary {
         let (c, r) = (&self.counters, &self.reassembly);
         write!(
             f,
-            "replayed {} frames ({:.1} s): {} steps, {} classified, {} without a sample; \
-             unknown by reason: {}; {} images, {} CRC failures, {} incomplete, {} undecodable \
-             frames",
+            "replayed {} frames ({:.1} s): {} steps, {} classified, {} without a sample, {} \
+             without contact{}; unknown by reason: {}; {} images, {} CRC failures, {} \
+             incomplete, {} undecodable frames",
             self.frames,
             self.span_us as f64 * 1e-6,
             c.steps,
             c.classified,
             c.no_sample,
+            c.no_contact,
+            // A step whose stance the log ends in is counted, not decided.
+            match c
+                .steps
+                .saturating_sub(c.classified + c.no_sample + c.no_contact)
+            {
+                0 => String::new(),
+                n => format!(", {n} still in stance at the log's end"),
+            },
             c.unknown_by_reason,
             r.delivered,
             r.crc_failures,

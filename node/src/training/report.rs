@@ -162,7 +162,7 @@ impl Trained {
         };
         let mut line = format!(
             "unknown terrain: thresholds from {} ({images}) at --unknown-rate {unknown_rate}: the \
-             check calls {:.1}% of them unknown ({:.1}% were taken for another terrain)",
+             check calls {:.1}% of them unknown ({:.1}% were decided as the wrong known terrain)",
             c.source.describe(),
             100.0 * c.called_unknown,
             100.0 * c.misclassified,

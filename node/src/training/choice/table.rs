@@ -152,10 +152,16 @@ impl fmt::Display for Report<'_> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let c = self.choice;
         c.header(f)?;
+        // As wide as the longest candidate's name, so the columns line up.
+        let w = c
+            .outcomes
+            .iter()
+            .map(|o| o.candidate.to_string().len())
+            .fold(50, usize::max);
         let row = |f: &mut fmt::Formatter<'_>, mark: &str, o: &Outcome, note: &str| {
             writeln!(
                 f,
-                "{mark} {:<50} {:>6} {:>9} {:>13}{note}",
+                "{mark} {:<w$} {:>6} {:>9} {:>13}{note}",
                 o.candidate.to_string(),
                 num(o.auroc, 3, ""),
                 num(100.0 * o.found, 1, "%"),
@@ -164,8 +170,14 @@ impl fmt::Display for Report<'_> {
         };
         writeln!(
             f,
-            "  {:<50} {:>6} {:>10} {:>14}",
+            "  {:<w$} {:>6} {:>10} {:>14}",
             "candidate (--unknown-checks)", "AUROC", "left out", "known unknown"
+        )?;
+        writeln!(
+            f,
+            "  (AUROC: how well the score ranks new ground above known, 1 = always; left out: \
+             the share of the left-out terrain called unknown; known unknown: the share of \
+             known images called unknown)"
         )?;
         let single = c.best_single_option();
         for (i, o) in c.outcomes.iter().enumerate() {
@@ -198,7 +210,7 @@ impl fmt::Display for Report<'_> {
         if let Some(nn) = c.nn_auroc.filter(|v| v.is_finite()) {
             writeln!(
                 f,
-                "  {:<50} {nn:>6.3}  (the plain nearest neighbour's distance, for scale)",
+                "  {:<w$} {nn:>6.3}  (the plain nearest neighbour's distance, for scale)",
                 "nearest neighbour"
             )?;
         }
@@ -275,9 +287,9 @@ impl Choice {
             if o.known_unknown <= self.budget + 1e-12 {
                 writeln!(
                     f,
-                    "kept * ({}): of those finding nearly the most left-out ground (each check \
-                     counted {:.0} points less), the fewest known images unknown, at most \
-                     {:.1}%; per terrain left out: {}",
+                    "kept * ({}): of those finding nearly the most left-out ground (an extra \
+                     check must find {:.0} points more to be worth it), the fewest known images \
+                     unknown, at most {:.1}%; per terrain left out: {}",
                     self.candidate,
                     100.0 * CHECK_COST,
                     100.0 * self.budget,
