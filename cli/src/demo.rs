@@ -21,7 +21,8 @@ pub struct DemoArgs {
     /// gait, speed); nothing is written without it.
     #[arg(long, value_name = "FILE")]
     pub csv: Option<PathBuf>,
-    /// The simulator's random seed: the same seed, the same run.
+    /// The simulator's random seed: the terrains' patches and the skin's noise (the hopper's
+    /// dynamics and the track are the same for every seed). The same seed, the same run.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Run the simulator, the node and the controller as three concurrent tasks on the wall

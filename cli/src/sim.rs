@@ -33,7 +33,8 @@ pub struct SimArgs {
     /// Write the per-step record (truth, what the node said, the gait run) as JSON at exit.
     #[arg(long)]
     pub report: Option<PathBuf>,
-    /// The simulator's random seed: the same seed, the same run.
+    /// The simulator's random seed: the terrains' patches and the skin's noise (the hopper's
+    /// dynamics and the track are the same for every seed). The same seed, the same run.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Track terrains and reported names come from this catalog.
