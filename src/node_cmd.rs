@@ -18,22 +18,20 @@ pub fn run(a: NodeArgs) -> Result<ExitCode> {
         node::NodeConfig::load_or_default(a.config.as_deref(), &a.terrains).context("--config")?;
     // The error names the file already.
     let model = Model::load(&a.model).context("--model")?;
+    let model_ids: Vec<u8> = model.classes.iter().map(|c| c.terrain_id).collect();
     match (&a.replay, &a.iface) {
         (Some(log), _) => {
+            let (l, m) = (log.display(), a.model.display());
             anyhow::ensure!(
                 a.live.mcap.is_none() && a.live.foxglove.is_none() && !a.ros2.any(),
-                "--mcap, --foxglove, --ros2 and --ros2-bag record a live node; for a log, run `presrs mcap {} --out FILE.mcap --model {}` (or `presrs mcap --ros2 {} --out DIR --model {}`)",
-                log.display(),
-                a.model.display(),
-                log.display(),
-                a.model.display()
+                "--mcap, --foxglove, --ros2 and --ros2-bag record a live node; for a log, run `presrs mcap {l} --out FILE.mcap --model {m}` (or `presrs mcap --ros2 {l} --out DIR --model {m}`)"
             );
             // The same decisions on every replay: a refit lands at the step that asked for it.
             cfg.refit = cfg.refit.reproducible();
             let mut node = NodeService::new(cfg, model)
                 .with_context(|| format!("--model {}", a.model.display()))?;
             let keep = keep_unknown(&a, &mut node, &log.display().to_string(), true)?;
-            let code = replay(node, log, a.json, a.csv.as_deref())?;
+            let code = replay(node, log, &a, model_ids)?;
             finish_keep(keep, &a)?;
             Ok(code)
         }
@@ -115,14 +113,21 @@ fn finish_keep(keep: Option<node::unknown::keep::KeepWriter>, a: &NodeArgs) -> R
     Ok(())
 }
 
-/// The log through the node on the log's own clock ([`node::replay`]), each decision printed.
-fn replay(mut node: NodeService, log: &Path, json: bool, csv: Option<&Path>) -> Result<ExitCode> {
-    let mut stdout = std::io::stdout().lock();
-    let summary =
-        node::replay::replay_file(&mut node, log, json, csv, &mut stdout).map_err(|e| match e {
+/// The log through the node on the log's own clock ([`node::replay`]), each decision printed,
+/// and with `--truth`, the tally against the simulator's truth.
+fn replay(mut node: NodeService, log: &Path, a: &NodeArgs, ids: Vec<u8>) -> Result<ExitCode> {
+    let mut truth = (a.truth.as_deref())
+        .map(|p| node::truth::TruthTally::from_file(p, node.catalog(), ids))
+        .transpose()
+        .context("--truth")?;
+    let mut out = std::io::stdout().lock();
+    let csv = a.csv.as_deref();
+    let summary = node::replay::replay_file(&mut node, log, a.json, csv, truth.as_mut(), &mut out)
+        .map_err(|e| match e {
             node::replay::ReplayFileError::Table { .. } => anyhow::Error::new(e).context("--csv"),
             e => e.into(),
         })?;
     eprintln!("{summary}");
+    truth.iter().for_each(|t| eprintln!("{t}"));
     Ok(ExitCode::SUCCESS)
 }

@@ -273,7 +273,10 @@ fn the_readme_path_on_the_simulator_runs_as_written() {
         .filter(|c| {
             (c[0] == "demo" && has(c, "--candump") && has(c, "--truth"))
                 || (c[0] == "capture" && has(c, "--labels"))
-                || (c[0] == "node" && has(c, "--keep-unknown") && has(c, "--replay"))
+                || (c[0] == "node"
+                    && has(c, "--keep-unknown")
+                    && has(c, "--replay")
+                    && has(c, "--truth"))
                 || c[0] == "discover" && !has(c, "--add")
         })
         .collect();
@@ -291,9 +294,17 @@ fn the_readme_path_on_the_simulator_runs_as_written() {
         run(&dir, c);
     }
     run(&dir, &train);
-    for c in &path[2..] {
-        run(&dir, c);
-    }
+    run(&dir, path[2]);
+    // The replay held against the truth: sand, which the model never saw, is new ground.
+    let said = String::from_utf8_lossy(&run(&dir, path[3]).stderr).to_string();
+    assert!(
+        said.contains("known ground called unknown (the safe gait): ")
+            && said.contains("new ground found: ")
+            && said
+                .lines()
+                .any(|l| l.trim_start().starts_with("sand ") && l.contains(" new ")),
+        "{said}"
+    );
     let out = run(&dir, path[4]);
     let table = String::from_utf8_lossy(&out.stdout);
     assert!(

@@ -3,9 +3,11 @@
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
+// One of the two: the usage line says so (`<--iface <IFACE>|--replay <REPLAY>>`).
+#[command(group(clap::ArgGroup::new("source").required(true).args(["iface", "replay"])))]
 pub struct NodeArgs {
     /// CAN interface (can0, vcan0).
-    #[arg(long, required_unless_present = "replay", conflicts_with = "replay")]
+    #[arg(long)]
     pub iface: Option<String>,
     /// Run the pipeline on a candump log (`candump -L` format) instead of a bus, with the log's
     /// timestamps, and print the TerrainClass stream.
@@ -34,6 +36,11 @@ pub struct NodeArgs {
     /// with each stance's reason. Off the node's thread; an existing DIR is added to.
     #[arg(long, value_name = "DIR")]
     pub keep_unknown: Option<PathBuf>,
+    /// With --replay: the run's true terrain (a labels CSV, `start_s,end_s,terrain[,foot]`, as
+    /// `capture --labels` reads and `demo --truth` writes it): the node's decisions per true
+    /// terrain, known ground called unknown and new ground found.
+    #[arg(long, value_name = "CSV", requires = "replay")]
+    pub truth: Option<PathBuf>,
     /// Overrides the config's `terrains` key.
     #[command(flatten)]
     pub terrains: protocol::TerrainsArg,

@@ -45,6 +45,7 @@ pub mod service;
 pub mod stance;
 pub mod step_table;
 pub mod training;
+pub mod truth;
 pub mod unknown;
 
 pub use config::{NodeConfig, RefitMode, RepairMode};

@@ -145,6 +145,7 @@ pub fn replay_file(
     log: &std::path::Path,
     json: bool,
     table: Option<&std::path::Path>,
+    mut truth: Option<&mut crate::truth::TruthTally>,
     out: &mut dyn std::io::Write,
 ) -> Result<ReplaySummary, ReplayFileError> {
     use std::io::Write;
@@ -174,11 +175,17 @@ pub fn replay_file(
             row_err = Some(e);
         }
         let Output::Class {
-            foot, class, gait, ..
+            foot,
+            class,
+            gait,
+            touchdown_us,
         } = o
         else {
             return;
         };
+        if let Some(t) = truth.as_deref_mut() {
+            t.add(foot, touchdown_us, &class);
+        }
         let line = if json {
             class_json(t_us, foot, &class, gait, &catalog).to_string()
         } else {

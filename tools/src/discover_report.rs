@@ -288,12 +288,38 @@ pub fn added(
             c.score()
         );
     }
-    let _ = writeln!(
-        s,
-        "next: move {} to the node's model path and send it SIGHUP (it reads the model and its \
-         terrains file again); the controller takes its safe gait on `{name}` until its \
-         terrain_gaits gives one ({name} = N)",
-        out_model.display()
-    );
+    let losses = a.known_losses();
+    if losses.is_empty() {
+        let _ = writeln!(
+            s,
+            "next: move {} to the node's model path and send it SIGHUP (it reads the model and \
+             its terrains file again); the controller takes its safe gait on `{name}` until its \
+             terrain_gaits gives one ({name} = N)",
+            out_model.display()
+        );
+    } else {
+        let each: Vec<String> = losses
+            .iter()
+            .map(|l| {
+                format!(
+                    "{} {:.0}% right (was {:.0}%)",
+                    l.terrain,
+                    100.0 * l.after,
+                    100.0 * l.before
+                )
+            })
+            .collect();
+        // Said instead of the install line: the lab would otherwise deploy a model that
+        // takes known ground for the new terrain.
+        let _ = writeln!(
+            s,
+            "warning: `{name}` takes known ground: {}. Do not deploy {} as it is (it is written \
+             for a look): open the groups' contact sheets (`--out DIR`) and add only the groups \
+             that show one ground (`--group N`); a group of a known terrain on another foot or \
+             sensor is known ground, to capture and train on, not a new terrain",
+            each.join(", "),
+            out_model.display()
+        );
+    }
     s
 }

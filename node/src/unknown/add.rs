@@ -78,6 +78,48 @@ pub struct Added {
     pub after: Vec<ToldApart>,
 }
 
+/// The most a known terrain's share decided right may fall when a terrain is added before the
+/// add is called a loss: beyond counting noise on the few stances a model stores (one of 20 is
+/// 5 points), and far beyond what the add costs where it works (docs/decisions/discover-grouping.md).
+pub const MAX_KNOWN_DROP: f64 = 0.10;
+
+/// A known terrain the add takes ground from: its share decided right before and after.
+#[derive(Clone, Debug, PartialEq)]
+pub struct KnownLoss {
+    /// The terrain.
+    pub terrain: String,
+    /// Its stored stances decided right (each without itself) before the add, 0..1.
+    pub before: f64,
+    /// The same after.
+    pub after: f64,
+}
+
+impl Added {
+    /// The known terrains whose share decided right fell by more than [`MAX_KNOWN_DROP`]:
+    /// the new terrain takes their ground, and the model should not be deployed as it is.
+    pub fn known_losses(&self) -> Vec<KnownLoss> {
+        let names: Vec<&str> = self.model.classes.iter().map(|c| c.name.as_str()).collect();
+        losses(&self.before, &self.after, &names)
+    }
+}
+
+/// [`Added::known_losses`] from the told-apart counts before and after, in class order.
+fn losses(before: &[ToldApart], after: &[ToldApart], names: &[&str]) -> Vec<KnownLoss> {
+    let share = |t: &ToldApart| t.right as f64 / t.stances.max(1) as f64;
+    before
+        .iter()
+        .zip(after)
+        .zip(names)
+        .filter(|((b, a), _)| b.stances > 0 && a.stances > 0)
+        .map(|((b, a), name)| KnownLoss {
+            terrain: name.to_string(),
+            before: share(b),
+            after: share(a),
+        })
+        .filter(|l| l.before - l.after > MAX_KNOWN_DROP)
+        .collect()
+}
+
 /// `model` with groups `groups` of `d` (indices; none: the one new-ground group) added as one
 /// terrain `terrain` (its name and id from the lab's catalog). See the module docs.
 pub fn add_group(
@@ -296,6 +338,24 @@ mod tests {
             group_of: vec![],
             no_contact: vec![],
         }
+    }
+
+    /// A known terrain that falls more than ten points is a loss; one within it, one without
+    /// stored stances, and the new terrain (no "before") are not.
+    #[test]
+    fn a_known_terrain_that_falls_more_than_ten_points_is_a_loss() {
+        let t = |right, stances| ToldApart {
+            stances,
+            right,
+            unknown: stances - right,
+            wrong: 0,
+        };
+        let before = [t(20, 20), t(19, 20), t(0, 0)];
+        let after = [t(12, 20), t(18, 20), t(5, 5), t(9, 10)];
+        let l = losses(&before, &after, &["clay", "wood", "grass", "sand"]);
+        assert_eq!(l.len(), 1, "{l:?}");
+        assert_eq!(l[0].terrain, "clay");
+        assert!((l[0].before - 1.0).abs() < 1e-12 && (l[0].after - 0.6).abs() < 1e-12);
     }
 
     #[test]
