@@ -210,7 +210,6 @@ pub fn added(
     terrains: Option<&Path>,
     in_catalog: bool,
 ) -> String {
-    let pct = |n: usize, of: usize| 100.0 * n as f64 / of.max(1) as f64;
     let mut s = format!(
         "added group {} as `{name}` (terrain id {id}{}) to {}: each terrain's stored stances \
          decided without themselves (right / unknown / other terrain):\n",
@@ -233,18 +232,30 @@ pub fn added(
         },
         out_model.display()
     );
+    told_apart(&mut s, a, old);
+    candidates(&mut s, a);
+    next_step(&mut s, a, name, out_model);
+    s
+}
+
+fn pct(n: usize, of: usize) -> f64 {
+    100.0 * n as f64 / of.max(1) as f64
+}
+
+/// Each terrain's stored stances, right / unknown / other, before and after the add.
+fn told_apart(s: &mut String, a: &Added, old: &Model) {
     s.push_str("terrain         before                 after\n");
+    let cell = |t: Option<&ToldApart>| {
+        t.map_or("-".to_string(), |t| {
+            format!(
+                "{:>3.0}% / {:>3.0}% / {:>3.0}%",
+                pct(t.right, t.stances),
+                pct(t.unknown, t.stances),
+                pct(t.wrong, t.stances)
+            )
+        })
+    };
     for (k, c) in a.model.classes.iter().enumerate() {
-        let cell = |t: Option<&ToldApart>| {
-            t.map_or("-".to_string(), |t| {
-                format!(
-                    "{:>3.0}% / {:>3.0}% / {:>3.0}%",
-                    pct(t.right, t.stances),
-                    pct(t.unknown, t.stances),
-                    pct(t.wrong, t.stances)
-                )
-            })
-        };
         let before = if k < old.classes.len() {
             a.before.get(k)
         } else {
@@ -258,6 +269,10 @@ pub fn added(
             cell(a.after.get(k))
         );
     }
+}
+
+/// The ways the new terrain could be fitted, each scored on the run, the chosen one starred.
+fn candidates(s: &mut String, a: &Added) {
     let _ = writeln!(
         s,
         "fitted as `{}`, the best of {} ways measured on this run ({} of its known stances \
@@ -288,6 +303,10 @@ pub fn added(
             c.score()
         );
     }
+}
+
+/// How to deploy the model, or (known ground lost) why not to.
+fn next_step(s: &mut String, a: &Added, name: &str, out_model: &Path) {
     let losses = a.known_losses();
     if losses.is_empty() {
         let _ = writeln!(
@@ -297,29 +316,28 @@ pub fn added(
              terrain_gaits gives one ({name} = N)",
             out_model.display()
         );
-    } else {
-        let each: Vec<String> = losses
-            .iter()
-            .map(|l| {
-                format!(
-                    "{} {:.0}% right (was {:.0}%)",
-                    l.terrain,
-                    100.0 * l.after,
-                    100.0 * l.before
-                )
-            })
-            .collect();
-        // Said instead of the install line: the lab would otherwise deploy a model that
-        // takes known ground for the new terrain.
-        let _ = writeln!(
-            s,
-            "warning: `{name}` takes known ground: {}. Do not deploy {} as it is (it is written \
-             for a look): open the groups' contact sheets (`--out DIR`) and add only the groups \
-             that show one ground (`--group N`); a group of a known terrain on another foot or \
-             sensor is known ground, to capture and train on, not a new terrain",
-            each.join(", "),
-            out_model.display()
-        );
+        return;
     }
-    s
+    let each: Vec<String> = losses
+        .iter()
+        .map(|l| {
+            format!(
+                "{} {:.0}% right (was {:.0}%)",
+                l.terrain,
+                100.0 * l.after,
+                100.0 * l.before
+            )
+        })
+        .collect();
+    // Said instead of the install line: the lab would otherwise deploy a model that
+    // takes known ground for the new terrain.
+    let _ = writeln!(
+        s,
+        "warning: `{name}` takes known ground: {}. Do not deploy {} as it is (it is written \
+         for a look): open the groups' contact sheets (`--out DIR`) and add only the groups \
+         that show one ground (`--group N`); a group of a known terrain on another foot or \
+         sensor is known ground, to capture and train on, not a new terrain",
+        each.join(", "),
+        out_model.display()
+    );
 }
