@@ -177,7 +177,7 @@ fn an_offset_slowly_loading_foot_gets_its_own_crop_and_deciding_frame() {
     );
 
     // The node samples each stance at the model's frame: its decision comes one frame after it.
-    let (log2, _) = write_run(&dir, "run2", 2, 15);
+    let (log2, csv2) = write_run(&dir, "run2", 2, 15);
     presrs(
         &dir,
         &[
@@ -215,6 +215,29 @@ fn an_offset_slowly_loading_foot_gets_its_own_crop_and_deciding_frame() {
         "{right} of {} right:\n{text}",
         rows.len()
     );
+
+    // `eval` on a capture of the next run judges each stance at the model's frame (its
+    // `.stance/` frames), not at the capture's sample time, so it agrees with the node.
+    presrs(
+        &dir,
+        &[
+            "capture", "--replay", &log2, "--labels", &csv2, "--out", "set2",
+        ],
+    );
+    let ev = presrs(&dir, &["eval", "--model", "model.json", "--data", "set2"]);
+    assert!(
+        ev.contains(&format!(
+            "judged at the model's deciding frame, {chosen} ms after touchdown"
+        )),
+        "{ev}"
+    );
+    let acc: f64 = ev
+        .split("overall accuracy ")
+        .nth(1)
+        .and_then(|t| t.split('%').next())
+        .and_then(|t| t.parse().ok())
+        .unwrap_or_else(|| panic!("{ev}"));
+    assert!(acc >= 80.0, "eval at the model's frame: {acc}%\n{ev}");
 
     // A crop given that cuts loaded lines is warned about, with the load it cuts.
     let given = presrs(

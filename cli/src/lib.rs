@@ -47,6 +47,9 @@ pub enum Cmd {
     /// labelled, into DIR/<terrain>/ with a manifest.
     Capture(capture::CaptureArgs),
     /// Train a terrain classifier on DIR/<terrain>/<images>, as `capture` writes them.
+    ///
+    /// A first try needs only `--data` and `--out`: the crop, the stance's frame and the
+    /// unknown-ground checks are measured on your runs, and the summary says what was chosen.
     Train(classifier::TrainArgs),
     /// Evaluate a model on a dataset: confusion matrix (detected vs actual, %) and accuracy.
     Eval(classifier::EvalArgs),

@@ -113,6 +113,80 @@ pub struct Evaluation {
     /// Class folders of terrains the model was not trained on (open-set test): per folder,
     /// images and how many the model called unknown (the right answer).
     pub novel: BTreeMap<String, (usize, usize)>,
+    /// Which image of each stance was judged.
+    pub frame: FrameUse,
+}
+
+/// Which image of each stance [`evaluate`] judged: the frame the model decides at, where the
+/// set keeps its stances' frames (`capture` does, in `.stance/`), else the image the set holds.
+///
+/// Why: `train` measures the foot's deciding frame (30 to 190 ms after touchdown) and trains
+/// there, while a capture's images are at the node's sample time of the capture; judged on
+/// those, a model of another frame calls known ground unknown.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct FrameUse {
+    /// The model's deciding frame, ms after touchdown (`None`: a model without one).
+    pub ms: Option<u32>,
+    /// Images replaced by their stance's frame at `ms`.
+    pub at_frame: usize,
+    /// Images judged as the set holds them: no stance frames beside them.
+    pub as_held: usize,
+    /// Stances that ended before `ms`: left out (the node sends them as no sample).
+    pub ended: usize,
+}
+
+impl std::fmt::Display for FrameUse {
+    /// One line (with its newline): the frame judged, or why the images were taken as held.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let Some(ms) = self.ms else {
+            return writeln!(
+                f,
+                "images as the set holds them (the model names no deciding frame)"
+            );
+        };
+        if self.at_frame > 0 {
+            write!(
+                f,
+                "judged at the model's deciding frame, {ms} ms after touchdown: {} stances' \
+                 frames from the set's .stance/",
+                self.at_frame
+            )?;
+            if self.ended > 0 {
+                write!(
+                    f,
+                    "; {} ended before it, left out (the node: no sample)",
+                    self.ended
+                )?;
+            }
+            if self.as_held > 0 {
+                write!(f, "; {} without frames, as held", self.as_held)?;
+            }
+            return writeln!(f);
+        }
+        writeln!(
+            f,
+            "images as the set holds them: it keeps no stance frames (a set `presrs capture` \
+             wrote does); the model decides {ms} ms after touchdown, so a set sampled at \
+             another time judges it at the wrong frame"
+        )
+    }
+}
+
+/// Sample `s`'s stance frame `j` from `root`'s `.stance/` folder: `Some(None)` when the stance
+/// had ended by then, `None` when the set keeps no frames for it.
+fn stance_frame(
+    root: &std::path::Path,
+    s: &node::classifier::dataset::Sample,
+    j: usize,
+) -> Option<Option<PressureImage>> {
+    let rel = s.path.strip_prefix(root).ok()?;
+    let path = root.join(node::capture::STANCE_DIR).join(rel);
+    let frames = node::classifier::dataset::read_images(&path).ok()?;
+    if frames.len() != node::stance::FRAME_OFFSETS_MS.len() {
+        return None;
+    }
+    let f = frames.into_iter().nth(j)?;
+    Some(f.pixels.iter().any(|&p| p > 0).then_some(f))
 }
 
 impl Evaluation {
@@ -157,6 +231,8 @@ impl Evaluation {
             "classify_us_median": percentile(&self.classify_us, 0.5).unwrap_or(0.0),
             "classify_us_p99": percentile(&self.classify_us, 0.99).unwrap_or(0.0),
             "kernels": spec.kernels.describe(),
+            "frame_ms": self.frame.ms, "images_at_frame": self.frame.at_frame,
+            "images_as_held": self.frame.as_held, "stances_ended_before_frame": self.frame.ended,
         })
     }
 
@@ -175,6 +251,7 @@ impl Evaluation {
             "left out {} images the model was trained or validated on; tested {n_tested}",
             self.skipped
         );
+        o.push_str(&self.frame.to_string());
         let _ = write!(o, "{:>16}", "detected \\ actual");
         for n in names {
             let _ = write!(o, " {n:>12}");
@@ -256,14 +333,34 @@ pub fn evaluate(
     let (mut skipped, mut times) = (0, Vec::new());
     let mut novel: BTreeMap<String, (usize, usize)> = BTreeMap::new();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(spec.seed);
+    let mut frame = FrameUse {
+        ms: model.sample_ms,
+        ..FrameUse::default()
+    };
+    let j = (model.sample_ms)
+        .and_then(|ms| node::stance::FRAME_OFFSETS_MS.iter().position(|&o| o == ms));
     let mut c = Classifier::with_kernels(model, spec.kernels);
     for s in &ds.samples {
         let actual = names.iter().position(|n| *n == ds.classes[s.class]);
-        if used.contains(&s.image.content_hash()) {
+        let mut img = match j.and_then(|j| stance_frame(&ds.root, s, j)) {
+            Some(Some(f)) => {
+                frame.at_frame += 1;
+                f
+            }
+            Some(None) => {
+                frame.ended += 1;
+                continue;
+            }
+            None => {
+                frame.as_held += 1;
+                s.image.clone()
+            }
+        };
+        // The model's hashes are of the images it trained on: the frame's, where it had them.
+        if used.contains(&img.content_hash()) {
             skipped += 1;
             continue;
         }
-        let mut img = s.image.clone();
         if let Some(p) = spec.damage_pct {
             node::classifier::repair::damage(&mut img, p, &mut rng);
         }
@@ -290,6 +387,7 @@ pub fn evaluate(
         skipped,
         classify_us: times,
         novel,
+        frame,
     })
 }
 
