@@ -12,9 +12,9 @@ use presrs_cli::classifier::{
 };
 
 pub fn train(a: &TrainArgs) -> Result<ExitCode> {
-    let (data, out, opts) = (&a.data, &a.out, &a.opts);
     let catalog = a.terrains.catalog()?;
-    let (set, _) = TrainingSet::load(data, &catalog, a.skip_bad)?;
+    let (set, _) = TrainingSet::load(&a.data, &catalog, a.skip_bad)?;
+    let opts = &a.opts;
     if let Some(note) = set.gait_note(a.verbose) {
         println!("{note}");
     }
@@ -34,11 +34,11 @@ pub fn train(a: &TrainArgs) -> Result<ExitCode> {
     let t0 = Instant::now();
     let trained = set.train_calibrated(opts, cal.as_ref().map(|(s, n)| (s, n.as_slice())))?;
     let took = t0.elapsed();
-    trained.model.save(out)?;
-    let out = out.display().to_string();
+    trained.model.save(&a.out)?;
+    let (out, rate) = (a.out.display().to_string(), opts.unknown_rate);
     match a.verbose {
-        true => print!("{}", trained.report(opts.unknown_rate, took, &out, true)),
-        false => print!("{}", trained.summary(opts.unknown_rate, took, &out)),
+        true => print!("{}", trained.report(rate, took, &out, true)),
+        false => print!("{}", trained.summary(rate, took, &out)),
     }
     Ok(ExitCode::SUCCESS)
 }

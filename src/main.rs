@@ -77,15 +77,11 @@ fn main() -> ExitCode {
 /// The error and its causes, each said once: our library errors already name their cause in
 /// their message ("cannot read model m.json: No such file ..."), and `{:#}` repeated it.
 fn message(e: &anyhow::Error) -> String {
-    let mut out = String::new();
-    for cause in e.chain() {
-        let text = cause.to_string();
-        if !out.contains(&text) {
-            if !out.is_empty() {
-                out.push_str(": ");
-            }
-            out.push_str(&text);
+    let mut said: Vec<String> = Vec::new();
+    for text in e.chain().map(|c| c.to_string()) {
+        if !said.iter().any(|s| s.contains(&text)) {
+            said.push(text);
         }
     }
-    out
+    said.join(": ")
 }

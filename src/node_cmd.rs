@@ -9,9 +9,7 @@ use anyhow::{Context, Result};
 use node::NodeService;
 use node::classifier::Model;
 use presrs_cli::node::NodeArgs;
-use protocol::bus::BusSource;
-
-use protocol::component::Signals;
+use protocol::{bus::BusSource, component::Signals};
 
 pub fn run(a: NodeArgs) -> Result<ExitCode> {
     let mut cfg =

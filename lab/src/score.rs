@@ -117,10 +117,14 @@ impl std::fmt::Display for DemoReport {
             )?;
         }
         for (t, u) in &sum.unknown_terrains {
-            let to_safe: Vec<String> = u
-                .steps_to_safe_gait
-                .iter()
-                .map(|d| d.map_or("never".into(), |d| d.to_string()))
+            // An entry the run ended on may have been too short to switch: said so, not
+            // "never".
+            let to_safe: Vec<String> = (u.steps_to_safe_gait.iter().zip(&u.entries))
+                .map(|(d, &(len, ended))| match (d, ended) {
+                    (Some(d), _) => d.to_string(),
+                    (None, true) => format!("not yet: the run ended {len} steps on"),
+                    (None, false) => format!("never: left after {len} steps"),
+                })
                 .collect();
             writeln!(
                 f,
@@ -152,6 +156,8 @@ pub struct UnknownTerrain {
     /// For each time the hopper came onto it: steps until the first step in the safe gait
     /// (`None`: not reached before it left).
     pub steps_to_safe_gait: Vec<Option<usize>>,
+    /// For each time the hopper came onto it: its steps there, and whether the run ended on it.
+    pub entries: Vec<(usize, bool)>,
 }
 
 impl Summary {
@@ -216,11 +222,11 @@ impl Summary {
                 self.correct += 1;
             }
             if i == 0 || rows[i - 1].truth != r.truth {
-                let d = rows[i..]
-                    .iter()
-                    .take_while(|x| x.truth == r.truth)
-                    .position(|x| x.gait == safe_gait);
-                u.steps_to_safe_gait.push(d);
+                let on = || rows[i..].iter().take_while(|x| x.truth == r.truth);
+                u.steps_to_safe_gait
+                    .push(on().position(|x| x.gait == safe_gait));
+                let len = on().count();
+                u.entries.push((len, i + len == rows.len()));
             }
         }
         if self.steps > 0 {
@@ -315,6 +321,7 @@ mod tests {
         let u = &s.unknown_terrains["sand"];
         assert_eq!((u.steps, u.called_unknown), (4, 2));
         assert_eq!(u.steps_to_safe_gait, vec![Some(2), None]);
+        assert_eq!(u.entries, vec![(3, false), (1, true)]);
     }
 
     #[test]

@@ -16,6 +16,10 @@ use crate::unknown::novelty::CalibrationSource;
 /// new ground like it will mostly be taken for known ground.
 const WEAK_FOUND: f64 = 0.5;
 
+/// A calibration run taken for another known terrain more often than this is warned about:
+/// on the robot most of those steps come out unknown or wrong, beyond what the checks count.
+const WRONG_TERRAIN_WARN: f64 = 0.10;
+
 impl Trained {
     /// The short account of a model written to `out` in `took`; see the module docs.
     pub fn summary(&self, unknown_rate: f64, took: std::time::Duration, out: &str) -> String {
@@ -108,16 +112,23 @@ impl Trained {
             };
         };
         let c = &nv.calibration;
+        let n = c.images;
         let from = match c.source {
-            CalibrationSource::HeldOutRuns => format!("held-out runs ({})", c.runs.join(", ")),
-            CalibrationSource::SameRun => "the training run's unused images".into(),
-            CalibrationSource::LeaveOneOut => "the stored samples, leave-one-out".into(),
-            CalibrationSource::TimeBlocks => "this one session, in time blocks".into(),
+            CalibrationSource::HeldOutRuns => {
+                let held = c.held_out_images.min(n);
+                format!(
+                    "held-out runs ({}: {held} images; and {} of the training run's unused)",
+                    c.runs.join(", "),
+                    n - held
+                )
+            }
+            CalibrationSource::SameRun => format!("the training run's unused images, {n}"),
+            CalibrationSource::LeaveOneOut => format!("the stored samples, leave-one-out, {n}"),
+            CalibrationSource::TimeBlocks => {
+                format!("this one session, in time blocks, {n} images")
+            }
         };
-        let mut line = format!(
-            "thresholds at --unknown-rate {unknown_rate} from {from}, {} images",
-            c.images
-        );
+        let mut line = format!("thresholds at --unknown-rate {unknown_rate} from {from}");
         if c.margin != 1.0 || c.source == CalibrationSource::TimeBlocks {
             line.push_str(&format!(", margin {:.2}", c.margin));
         }
@@ -139,6 +150,10 @@ impl Trained {
             w.push(self.crop_line());
         }
         let c = &self.choice;
+        // The calibration on a held-out run, which the checks below judge.
+        let held_out = (self.model.unknown.novelty.as_ref())
+            .map(|nv| &nv.calibration)
+            .filter(|cal| cal.source == CalibrationSource::HeldOutRuns);
         if let Some(o) = c.chosen.map(|i| &c.outcomes[i])
             && o.known_unknown > c.budget + 1e-12
         {
@@ -150,6 +165,22 @@ impl Trained {
                 100.0 * c.budget
             ));
         }
+        if let Some(cal) = held_out
+            && cal.misclassified > WRONG_TERRAIN_WARN
+        {
+            w.push(format!(
+                "warning: the model took {:.0}% of its calibration images ({} and the training \
+                 run's unused) for another known terrain (h = {} PCA dimensions, chosen on {} \
+                 validation images): on the robot most of those steps come out unknown (the safe \
+                 gait) or wrong, beyond the share above. `presrs node --replay LOG --model MODEL --truth CSV` on the next run \
+                 counts them; a larger draw (`--per-class 40` where a session holds 60 stances \
+                 of each terrain) chooses both on more images: docs/decisions/train-draw.md",
+                100.0 * cal.misclassified,
+                cal.runs.join(", "),
+                self.model.h,
+                self.split.validation.len()
+            ));
+        }
         if !c.thin.is_empty() {
             let each: Vec<String> = c.thin.iter().map(|(t, n)| format!("{t} ({n})")).collect();
             w.push(format!(
@@ -158,13 +189,7 @@ impl Trained {
                 each.join(", ")
             ));
         }
-        if let Some(cal) = self
-            .model
-            .unknown
-            .novelty
-            .as_ref()
-            .map(|nv| &nv.calibration)
-            && cal.source == CalibrationSource::HeldOutRuns
+        if let Some(cal) = held_out
             && cal.training_run_images() == 0
         {
             w.push(
