@@ -63,7 +63,7 @@ pub fn run(a: CaptureArgs) -> Result<ExitCode> {
     if a.json {
         println!("{}", service.report_json(&a.out));
     } else {
-        eprintln!("{}", service.report_line(&a.out));
+        eprintln!("{}", service.report(&a.out));
     }
     let (failed, written) = (service.failed, service.set.written);
     if let Some(e) = failed {

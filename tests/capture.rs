@@ -292,7 +292,7 @@ fn a_capture_of_the_whole_bus_records_each_stances_gait_and_train_lists_them() {
     }
     assert!(by_gait >= 100, "{lines}");
     let summary = String::from_utf8_lossy(&replay.stderr);
-    assert!(summary.contains("; unknown by gait: G1 "), "{summary}");
+    assert!(summary.contains("\n  unknown by gait: G1 "), "{summary}");
     assert!(!summary.contains("not trained"), "{summary}");
 
     std::fs::write(

@@ -73,7 +73,10 @@ fn train_eval_classify_features_repair() {
     };
     let (ok, out, err) = train(&model, &["--crop", "2,2,2,2"]);
     assert!(ok, "{out}{err}");
-    assert!(out.contains("39 + 21 images"), "{out}");
+    assert!(
+        out.contains("fitted on 39 images and its kernel width chosen on 21 (13 + 7 per terrain"),
+        "{out}"
+    );
 
     let (ok, out, err) = presrs(&[
         "eval",

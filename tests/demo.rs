@@ -412,8 +412,8 @@ fn energy_is_fitted_from_a_recorded_run_and_bad_inputs_are_named() {
         let (_, tally) = err
             .rsplit_once("stances outside their terrain's map: ")
             .unwrap_or_else(|| panic!("no energy tally: {err}"));
-        // The per-gait unknowns follow the energy tally.
-        let tally = tally.split("; unknown by gait").next().unwrap_or(tally);
+        // The per-gait unknowns follow the energy tally, on a line of their own.
+        let tally = tally.lines().next().unwrap_or(tally);
         tally
             .trim()
             .split(", ")

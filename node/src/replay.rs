@@ -48,7 +48,7 @@ impl fmt::Display for ReplaySummary {
         write!(
             f,
             "replayed {} frames ({:.1} s): {} steps, {} classified, {} without a sample, {} \
-             without contact{}; unknown by reason: {}; {} images, {} CRC failures, {} \
+             without contact{}\n  unknown by reason: {}\n  {} images, {} CRC failures, {} \
              incomplete, {} undecodable frames",
             self.frames,
             self.span_us as f64 * 1e-6,
@@ -71,7 +71,7 @@ impl fmt::Display for ReplaySummary {
             c.decode_errors
         )?;
         if !self.energy.is_empty() {
-            write!(f, "; energy check, stances outside their terrain's map:")?;
+            write!(f, "\n  energy check, stances outside their terrain's map:")?;
             for (i, t) in self.energy.iter().enumerate() {
                 let sep = if i == 0 { " " } else { ", " };
                 write!(f, "{sep}{} {}/{}", t.terrain, t.outside, t.judged)?;
@@ -79,7 +79,7 @@ impl fmt::Display for ReplaySummary {
         }
         if !self.gaits.is_empty() {
             let by_gait = describe_counts(&self.gaits, self.model_gaits.as_deref());
-            write!(f, "; unknown by gait: {by_gait}")?;
+            write!(f, "\n  unknown by gait: {by_gait}")?;
         }
         Ok(())
     }
@@ -297,7 +297,7 @@ mod tests {
         let line = s.to_string();
         assert!(
             line.ends_with(
-                "; unknown by gait: G1 1/40, G3 7/20 (the model was not trained in it), \
+                "\n  unknown by gait: G1 1/40, G3 7/20 (the model was not trained in it), \
                  no GaitStatus 0/1"
             ),
             "{line}"

@@ -80,8 +80,8 @@ impl CaptureService {
         })
     }
 
-    /// The same as one line for a person.
-    pub fn report_line(&self, out: &Path) -> String {
+    /// The same for a person: the counts on a first line, what was written and skipped below.
+    pub fn report(&self, out: &Path) -> String {
         let (c, set) = (self.capture.counts(), &self.set);
         let terrains: Vec<String> = set
             .written_per_terrain
@@ -94,10 +94,15 @@ impl CaptureService {
             .map(|(g, n)| format!("{} {n}", crate::gait_status::gait_name(*g)))
             .collect();
         format!(
-            "capture of {}: {} steps, {} written ({}; by gait at touchdown: {}), {} already in the set; skipped: {} without an image in the stance, {} blank, {} outside every label, {} spanning two labels; {} holds {} steps",
+            "capture of {}: {} steps, {} written, {} already in the set; {} holds {} steps\n  \
+             written per terrain: {}\n  by gait at touchdown: {}\n  skipped: {} without an \
+             image in the stance, {} blank, {} outside every label, {} spanning two labels",
             self.source,
             c.steps,
             set.written,
+            set.duplicates,
+            out.display(),
+            set.len(),
             if terrains.is_empty() {
                 "none".into()
             } else {
@@ -108,13 +113,10 @@ impl CaptureService {
             } else {
                 gaits.join(", ")
             },
-            set.duplicates,
             c.no_image,
             c.blank,
             c.unlabelled,
             c.spans_labels,
-            out.display(),
-            set.len()
         )
     }
 }

@@ -27,14 +27,28 @@ impl Trained {
         let mut o = String::new();
         let (m, split) = (&self.model, &self.split);
         let names: Vec<&str> = m.classes.iter().map(|c| c.name.as_str()).collect();
-        let _ = writeln!(
-            o,
-            "wrote {out}: {} terrains ({}), trained on {} + {} images of {} (fit + kernel \
-             width), in {:.1} s",
-            names.len(),
-            names.join(", "),
+        let (fit, width, k) = (
             split.train.len(),
             split.validation.len(),
+            names.len().max(1),
+        );
+        // Per terrain when the draw was even (the paper's 13 + 7), else the totals alone.
+        let each = match fit % k == 0 && width % k == 0 {
+            true => {
+                let (f, w) = (fit / k, width / k);
+                format!(
+                    " ({f} + {w} per terrain: `--per-class {}`, `--train {f}`)",
+                    f + w
+                )
+            }
+            false => String::new(),
+        };
+        let _ = writeln!(
+            o,
+            "wrote {out}: {} terrains ({}), fitted on {fit} images and its kernel width chosen \
+             on {width}{each} of the training run's {}, in {:.1} s",
+            names.len(),
+            names.join(", "),
             self.train_images,
             took.as_secs_f64()
         );
