@@ -301,3 +301,53 @@ fn calibration_runs_and_classify_json() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Two demo sessions whose model takes much of the calibration run for another terrain
+/// (seeds 11 and 12: h = 24 PCA dimensions chosen on 28 validation images) are warned about,
+/// with the figures the warning is made of; the README's seeds 1 and 2 are not.
+#[test]
+fn train_warns_when_the_model_takes_the_calibration_run_for_other_terrains() {
+    let dir = std::env::temp_dir().join(format!("presrs-cli-wrong-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = |name: &str| dir.join(name).display().to_string();
+    let warned = |seeds: [u64; 2], set: &str| {
+        for s in seeds {
+            let (log, csv) = (p(&format!("r{s}.log")), p(&format!("r{s}.csv")));
+            let seed = s.to_string();
+            let args = ["demo", "--steps", "300", "--seed", &seed, "--candump", &log];
+            let (ok, _, err) = presrs(&[&args[..], &["--truth", &csv]].concat());
+            assert!(ok, "{err}");
+            let (ok, _, err) = presrs(&[
+                "capture",
+                "--replay",
+                &log,
+                "--labels",
+                &csv,
+                "--out",
+                &p(set),
+            ]);
+            assert!(ok, "{err}");
+            let _ = std::fs::remove_file(&log);
+        }
+        let (ok, out, err) = presrs(&["train", "--data", &p(set), "--out", &p("m.json")]);
+        assert!(ok, "{err}");
+        out.lines()
+            .find(|l| l.starts_with("warning: the model took"))
+            .map(str::to_string)
+    };
+    let w = warned([11, 12], "set11").expect("a warning for seeds 11 and 12");
+    let share: f64 = w
+        .split("took ")
+        .nth(1)
+        .and_then(|t| t.split('%').next())
+        .and_then(|t| t.parse().ok())
+        .unwrap_or_else(|| panic!("{w}"));
+    assert!(share > 10.0, "{w}");
+    assert!(
+        w.contains("r12.log") && w.contains("h = ") && w.contains("validation images"),
+        "{w}"
+    );
+    assert_eq!(warned([1, 2], "set1"), None);
+    let _ = std::fs::remove_dir_all(&dir);
+}
