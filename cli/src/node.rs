@@ -21,7 +21,7 @@ pub struct NodeArgs {
     pub config: Option<PathBuf>,
     /// Replay: print each TerrainClass as a JSON line (`t_us`: when the node decided the step,
     /// on the log's clock, µs; `step`: the foot's step counter, as on the bus).
-    #[arg(long)]
+    #[arg(long, help_heading = "Replay a log")]
     pub json: bool,
     /// One CSV row per step and foot, live or on a replay: foot, step (the bus's counter,
     /// numbered as `capture`'s manifest), touchdown_s (the debounced touchdown) and
@@ -39,7 +39,12 @@ pub struct NodeArgs {
     /// With --replay: the run's true terrain (a labels CSV, `start_s,end_s,terrain[,foot]`, as
     /// `capture --labels` reads and `demo --truth` writes it): the node's decisions per true
     /// terrain, known ground called unknown and new ground found.
-    #[arg(long, value_name = "CSV", requires = "replay")]
+    #[arg(
+        long,
+        value_name = "CSV",
+        requires = "replay",
+        help_heading = "Replay a log"
+    )]
     pub truth: Option<PathBuf>,
     /// Overrides the config's `terrains` key.
     #[command(flatten)]

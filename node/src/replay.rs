@@ -211,8 +211,22 @@ pub fn replay_file(
 
 /// One TerrainClass as a line for people: time (s), foot, step, terrain name, confidence
 /// (`-` for unknown ground: no terrain was chosen, and the rejected class's posterior would
-/// read as certainty), damage and flags.
+/// read as certainty), damage and flags, as on the bus and named (the unknown reason first).
 pub fn class_line(t_us: u64, foot: u8, tc: &TerrainClass, catalog: &TerrainCatalog) -> String {
+    use protocol::messages::flags;
+    let named = [
+        (flags::REPAIRED, "repaired"),
+        (flags::LOW_CONFIDENCE, "low confidence"),
+        (flags::MULTI_FRAME, "multi-frame"),
+    ];
+    let notes: Vec<&str> = (tc.unknown_reason().map(|r| r.name()).into_iter())
+        .chain(
+            named
+                .iter()
+                .filter(|(b, _)| tc.flags & b != 0)
+                .map(|(_, n)| *n),
+        )
+        .collect();
     format!(
         "{:.6} foot {foot} step {:5} {:<13} {:>6}  damage {:4.1}%  flags 0x{:02X}{}",
         t_us as f64 * 1e-6,
@@ -221,8 +235,10 @@ pub fn class_line(t_us: u64, foot: u8, tc: &TerrainClass, catalog: &TerrainCatal
         confidence_text(tc),
         tc.damage_pct,
         tc.flags,
-        tc.unknown_reason()
-            .map_or(String::new(), |r| format!("  ({})", r.name()))
+        match notes.is_empty() {
+            true => String::new(),
+            false => format!("  ({})", notes.join(", ")),
+        }
     )
 }
 
@@ -316,6 +332,14 @@ mod tests {
         assert!(line.starts_with("1.500000 foot 1 step     7 "), "{line}");
         assert!(
             line.contains(" 91.5%") && line.ends_with("flags 0x04"),
+            "{line}"
+        );
+        let mut repaired = tc(0);
+        repaired.flags =
+            protocol::messages::flags::REPAIRED | protocol::messages::flags::LOW_CONFIDENCE;
+        let line = class_line(0, 0, &repaired, &cat);
+        assert!(
+            line.ends_with("flags 0x03  (repaired, low confidence)"),
             "{line}"
         );
         let unknown = class_line(0, 0, &tc(protocol::messages::TERRAIN_UNKNOWN), &cat);

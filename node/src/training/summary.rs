@@ -110,7 +110,8 @@ impl Trained {
         };
         format!(
             "unknown ground: {}; with each terrain left out in turn, it finds {:.0}% of it{weak} \
-             and calls {:.1}% of known ground unknown",
+             and calls {:.1}% of the calibration run's known ground unknown (a next session \
+             calls more: `node --replay LOG --truth CSV` measures it)",
             c.candidate,
             100.0 * o.found,
             100.0 * o.known_unknown
