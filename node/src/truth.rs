@@ -12,7 +12,7 @@ use std::fmt;
 
 use protocol::messages::{TERRAIN_UNKNOWN, TerrainClass};
 
-use crate::capture::LabelRange;
+use crate::capture::Labelling;
 
 /// One true terrain's steps and what the node made of them.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -36,7 +36,7 @@ pub struct TruthRow {
 /// The tally over a replay; see the module docs.
 #[derive(Clone, Debug)]
 pub struct TruthTally {
-    labels: Vec<LabelRange>,
+    labels: Labelling,
     model_ids: Vec<u8>,
     /// Per true terrain, in the order first met.
     pub rows: Vec<TruthRow>,
@@ -46,7 +46,7 @@ pub struct TruthTally {
 
 impl TruthTally {
     /// A tally for `labels` and a model of the terrains `model_ids`.
-    pub fn new(labels: Vec<LabelRange>, model_ids: Vec<u8>) -> Self {
+    pub fn new(labels: Labelling, model_ids: Vec<u8>) -> Self {
         Self {
             labels,
             model_ids,
@@ -62,27 +62,23 @@ impl TruthTally {
         catalog: &protocol::terrain::TerrainCatalog,
         model_ids: Vec<u8>,
     ) -> Result<Self, crate::capture::CaptureError> {
-        match crate::capture::Labelling::from_args(None, Some(path), catalog)? {
-            crate::capture::Labelling::Ranges(r) => Ok(Self::new(r, model_ids)),
-            // `from_args` without a name reads the file.
-            crate::capture::Labelling::All(_) => Ok(Self::new(Vec::new(), model_ids)),
-        }
+        let labels = Labelling::from_args(None, Some(path), catalog)?;
+        Ok(Self::new(labels, model_ids))
     }
 
     /// One decided step of `foot`, touching down at `touchdown_us` (the log's clock).
     pub fn add(&mut self, foot: u8, touchdown_us: u64, class: &TerrainClass) {
-        let Some(l) = self.labels.iter().find(|l| {
-            (l.start_us..l.end_us).contains(&touchdown_us) && l.foot.is_none_or(|f| f == foot)
-        }) else {
+        // Capture's own rule, at the touchdown alone: the range it falls in on this foot.
+        let Ok(terrain) = self.labels.label(foot, touchdown_us, touchdown_us) else {
             self.outside += 1;
             return;
         };
-        let id = l.terrain.id();
+        let id = terrain.id();
         let i = match self.rows.iter().position(|r| r.id == id) {
             Some(i) => i,
             None => {
                 self.rows.push(TruthRow {
-                    terrain: l.terrain.name().to_string(),
+                    terrain: terrain.name().to_string(),
                     id,
                     known: self.model_ids.contains(&id),
                     steps: 0,
@@ -173,7 +169,7 @@ mod tests {
     /// on known ground it is the safe gait; a step in no range is counted apart.
     #[test]
     fn steps_are_scored_against_the_range_their_touchdown_falls_in() {
-        let range = |start_us, end_us, terrain, foot| LabelRange {
+        let range = |start_us, end_us, terrain, foot| crate::capture::LabelRange {
             start_us,
             end_us,
             terrain,
@@ -183,7 +179,7 @@ mod tests {
             range(0, 100, Terrain::WOOD, None),
             range(100, 200, Terrain::SAND, Some(0)),
         ];
-        let mut t = TruthTally::new(labels, vec![Terrain::WOOD.id()]);
+        let mut t = TruthTally::new(Labelling::Ranges(labels), vec![Terrain::WOOD.id()]);
         let wood = Terrain::WOOD.id();
         t.add(0, 10, &class(wood));
         t.add(0, 20, &class(TERRAIN_UNKNOWN));

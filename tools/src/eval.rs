@@ -179,9 +179,7 @@ fn stance_frame(
     s: &node::classifier::dataset::Sample,
     j: usize,
 ) -> Option<Option<PressureImage>> {
-    let rel = s.path.strip_prefix(root).ok()?;
-    let path = root.join(node::capture::STANCE_DIR).join(rel);
-    let frames = node::classifier::dataset::read_images(&path).ok()?;
+    let frames = node::capture::stance_frames(root, &s.path)?;
     if frames.len() != node::stance::FRAME_OFFSETS_MS.len() {
         return None;
     }

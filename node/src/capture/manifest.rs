@@ -107,6 +107,14 @@ pub fn read_manifest(
 /// Where a set keeps its stances' frames (`DIR/.stance/<terrain>/<image name>`).
 pub const STANCE_DIR: &str = ".stance";
 
+/// The stance frames a set at `root` keeps beside its image `image` (a path under `root`), at
+/// [`crate::stance::FRAME_OFFSETS_MS`] (a blank image where the stance had ended); `None` when
+/// it keeps none for it, or they cannot be read (the image itself is then what there is).
+pub fn stance_frames(root: &Path, image: &Path) -> Option<Vec<PressureImage>> {
+    let rel = image.strip_prefix(root).ok()?;
+    crate::classifier::dataset::read_images(&root.join(STANCE_DIR).join(rel)).ok()
+}
+
 /// The manifest's header line.
 pub const MANIFEST_HEADER: &str = "file,terrain,foot,step,touchdown_s,sample_s,load_sum,\
                                    damage_pct,source,gait,flight_before_s,flight_after_s";

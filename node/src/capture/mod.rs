@@ -30,7 +30,7 @@ mod service;
 pub use labels::{LabelRange, Labelling, parse_labels};
 pub use manifest::{
     CaptureSet, MANIFEST_HEADER, MANIFEST_HEADER_V1, MANIFEST_HEADER_V2, ManifestEntry, STANCE_DIR,
-    read_manifest,
+    read_manifest, stance_frames,
 };
 pub use service::CaptureService;
 

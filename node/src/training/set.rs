@@ -154,12 +154,7 @@ impl TrainingSet {
         let frames = ds
             .samples
             .iter()
-            .map(|s| {
-                let rel = s.path.strip_prefix(&ds.root).ok()?;
-                let f = ds.root.join(crate::capture::STANCE_DIR).join(rel);
-                crate::classifier::dataset::read_images(&f).ok()
-            })
-            .map(Option::unwrap_or_default)
+            .map(|s| crate::capture::stance_frames(&ds.root, &s.path).unwrap_or_default())
             .collect();
         let (images, labels) = ds.samples.into_iter().map(|s| (s.image, s.class)).unzip();
         Ok(Self {
