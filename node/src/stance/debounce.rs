@@ -42,11 +42,15 @@ impl Switch {
 
     /// The edge accepted by `now_us` (foot clock): a reading that differs from the state and
     /// has held for `debounce_us`. Timestamps wrap (32-bit µs, 71 minutes).
+    ///
+    /// `now_us` may lie before the reading: an image carries its sample time and is received
+    /// whole a few ms later, after a switch edge sent in between. Such a time has seen the
+    /// reading hold not at all (a wrapping difference past half the clock is negative), not
+    /// for 71 minutes: taken as held, a bouncing switch's edge settled on it, before the
+    /// bounce ended and with its touchdown 2^32 µs early on the receiver's clock.
     pub fn settle(&mut self, now_us: u32, debounce_us: u32) -> Option<Edge> {
-        if !self.heard
-            || self.raw == self.stance
-            || now_us.wrapping_sub(self.raw_since) < debounce_us
-        {
+        let held = now_us.wrapping_sub(self.raw_since);
+        if !self.heard || self.raw == self.stance || held > i32::MAX as u32 || held < debounce_us {
             return None;
         }
         self.stance = self.raw;
@@ -129,6 +133,22 @@ mod tests {
             s.settle(t.wrapping_add(5_000), DEBOUNCE),
             Some(Edge::Touchdown { at_us: t })
         );
+    }
+
+    #[test]
+    fn a_time_from_before_the_reading_has_not_seen_it_hold() {
+        // An image sampled 3 ms before the switch closed, received after the close: its
+        // timestamp settles nothing, before and after the clock wraps.
+        for t in [100_000, 1_500, u32::MAX - 1_000] {
+            let mut s = Switch::default();
+            s.read(true, t);
+            assert_eq!(s.settle(t.wrapping_sub(3_000), DEBOUNCE), None, "t {t}");
+            assert!(!s.stance);
+            assert_eq!(
+                s.settle(t.wrapping_add(DEBOUNCE), DEBOUNCE),
+                Some(Edge::Touchdown { at_us: t })
+            );
+        }
     }
 
     #[test]
