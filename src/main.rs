@@ -15,6 +15,7 @@ mod demo_cmd;
 mod discover_cmd;
 mod energy_cmd;
 mod experiment_cmd;
+mod feet_cmd;
 mod leg_cmd;
 mod mcap_cmd;
 mod node_cmd;
@@ -45,6 +46,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             LabCmd::Dbc(a) => classifier_cmd::dbc(&a),
             LabCmd::Energy(a) => energy_cmd::run(a),
             LabCmd::Adaptation(a) => adaptation_cmd::run(a),
+            LabCmd::Feet(a) => feet_cmd::run(a),
         },
     }
 }

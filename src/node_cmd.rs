@@ -28,6 +28,7 @@ pub fn run(a: NodeArgs) -> Result<ExitCode> {
             cfg.refit = cfg.refit.reproducible();
             let mut node = NodeService::new(cfg, model)
                 .with_context(|| format!("--model {}", a.model.display()))?;
+            tracing::info!("deciding frame {}", node.sample_time());
             let keep = keep_unknown(&a, &mut node, &log.display().to_string(), true)?;
             let code = replay(node, log, &a, model_ids)?;
             finish_keep(keep, &a)?;
@@ -35,18 +36,19 @@ pub fn run(a: NodeArgs) -> Result<ExitCode> {
         }
         (None, Some(iface)) => {
             let signals = Signals::install()?;
-            tracing::info!(
-                %iface,
-                model = %a.model.display(),
-                feet = cfg.feet,
-                sample_ms = cfg.sample_ms,
-                repair = ?cfg.repair,
-                multi_frame = cfg.multi_frame,
-                "presrs node starting"
-            );
+            let (feet, repair, multi_frame) = (cfg.feet, cfg.repair, cfg.multi_frame);
             let terrains = cfg.terrains.clone();
             let mut node = NodeService::new(cfg, model)
                 .with_context(|| format!("--model {}", a.model.display()))?;
+            tracing::info!(
+                %iface,
+                model = %a.model.display(),
+                feet,
+                repair = ?repair,
+                multi_frame,
+                "presrs node starting; deciding frame {}",
+                node.sample_time()
+            );
             // After the checks above: a bad model or config is an error before any file exists.
             let steps = a
                 .csv

@@ -251,5 +251,64 @@ fn an_offset_slowly_loading_foot_gets_its_own_crop_and_deciding_frame() {
             && given.contains("% of the stances' load"),
         "{given}"
     );
+
+    // The lab's word: `--sample-ms` pins the frame to one the stances keep, and the node says
+    // whose frame is in force; a time the set holds nothing at is refused by name.
+    let pinned = presrs(
+        &dir,
+        &[
+            "train",
+            "--data",
+            "set",
+            "--out",
+            "m3.json",
+            "--sample-ms",
+            "130",
+        ],
+    );
+    assert!(
+        pinned.contains("deciding frame 130 ms after touchdown (--sample-ms)"),
+        "{pinned}"
+    );
+    let m3 = node::classifier::Model::load(&dir.join("m3.json")).unwrap();
+    assert_eq!(m3.sample_ms, Some(130));
+    let replay = presrs(&dir, &["node", "--replay", &log2, "--model", "m3.json"]);
+    assert!(
+        replay.contains("deciding frame 130 ms after touchdown (the model's)"),
+        "{replay}"
+    );
+    std::fs::write(dir.join("pin.toml"), "sample_ms = 150\n").unwrap();
+    let replay = presrs(
+        &dir,
+        &[
+            "node", "--replay", &log2, "--model", "m3.json", "--config", "pin.toml",
+        ],
+    );
+    assert!(
+        replay.contains("deciding frame 150 ms after touchdown (the config's sample_ms"),
+        "{replay}"
+    );
+    let out = Command::new(env!("CARGO_BIN_EXE_presrs"))
+        .args([
+            "train",
+            "--data",
+            "set",
+            "--out",
+            "m4.json",
+            "--sample-ms",
+            "200",
+        ])
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(
+        err.contains("--sample-ms 200")
+            && err.contains("30, 50, 70")
+            && err.contains("sample_ms = 200"),
+        "{err}"
+    );
+    assert!(!dir.join("m4.json").exists());
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -18,6 +18,7 @@ pub mod demo;
 pub mod discover;
 pub mod energy;
 pub mod experiment;
+pub mod feet;
 pub mod leg;
 pub mod mcap;
 pub mod node;
@@ -112,6 +113,10 @@ pub enum LabCmd {
     /// The paper's Table 3 for your robot: forward speed per terrain and gait from a recorded
     /// run (each hop measured from the foot switch and LegState, as the controller does).
     Adaptation(adaptation::AdaptationArgs),
+    /// The README's path (two small sessions, capture, train, a third session with new ground)
+    /// walked on feet that are not the paper's: the simulator's and the independent foot
+    /// emulator's; a table per foot and the worst foot.
+    Feet(feet::FeetArgs),
 }
 
 /// The commands that moved under `presrs lab`; their old names still run, with a pointer, for

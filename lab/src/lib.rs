@@ -38,6 +38,7 @@
 //! ```
 
 pub mod closed_loop;
+pub mod feet;
 pub mod load;
 pub mod model;
 pub mod open_set;

@@ -37,6 +37,7 @@ pub fn training_set(samples: Vec<Sample>, terrains: &[Terrain]) -> TrainingSet {
         gaits,
         flights: Vec::new(),
         frames: Vec::new(),
+        captured_ms: None,
     }
 }
 

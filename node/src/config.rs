@@ -41,6 +41,10 @@ impl RefitMode {
     }
 }
 
+/// The paper's sampled frame, ms after touchdown (section 7.1): the node's when neither its
+/// config nor its model names one.
+pub const DEFAULT_SAMPLE_MS: u32 = 70;
+
 /// The node's config file (`/etc/presrs/node.toml`); every key has a default.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -49,9 +53,11 @@ pub struct NodeConfig {
     pub feet: u8,
     /// Micro-switch debounce, µs.
     pub debounce_us: u32,
-    /// Stance time of the sampled frame, ms (section 7.1: 70), for a model that carries none:
-    /// a model `train` made carries the frame it measured on the lab's stances, and that wins.
-    pub sample_ms: u32,
+    /// Stance time of the sampled frame, ms: set, it pins the frame (the lab's word wins over
+    /// the model's); unset, the model's (`train` measured it on the lab's stances), else
+    /// [`DEFAULT_SAMPLE_MS`]. A capture made with it set keeps its stances at that time, and
+    /// `train` then pins the model to it.
+    pub sample_ms: Option<u32>,
     /// How dead sensor lines are filled.
     pub repair: RepairMode,
     /// Stances in a row a line must stay dead before the history repair fills it.
@@ -83,7 +89,7 @@ impl Default for NodeConfig {
         Self {
             feet: 1,
             debounce_us: 5_000,
-            sample_ms: 70,
+            sample_ms: None,
             repair: RepairMode::History,
             dead_after_stances: 5,
             refit: RefitMode::Background,
@@ -167,8 +173,10 @@ impl NodeConfig {
                 ),
             ));
         }
-        if !(10..=500).contains(&self.sample_ms) {
-            return Err(Invalid::range("sample_ms", self.sample_ms, "10..=500"));
+        if let Some(ms) = self.sample_ms
+            && !(10..=500).contains(&ms)
+        {
+            return Err(Invalid::range("sample_ms", ms, "10..=500"));
         }
         if self.window_ms[0] >= self.window_ms[1] {
             return Err(Invalid::new(

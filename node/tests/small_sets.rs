@@ -67,6 +67,7 @@ fn session(seed: u64, counts: &[usize], kinds: &[Kind], run: &str) -> TrainingSe
         gaits: Vec::new(),
         flights: Vec::new(),
         frames: Vec::new(),
+        captured_ms: None,
     };
     for (k, &n) in counts.iter().enumerate() {
         let start = set.images.len();

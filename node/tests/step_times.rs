@@ -1,7 +1,7 @@
 //! A step's touchdown time on the log's clock, whatever the foot switch does: any bounce at
 //! touchdown and liftoff, a sender clock based anywhere (near 2^32 µs too), the clock wrapping
 //! mid-stance, images stamped at their sample time and received whole a few ms later. Every
-//! step is decided once, and its touchdown lies within 10 ms of the true one.
+//! step is decided once, and its touchdown lies within 5 ms of the true one (the bounce's span).
 //!
 //! `node --replay --csv`, `--truth`, `--keep-unknown` and MCAP all take the step's time from
 //! [`presrs_node::stance::Decided::touchdown_us`], which these streams check.
@@ -137,9 +137,11 @@ fn check(steps: &[Step], base: u32, phase_us: u64, seg_gap_us: u64) -> Result<()
     }
     prop_assert_eq!(said.len(), truth.len(), "one decision per step");
     for (k, (d, &td)) in said.iter().zip(&truth).enumerate() {
+        // The debounced edge is the bounce's last (at most 4.8 ms after the first here), put on
+        // the log's clock by the switch report (received 150 µs after it was sent).
         let err = d.touchdown_us.abs_diff(td);
         prop_assert!(
-            err <= 10_000,
+            err <= 5_000,
             "step {}: touchdown {} µs from the truth (clock base {})",
             k,
             err,

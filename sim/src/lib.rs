@@ -5,6 +5,7 @@ pub mod dataset;
 pub mod faults;
 pub mod field;
 pub mod fixed_gait;
+pub mod foot_model;
 pub mod hopper;
 pub mod runner;
 pub mod service;

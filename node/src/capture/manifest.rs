@@ -14,6 +14,9 @@ pub struct ManifestEntry {
     /// The flights before and after its stance, µs (`flight_before_s`, `flight_after_s`; empty
     /// where an edge was not heard, and in manifests written before the columns).
     pub flights_us: [Option<u32>; 2],
+    /// Its image's time after touchdown, µs (`sample_s` - `touchdown_s`): the capture's sample
+    /// time, to the array's frame (`None` when the sample is not after the touchdown).
+    pub sampled_after_us: Option<u32>,
 }
 
 /// One manifest line, parsed: `Ok(None)` for a header or blank line; `Err` says what is wrong.
@@ -60,15 +63,20 @@ pub(super) fn parse_manifest_line(l: &str) -> Result<Option<ManifestLine<'_>>, S
                 .ok_or_else(|| format!("gait `{g}` is not 1..255 or empty"))?,
         ),
     };
+    let touchdown_us = parse_seconds(f[4]).ok_or_else(|| format!("touchdown_s `{}`", f[4]))?;
+    let sample_us = parse_seconds(f[5]).ok_or_else(|| format!("sample_s `{}`", f[5]))?;
     Ok(Some(ManifestLine {
         file: f[0],
         foot: f[2].parse().map_err(|_| format!("foot `{}`", f[2]))?,
         step: f[3].parse().map_err(|_| format!("step `{}`", f[3]))?,
-        touchdown_us: parse_seconds(f[4]).ok_or_else(|| format!("touchdown_s `{}`", f[4]))?,
+        touchdown_us,
         entry: ManifestEntry {
             source: f[8].to_string(),
             gait,
             flights_us: [flight(10)?, flight(11)?],
+            sampled_after_us: sample_us
+                .checked_sub(touchdown_us)
+                .and_then(|d| u32::try_from(d).ok()),
         },
     }))
 }

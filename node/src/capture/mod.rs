@@ -410,6 +410,8 @@ mod tests {
             source: source.into(),
             gait,
             flights_us: [None, None],
+            // Every line samples 70 ms after its touchdown.
+            sampled_after_us: Some(70_000),
         };
         assert_eq!(m[Path::new("wood/a.pgm")], want("run1", None));
         // A capture appends 10 columns to a manifest that began with 9.

@@ -129,6 +129,19 @@ pub struct TrainOptions {
         )
     )]
     pub unknown_checks: UnknownChecks,
+    /// The deciding frame, ms after touchdown, as the lab sets it: one of the captured stance
+    /// frames' times (30, 50, ..., 190) or the time the set was captured at (the capture
+    /// config's `sample_ms`). Without it `train` measures the frame on the stances' frames,
+    /// unless the set was captured at another time than the paper's 70 ms: then that one.
+    #[cfg_attr(
+        feature = "clap",
+        arg(
+            long,
+            value_name = "MS",
+            help_heading = "The fit (the paper's split; the crop measured)"
+        )
+    )]
+    pub sample_ms: Option<u32>,
 }
 
 /// `--downsample`: 1..=MAX_DOWNSAMPLE, refused as the command line is read (`train` refuses it
@@ -171,6 +184,7 @@ impl Default for TrainOptions {
             check_load: false,
             check_texture: false,
             unknown_checks: UnknownChecks::Auto,
+            sample_ms: None,
         }
     }
 }

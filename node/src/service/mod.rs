@@ -318,6 +318,12 @@ impl NodeService {
         Ok(id)
     }
 
+    /// The deciding frame's time after touchdown in force, and whose it is (the config's, the
+    /// model's or the paper's).
+    pub fn sample_time(&self) -> crate::stance::SampleTime {
+        self.pipeline.sample_time()
+    }
+
     /// The frame that carries `out` on the node's ids.
     pub fn frame(&self, out: &Output) -> Option<CanFrame> {
         out.to_frame(self.ids())

@@ -65,7 +65,11 @@ impl RunningNode {
         let installed = self
             .threads
             .call(move |node| match node.set_model_in(model, catalog) {
-                Ok(id) => tracing::info!(model_id = id, "model reloaded"),
+                Ok(id) => tracing::info!(
+                    model_id = id,
+                    "model reloaded; deciding frame {}",
+                    node.sample_time()
+                ),
                 Err(e) => tracing::error!("{e}; keeping the model already loaded"),
             });
         if !installed {

@@ -16,7 +16,7 @@ impl StancePipeline {
     /// ([`protocol::component::Component::expected_frame_us`]).
     pub fn next_decision(&self) -> Option<(Option<u8>, u64)> {
         self.classifier.as_ref()?;
-        let sample_us = self.sample_us;
+        let sample_us = self.sample.ms * 1000;
         let w1 = self.cfg.window_ms[1] * 1000;
         let mut next: (Option<u8>, u64) = (None, u64::MAX);
         for (i, f) in self.feet.iter().enumerate() {

@@ -65,10 +65,19 @@ impl Switch {
         })
     }
 
+    /// A reading differs from the debounced state and has not been accepted yet.
+    pub fn pending(&self) -> bool {
+        self.heard && self.raw != self.stance
+    }
+
     /// A frame sampled at foot time `t_us` came after a liftoff edge the debounce has not
-    /// confirmed yet: outside the stance unless the edge was bounce.
-    pub fn after_open_edge(&self, t_us: u32) -> bool {
-        !self.raw && t_us.wrapping_sub(self.raw_since) < 10_000_000
+    /// confirmed yet: outside the stance unless the edge was bounce. A frame from up to
+    /// `debounce_us` before the last open reading counts too: the switch's bounce at liftoff
+    /// (open, closed, open again within a few ms) leaves only its last edge in `raw_since`,
+    /// and a frame from between its first and last is already in flight.
+    pub fn after_open_edge(&self, t_us: u32, debounce_us: u32) -> bool {
+        let since = t_us.wrapping_sub(self.raw_since) as i32;
+        !self.raw && since > -(debounce_us.min(i32::MAX as u32) as i32) && since < 10_000_000
     }
 }
 
@@ -156,11 +165,15 @@ mod tests {
         let mut s = Switch::default();
         s.read(true, 0);
         s.settle(DEBOUNCE, DEBOUNCE);
-        assert!(!s.after_open_edge(100_000));
+        assert!(!s.after_open_edge(100_000, DEBOUNCE));
         s.read(false, 200_000);
-        assert!(s.after_open_edge(201_000));
+        assert!(s.after_open_edge(201_000, DEBOUNCE));
+        // Bounce: it had opened at 197 ms, closed for a ms and opened again at 200 ms; a frame
+        // from between them is in flight.
+        assert!(s.after_open_edge(198_000, DEBOUNCE));
+        assert!(!s.after_open_edge(190_000, DEBOUNCE));
         // Timestamps 10 s or more from the edge (another stance, a wrapped clock) are not
         // judged by it.
-        assert!(!s.after_open_edge(199_000 + 20_000_000));
+        assert!(!s.after_open_edge(199_000 + 20_000_000, DEBOUNCE));
     }
 }

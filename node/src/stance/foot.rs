@@ -47,6 +47,10 @@ pub(super) struct Foot {
     /// The last frame heard from this foot: its receive time and the foot's timestamp in it,
     /// so [`super::StancePipeline::tick`] can tell the foot's time from the receiver's.
     pub(super) heard: Option<(u64, u32)>,
+    /// The last FootContact's receive time and timestamp: the foot's clock against the
+    /// receiver's without an image's transfer time (an image is received whole some ms after
+    /// its sample time), to put a touchdown on the receiver's clock.
+    pub(super) contact_heard: Option<(u64, u32)>,
     /// The hop's energy balance over this foot's stances.
     pub(super) balance: Balance,
     /// Capture mode: per offset of [`super::FRAME_OFFSETS_MS`], the image nearest it so far (|dt -
@@ -89,6 +93,7 @@ impl Foot {
             asked: None,
             clock: ImageClock::default(),
             heard: None,
+            contact_heard: None,
             balance: Balance::default(),
             frames: Vec::new(),
         }

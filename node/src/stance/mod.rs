@@ -37,6 +37,7 @@ use adapt::Refitter;
 use debounce::Edge;
 use foot::Foot;
 use frame_decision::{Adaptation, FrameSums, decide_frame};
+pub use sample::{SampleSource, SampleTime};
 
 /// Counters per stage, for NodeStatus and the logs.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -76,6 +77,10 @@ const FRAME_NEAR_US: u32 = 5_000;
 /// Capture mode decides a stance once its frames are past the last offset (or at liftoff).
 const CAPTURE_DONE_US: u32 = (FRAME_OFFSETS_MS[FRAME_OFFSETS_MS.len() - 1] * 1000) + FRAME_NEAR_US;
 
+/// Receiver time without a frame from a foot after which its switch's last reading counts as
+/// held (see [`StancePipeline::tick`]).
+const SILENT_US: u64 = 1_000_000;
+
 /// The node's pipeline, one thread's worth.
 pub struct StancePipeline {
     cfg: NodeConfig,
@@ -100,9 +105,8 @@ pub struct StancePipeline {
     /// Per class of the model: stances the energy check judged, and of them those outside
     /// the class's map (sized when a model with another class count is installed).
     energy_tally: Vec<[u32; 2]>,
-    /// The deciding frame's time after touchdown, µs: the model's (measured by `train` on the
-    /// lab's stances), else the config's `sample_ms`.
-    sample_us: u32,
+    /// The deciding frame's time after touchdown, and whose word it is.
+    sample: SampleTime,
 }
 
 /// One step's decision as the pipeline hands it on: exactly one per step.
@@ -156,7 +160,7 @@ impl StancePipeline {
             counters: Counters::default(),
             capture: false,
             energy_tally: Vec::new(),
-            sample_us: cfg.sample_ms * 1000,
+            sample: SampleTime::of(cfg.sample_ms, None),
             cfg,
         };
         p.set_model(model);
@@ -203,9 +207,9 @@ impl StancePipeline {
         }
     }
 
-    /// The deciding frame's time after touchdown the pipeline uses, ms.
-    pub fn sample_ms(&self) -> u32 {
-        self.sample_us / 1000
+    /// The deciding frame's time after touchdown the pipeline uses, and where it came from.
+    pub fn sample_time(&self) -> SampleTime {
+        self.sample
     }
 
     /// Per class of the model: the stances its energy check judged and, of them, those outside
@@ -249,12 +253,9 @@ impl StancePipeline {
     /// model sizes changes: a sample of another image size is dropped, and the sensor health is
     /// learned afresh when the working image's size changes.
     pub fn set_model(&mut self, model: Option<Model>) {
-        // The model's deciding frame, measured on the lab's stances; older models have none.
-        self.sample_us = model
-            .as_ref()
-            .and_then(|m| m.sample_ms)
-            .unwrap_or(self.cfg.sample_ms)
-            * 1000;
+        // The config's word, else the model's deciding frame (measured on the lab's stances;
+        // older models have none).
+        self.sample = SampleTime::of(self.cfg.sample_ms, model.as_ref().and_then(|m| m.sample_ms));
         let (rows, cols) = model.as_ref().and_then(|m| m.work_size()).unwrap_or((1, 1));
         let input = model.as_ref().map_or(1, |m| m.input_rows * m.input_cols);
         let classes = model.as_ref().map_or(0, |m| m.classes.len());
@@ -373,6 +374,7 @@ impl StancePipeline {
         self.settle(foot, fc.timestamp_us, out);
         let f = &mut self.feet[foot as usize];
         f.heard = Some((self.now_rx_us, fc.timestamp_us));
+        f.contact_heard = f.heard;
         f.switch.read(fc.stance, fc.timestamp_us);
         self.settle(foot, fc.timestamp_us, out);
     }
@@ -400,11 +402,12 @@ impl StancePipeline {
                 t[1] = t[1].saturating_add(u32::from(outside));
             }
             f.touchdown_us = at_us;
-            // `now` is the foot's time in the report received at `now_rx_us`; the edge was
-            // confirmed a debounce time after it happened.
-            f.touchdown_rx_us = self
-                .now_rx_us
-                .saturating_sub(u64::from(now.wrapping_sub(at_us)));
+            // The edge on the receiver's clock, from the last switch report (received as it
+            // was sent), else from the frame that confirmed it (`now` is the foot's time in the
+            // frame received at `now_rx_us`).
+            let (rx, ts) = f.contact_heard.unwrap_or((self.now_rx_us, now));
+            let since = ts.wrapping_sub(at_us) as i32;
+            f.touchdown_rx_us = rx.saturating_add_signed(-i64::from(since));
             f.decided = false;
             f.best_err = None;
             for (err, _) in &mut f.frames {
@@ -444,7 +447,7 @@ impl StancePipeline {
         if dt > sample::FAR_US {
             return; // an image from before the touchdown
         }
-        if f.switch.after_open_edge(ts) {
+        if f.switch.after_open_edge(ts, self.cfg.debounce_us) {
             // Sampled after a liftoff edge that the debounce has not confirmed yet: outside the
             // stance unless the edge was bounce, and then the next images are inside again.
             return;
@@ -484,7 +487,7 @@ impl StancePipeline {
                 f.keep(img, rx_us);
                 // The stance history learns from one frame per stance, not every frame.
                 let observe = f.used == 0;
-                let err = dt.abs_diff(self.sample_us);
+                let err = dt.abs_diff(self.sample.ms * 1000);
                 let nearest = f.sample_err.is_none_or(|e| err < e);
                 let (mut sum_lp, mut verdicts) = (
                     std::mem::take(&mut f.sum_lp),
@@ -530,7 +533,7 @@ impl StancePipeline {
         rx_us: u64,
         out: &mut (impl Emit<Decided> + ?Sized),
     ) {
-        let sample_us = self.sample_us;
+        let sample_us = self.sample.ms * 1000;
         let img = self.reassembler.last_image();
         let f = &mut self.feet[foot as usize];
         if let Some(err) = sample::nearer(dt, sample_us, f.best_err) {
@@ -569,11 +572,20 @@ impl StancePipeline {
     /// arrived. So the deadline only moves with frames; a foot that falls silent is decided at
     /// liftoff.
     pub fn tick(&mut self, now_rx_us: u64, out: &mut (impl Emit<Decided> + ?Sized)) {
-        let sample_us = self.sample_us;
+        let sample_us = self.sample.ms * 1000;
         let w1 = self.cfg.window_ms[1] * 1000;
         for foot in 0..self.feet.len() {
             let f = &self.feet[foot];
             let Some((rx, ts)) = f.heard else { continue };
+            // A foot silent for a second (it reports its switch at 100 Hz, and only its edges
+            // if it departs from the spec) has held its last reading: a liftoff it reported
+            // before the end of a log, or before it stopped, is taken, and its stance decided.
+            if now_rx_us.saturating_sub(rx) >= SILENT_US && f.switch.pending() {
+                self.now_rx_us = now_rx_us;
+                let held = f.switch.raw_since.wrapping_add(self.cfg.debounce_us);
+                self.settle(foot as u8, held, out);
+            }
+            let f = &self.feet[foot];
             if !f.switch.stance || f.decided || now_rx_us < rx {
                 continue;
             }

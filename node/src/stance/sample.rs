@@ -4,6 +4,51 @@
 //!
 //! All times are the foot's own (µs, wrapping), measured from the touchdown (`dt`).
 
+/// The time after touchdown the node samples at, and whose word it is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SampleTime {
+    /// Ms after touchdown.
+    pub ms: u32,
+    /// Where it came from.
+    pub source: SampleSource,
+}
+
+/// Whose sample time is in force: the config's wins (the lab set it), then the model's (`train`
+/// measured it, or the lab pinned it there), then the paper's.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SampleSource {
+    /// The config's `sample_ms`.
+    Config,
+    /// The model's `sample_ms`.
+    Model,
+    /// Neither names one: the paper's 70 ms.
+    Default,
+}
+
+impl SampleTime {
+    /// The time in force for a config's `sample_ms` and a model's.
+    pub fn of(config: Option<u32>, model: Option<u32>) -> Self {
+        let (ms, source) = match (config, model) {
+            (Some(ms), _) => (ms, SampleSource::Config),
+            (None, Some(ms)) => (ms, SampleSource::Model),
+            (None, None) => (crate::config::DEFAULT_SAMPLE_MS, SampleSource::Default),
+        };
+        Self { ms, source }
+    }
+}
+
+/// `70 ms after touchdown (the model's)`: what the node logs.
+impl std::fmt::Display for SampleTime {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let whose = match self.source {
+            SampleSource::Config => "the config's sample_ms, which wins over the model's",
+            SampleSource::Model => "the model's",
+            SampleSource::Default => "the paper's: neither the config nor the model names one",
+        };
+        write!(f, "{} ms after touchdown ({whose})", self.ms)
+    }
+}
+
 /// An image `dt` after touchdown further than this is from before the touchdown (the foot
 /// clock wrapped backwards across it) or from another stance: not this stance's.
 pub(super) const FAR_US: u32 = 10_000_000;

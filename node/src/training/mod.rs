@@ -6,6 +6,7 @@
 pub mod choice;
 pub mod footprint;
 pub mod frame;
+pub mod held_out;
 mod report;
 mod set;
 mod summary;

@@ -11,6 +11,9 @@ pub struct Trained {
     pub footprint: Option<super::footprint::Footprint>,
     /// The crop was given (`--crop T,B,L,R`), not measured.
     pub crop_given: bool,
+    /// Whether the footprint's crop classified the held-out stances as well as none (an
+    /// automatic crop of a loaded footprint).
+    pub crop_check: Option<super::frame::CropCheck>,
     /// Which of the training images went where (indices into the images trained on).
     pub split: Split,
     /// Images trained on (the set less any run held out for calibration).
@@ -21,8 +24,8 @@ pub struct Trained {
     pub choice: crate::training::choice::Choice,
     /// The images per terrain and session, as used.
     pub sessions: Vec<SessionCount>,
-    /// How the deciding frame was chosen, where the sessions kept their stances' frames.
-    pub frame: Option<super::frame::FrameChoice>,
+    /// How the deciding frame came to be.
+    pub frame: super::frame::DecidingFrame,
 }
 
 /// One terrain's images of one session (a run of the capture manifest) and what they were
@@ -57,12 +60,8 @@ impl Trained {
         let _ = writeln!(o, "{}", self.sessions_line());
         let _ = writeln!(o, "{}", self.crop_line());
         let _ = match &self.frame {
-            Some(f) => writeln!(o, "{f}"),
-            None => writeln!(
-                o,
-                "deciding frame: the node's sample time (the sessions keep no stance frames to \
-                 measure one on: capture them with this build)"
-            ),
+            super::frame::DecidingFrame::Measured(f) => writeln!(o, "{f}"),
+            f => writeln!(o, "{}", f.summary()),
         };
         if unknown_rate > 0.0 {
             let _ = write!(o, "{}", self.choice.report(verbose));
@@ -223,10 +222,13 @@ impl Trained {
         });
         match (&self.footprint, self.crop_given) {
             (Some(f), false) => format!(
-                "crop {c} ({rows}x{cols} kept): the rows and columns that carry at least {:.2}% \
-                 of the load over the {} stances (give --crop T,B,L,R to set it)",
+                "crop {c} ({rows}x{cols} kept): the footprint's, the rows and columns that carry \
+                 at least {:.2}% of the load over the {} stances at the deciding frame{} (give \
+                 --crop T,B,L,R to set it)",
                 100.0 * LOADED_SHARE,
-                f.stances
+                f.stances,
+                self.crop_check
+                    .map_or(String::new(), |k| format!("; {}", k.why()))
             ),
             (Some(f), true) => match f.cut_by(&c) {
                 (share, loaded) if loaded > 0 => format!(

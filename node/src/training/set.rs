@@ -68,6 +68,9 @@ pub struct TrainingSet {
     /// the stance had none), as `presrs capture` keeps them in `DIR/.stance`; empty for an
     /// image without them, and past the end for a set built without any.
     pub frames: Vec<Vec<PressureImage>>,
+    /// The time after touchdown the capture took `images` at, ms: the median of the capture
+    /// manifest's sample times (`None` without one).
+    pub captured_ms: Option<u32>,
 }
 
 /// Why [`TrainingSet::train_calibrated`] failed: training or the calibration, as they say it.
@@ -82,6 +85,9 @@ pub enum TrainCalibratedError {
     /// Choosing the unknown-ground checks.
     #[error(transparent)]
     Choice(#[from] crate::training::choice::ChoiceError),
+    /// `--sample-ms` names a time the set holds no stances at (the message says which it holds).
+    #[error("{0}")]
+    SampleMs(String),
 }
 
 /// What each run of a set is used for, per class: see [`TrainingSet::split_runs`].
@@ -156,6 +162,12 @@ impl TrainingSet {
             .iter()
             .map(|s| crate::capture::stance_frames(&ds.root, &s.path).unwrap_or_default())
             .collect();
+        let mut after: Vec<u32> = entries
+            .iter()
+            .filter_map(|e| e.and_then(|e| e.sampled_after_us))
+            .collect();
+        after.sort_unstable();
+        let captured_ms = after.get(after.len() / 2).map(|us| (us + 500) / 1000);
         let (images, labels) = ds.samples.into_iter().map(|s| (s.image, s.class)).unzip();
         Ok(Self {
             classes,
@@ -165,6 +177,7 @@ impl TrainingSet {
             gaits,
             flights,
             frames,
+            captured_ms,
         })
     }
 
@@ -274,6 +287,7 @@ impl TrainingSet {
                 .iter()
                 .map(|&i| self.frames.get(i).cloned().unwrap_or_default())
                 .collect(),
+            captured_ms: self.captured_ms,
         }
     }
 
@@ -354,28 +368,33 @@ impl TrainingSet {
             }
             None => (self, None),
         };
-        // The foot's deciding frame, where the sessions keep their stances' frames: the sets
-        // at that frame train.
-        let frame_opts = TrainOptions {
-            crop: crate::classifier::train::resolve_crop(opts.crop, &train_set.images).into(),
-            ..opts.clone()
-        };
+        // The foot's deciding frame: the lab's, or measured where the sessions keep their
+        // stances' frames; the sets at that frame train.
+        use super::frame::{DecidingFrame, choose_frame, pinned};
+        let pin = pinned(train_set, opts).map_err(TrainCalibratedError::SampleMs)?;
         // A calibration session without frames would be judged at another time than the
         // training one: then the node's sample time for both.
         let cal_ok = calibration.is_none_or(|(c, _)| c.at_frame(0).is_some());
-        let default_ms = crate::config::NodeConfig::default().sample_ms;
-        let frame = cal_ok
-            .then(|| super::frame::choose_frame(train_set, &frame_opts, default_ms))
-            .flatten();
-        let Some(fc) = frame else {
-            return train_sets(train_set, calibration, opts, None);
+        let (frame, j) = match pin {
+            Some((ms, by, j)) => (DecidingFrame::Pinned { ms, by }, j),
+            None => match cal_ok.then(|| choose_frame(train_set, opts)).flatten() {
+                Some(fc) => {
+                    let j = fc.chosen;
+                    (DecidingFrame::Measured(fc), Some(j))
+                }
+                None => (DecidingFrame::NotMeasured, None),
+            },
         };
-        let j = fc.chosen;
+        let Some(j) = j else {
+            let mut trained = train_sets(train_set, calibration, opts, frame)?;
+            trained.model.sample_ms = trained.frame.ms();
+            return Ok(trained);
+        };
         let at = |s: &TrainingSet| s.at_frame(j).unwrap_or_else(|| s.clone());
         let t = at(train_set);
         let c = calibration.map(|(c, n)| (at(c), n));
-        let mut trained = train_sets(&t, c.as_ref().map(|(c, n)| (c, *n)), opts, Some(fc))?;
-        trained.model.sample_ms = trained.frame.as_ref().map(|f| f.offset_ms());
+        let mut trained = train_sets(&t, c.as_ref().map(|(c, n)| (c, *n)), opts, frame)?;
+        trained.model.sample_ms = trained.frame.ms();
         Ok(trained)
     }
 
@@ -429,18 +448,24 @@ fn train_sets(
     train_set: &TrainingSet,
     calibration: Option<(&TrainingSet, &[String])>,
     opts: &TrainOptions,
-    frame: Option<super::frame::FrameChoice>,
+    frame: super::frame::DecidingFrame,
 ) -> Result<Trained, TrainCalibratedError> {
-    // The foot's own crop, measured once on every stance (a given one is checked).
+    // The foot's own crop, measured once on every stance at the deciding frame (a given one is
+    // checked), and kept only where it classifies the held-out stances at least as well as
+    // none.
     let footprint = super::footprint::Footprint::of(
         train_set
             .images
             .iter()
             .chain(calibration.iter().flat_map(|(c, _)| &c.images)),
     );
-    let crop = match (opts.crop, &footprint) {
+    let crop_check = match (opts.crop, &footprint) {
+        (CropSpec::Fixed(_), _) | (CropSpec::Auto, None) => None,
+        (CropSpec::Auto, Some(f)) => Some(super::frame::check_crop(train_set, opts, f.crop())),
+    };
+    let crop = match (opts.crop, &crop_check) {
         (CropSpec::Fixed(c), _) => c,
-        (CropSpec::Auto, Some(f)) => f.crop(),
+        (CropSpec::Auto, Some(c)) => c.crop(),
         (CropSpec::Auto, None) => Crop::default(),
     };
     let crop_given = matches!(opts.crop, CropSpec::Fixed(_));
@@ -496,6 +521,7 @@ fn train_sets(
         model,
         footprint,
         crop_given,
+        crop_check,
         sessions,
         frame,
         split,

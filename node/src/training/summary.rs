@@ -72,18 +72,23 @@ impl Trained {
     /// `crop 0,3,6,0 (measured) · h = 12 PCA dimensions · deciding frame 120 ms (measured)`.
     fn settings_line(&self) -> String {
         let m = &self.model;
-        let crop = match (&self.footprint, self.crop_given) {
-            (Some(_), false) => format!("crop {} (measured on the stances' load)", m.crop),
-            (_, true) => format!("crop {} (as given)", m.crop),
-            (None, false) => format!("crop {} (no stance carried load to measure)", m.crop),
-        };
-        let frame = match &self.frame {
-            Some(f) => format!(
-                "deciding frame {} ms after touchdown (measured)",
-                f.scores[f.chosen].offset_ms
+        let crop = match (&self.footprint, self.crop_given, &self.crop_check) {
+            (_, true, _) => format!("crop {} (as given)", m.crop),
+            (Some(_), false, Some(k)) if !k.kept => format!(
+                "no crop (the footprint's {} classified held-out stances worse: {:.1}% against \
+                 {:.1}% right)",
+                k.footprint,
+                100.0 * k.cut.accuracy,
+                100.0 * k.none.accuracy
             ),
-            None => "deciding frame: the node's sample time (no stance frames kept)".into(),
+            (Some(_), false, _) => format!(
+                "crop {} (the footprint's at the deciding frame; held-out stances no worse than \
+                 with none)",
+                m.crop
+            ),
+            (None, false, _) => format!("crop {} (no stance carried load to measure)", m.crop),
         };
+        let frame = self.frame.summary();
         format!("{crop}; h = {} PCA dimensions; {frame}", m.h)
     }
 

@@ -18,7 +18,7 @@ use serde::Deserialize;
 use crate::faults::FaultParams;
 use crate::fixed_gait::FixedGait;
 use crate::hopper::{Event, Hopper, HopperParams, LegCommands};
-use crate::skin::{Contact, FRAME_PERIOD_US, Footprint, Skin, SkinParams};
+use crate::skin::{Contact, FRAME_PERIOD_US, Skin, SkinParams};
 use crate::terrain::{CannotSimulate, Physics, Terrain};
 use protocol::config::{ConfigFileError, Invalid};
 use protocol::terrain::TerrainCatalog;
@@ -27,7 +27,7 @@ mod record;
 mod robot;
 mod track;
 
-pub use record::{LOG_EPOCH_US, record, record_candump, truth_labels};
+pub use record::{LOG_EPOCH_US, record, record_candump, record_steps, truth_labels};
 pub use robot::{SimConfig, SimRobot, StepTruth};
 pub use track::{Segment, Track};
 

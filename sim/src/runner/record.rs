@@ -42,6 +42,45 @@ pub fn record(
         .collect()
 }
 
+/// [`record`] until the robot has made `steps` steps and the last one is over (the next
+/// touchdown, or a second after the last; at most `steps` seconds and 20 more of simulated
+/// time): a session of a given number of stances. Returns the truth of those `steps` (fewer
+/// when the robot fell short of them in time).
+pub fn record_steps(
+    cfg: SimConfig,
+    seed: u64,
+    steps: usize,
+    emit: &mut dyn Emit<protocol::Stamped>,
+) -> Vec<StepTruth> {
+    let mut robot = SimRobot::new(cfg, seed);
+    let limit = (steps as u64 + 20) * 1_000_000;
+    let (mut t, mut ended) = (0, None);
+    while t < limit && ended.is_none_or(|end| t < end) {
+        t += 1000;
+        robot.advance_to(t, &mut |frame| {
+            emit.emit(protocol::Stamped {
+                t_us: LOG_EPOCH_US + t,
+                frame,
+            })
+        });
+        if ended.is_none() && robot.steps.len() >= steps {
+            ended = Some(t + 1_000_000);
+        }
+        if robot.steps.len() > steps {
+            break;
+        }
+    }
+    robot
+        .steps
+        .iter()
+        .take(steps)
+        .map(|s| StepTruth {
+            touchdown_us: LOG_EPOCH_US + s.touchdown_us,
+            ..*s
+        })
+        .collect()
+}
+
 /// [`record`] as a candump log (`candump -L` lines, interface `can0`) written to `w`, every
 /// frame also handed to `tap` (a live recording). Returns the frames written and the steps'
 /// truth; the first write error stops the writing and is returned.

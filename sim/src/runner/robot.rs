@@ -29,6 +29,8 @@ pub struct SimConfig {
     /// Mass carried on the body, kg ([`crate::check_payload`]): the robot's next run with a
     /// load its model and its energy maps were not made with. The controller is not told.
     pub payload_kg: f64,
+    /// The foot every leg wears ([`crate::foot_model`]): the paper's unless told.
+    pub foot: crate::foot_model::FootModel,
 }
 
 impl SimConfig {
@@ -55,6 +57,7 @@ impl Default for SimConfig {
             leg: None,
             leg_silent_at_s: None,
             payload_kg: 0.0,
+            foot: crate::foot_model::FootModel::paper(),
         }
     }
 }
@@ -126,6 +129,8 @@ pub(super) struct Leg {
     edges: Vec<(u64, bool)>,
     /// The switch as last sent.
     switch: bool,
+    /// Simulated time of the stance's touchdown, µs.
+    touchdown_us: u64,
 }
 
 /// What the simulator knows about a step (ground truth for the demo and tests).
@@ -165,11 +170,18 @@ impl SimRobot {
     pub fn new(cfg: SimConfig, seed: u64) -> Self {
         let rng = ChaCha8Rng::seed_from_u64(seed);
         let gait = Gait::by_name(&cfg.gait.to_string()).unwrap_or_else(Gait::g2);
-        let params = SkinParams::default();
+        let foot = &cfg.foot;
+        let params = SkinParams {
+            full_scale_kpa: SkinParams::default().full_scale_kpa / foot.gain,
+            ..SkinParams::default()
+        };
+        let faults = FaultParams {
+            initial_damage_pct: cfg.faults.initial_damage_pct.max(foot.dead_pct),
+            ..cfg.faults.clone()
+        };
         let legs = (0..cfg.feet.max(1))
             .map(|i| {
-                let skin =
-                    Skin::of_sensor(cfg.sensor + i as u64, params.clone(), cfg.faults.clone());
+                let skin = Skin::of_sensor(cfg.sensor + i as u64, params.clone(), faults.clone());
                 let mut hopper = Hopper::launch(cfg.hopper_params(), &gait);
                 // Stagger the legs so their steps do not coincide.
                 hopper.y += 0.005 * i as f64;
@@ -195,6 +207,7 @@ impl SimRobot {
                     switch: false,
                     image_seq: 0,
                     edges: Vec::new(),
+                    touchdown_us: 0,
                 }
             })
             .collect();
@@ -326,11 +339,18 @@ impl SimRobot {
                     leg.stance_terrain = terrain;
                     leg.contact = Some(leg.skin.contact_on(
                         segment.physics,
-                        Footprint::FOOT,
+                        self.cfg.foot.base(),
                         &mut self.rng,
                     ));
                     leg.skin.faults.on_step(&mut self.rng);
-                    bounce(&mut leg.edges, ev_us, true, &mut self.rng);
+                    leg.touchdown_us = ev_us;
+                    bounce(
+                        &mut leg.edges,
+                        ev_us,
+                        true,
+                        self.cfg.foot.bounce_max,
+                        &mut self.rng,
+                    );
                     let speed = self.last_td[foot].map_or(leg.hopper.vx, |(t0, x0)| {
                         (leg.hopper.x - x0) / (leg.hopper.t - t0).max(1e-3)
                     });
@@ -354,7 +374,13 @@ impl SimRobot {
                 }
                 Some(Event::Liftoff { beta, length, .. }) => {
                     leg.cmd.fixed.on_liftoff(beta);
-                    bounce(&mut leg.edges, ev_us, false, &mut self.rng);
+                    bounce(
+                        &mut leg.edges,
+                        ev_us,
+                        false,
+                        self.cfg.foot.bounce_max,
+                        &mut self.rng,
+                    );
                     // The stance's last length: after the event the hopper is in flight and
                     // reports the rest length, which put the hip 8% short of where it left.
                     if leg.cmd.motors.is_none() {
@@ -400,7 +426,7 @@ impl SimRobot {
             let m = Message::FootContact(FootContact {
                 stance: state,
                 seq: leg.contact_seq,
-                timestamp_us: t as u32,
+                timestamp_us: self.cfg.foot.clock(t),
             });
             if let Some(f) = m.to_frame(ids, foot as u8) {
                 emit.emit(f);
@@ -411,9 +437,20 @@ impl SimRobot {
     fn send_frame(&mut self, foot: usize, emit: &mut dyn Emit<CanFrame>) {
         let leg = &mut self.legs[foot];
         leg.skin.faults.on_time(FRAME_US as f64 * 1e-6);
-        let load = leg.hopper.foot_load();
+        let model = &self.cfg.foot;
+        // The image is taken `sample_lead_us` before it is sent: the foot as it was then.
+        let taken_us = self.now_us.saturating_sub(u64::from(model.sample_lead_us));
+        let tau_s = taken_us.saturating_sub(leg.touchdown_us) as f64 * 1e-6;
+        let load = leg.hopper.foot_load() * model.load_share(tau_s);
         match (&leg.contact, leg.hopper.in_stance()) {
-            (Some(c), true) => leg.skin.image(c, load, &mut self.rng, &mut leg.pixels),
+            (Some(c), true) => {
+                leg.skin.image(c, load, &mut self.rng, &mut leg.pixels);
+                if let Some(r) = model.rolled_from_row(tau_s) {
+                    let cols = leg.skin.params.cols;
+                    let n = leg.pixels.len();
+                    leg.pixels[(r * cols).min(n)..].fill(0);
+                }
+            }
             _ => {
                 // In flight the array reads its noise floor (below threshold: zeros), faults apply.
                 leg.pixels.fill(0);
@@ -427,7 +464,7 @@ impl SimRobot {
         let m = Message::FootContact(FootContact {
             stance: leg.switch,
             seq: leg.contact_seq,
-            timestamp_us: self.now_us as u32,
+            timestamp_us: model.clock(self.now_us),
         });
         if let Some(f) = m.to_frame(&self.cfg.ids, foot as u8) {
             emit.emit(f);
@@ -437,7 +474,7 @@ impl SimRobot {
             rows: 44,
             cols: 44,
             bits: 8,
-            timestamp_us: self.now_us as u32,
+            timestamp_us: model.clock(taken_us),
             pixels: &leg.pixels,
         };
         let _ = self
@@ -514,12 +551,18 @@ pub(super) fn send_leg_state(
     }
 }
 
-/// A micro-switch edge with contact bounce: the final state at `t`, then 1-3 short reversals
-/// within the next 2 ms (typical for a small snap-action switch).
-pub(super) fn bounce(edges: &mut Vec<(u64, bool)>, t: u64, state: bool, rng: &mut impl Rng) {
+/// A micro-switch edge with contact bounce: the final state at `t`, then 1 to `most` short
+/// reversals within the next few ms (1-3 within 2 ms for a small snap-action switch).
+pub(super) fn bounce(
+    edges: &mut Vec<(u64, bool)>,
+    t: u64,
+    state: bool,
+    most: u8,
+    rng: &mut impl Rng,
+) {
     edges.push((t, state));
     let mut at = t;
-    for _ in 0..rng.random_range(1..=3) {
+    for _ in 0..rng.random_range(1..=most.max(1)) {
         at += rng.random_range(150..500);
         edges.push((at, !state));
         at += rng.random_range(100..400);
