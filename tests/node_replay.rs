@@ -295,6 +295,10 @@ fn keep_unknown_keeps_each_step_called_unknown_on_its_image_and_nothing_twice() 
         assert_eq!(cols[1], v["foot"].to_string());
         assert_eq!(cols[2], v["step"].to_string());
         assert_eq!(cols[3], v["unknown_reason"].as_str().unwrap());
+        assert_eq!(
+            cols[5], "",
+            "an unknown stance chose no terrain, so no confidence: {row}"
+        );
         let img = node::classifier::dataset::read_image(&kept.join(cols[0])).unwrap();
         assert_eq!((img.rows, img.cols), (44, 44));
         assert!(

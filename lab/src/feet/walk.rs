@@ -154,9 +154,10 @@ fn try_walk(
                 let em = emulator
                     .ok_or_else(|| FeetError::Emulator("not found: pass --emulator".into()))?;
                 let images = dir.join(format!("img{}", k + 1));
-                write_images(source, terrains, steps, s_seed, k, &images)?;
+                // As many steps as there are images (no image pressed twice).
+                let n = write_images(source, terrains, steps, s_seed, k, &images)?;
                 let flags: Vec<&str> = flags.iter().map(String::as_str).collect();
-                em.session(&images, &flags, steps, s_seed, &name, &catalog)?
+                em.session(&images, &flags, n, s_seed, &name, &catalog)?
             }
         });
     }
@@ -230,7 +231,8 @@ fn terrains(
     }
 }
 
-/// `steps` images of each of `terrains` from `source` for session `k`, as `out/<terrain>/*.pgm`.
+/// Up to `steps` images of each of `terrains` from `source` for session `k`, as
+/// `out/<terrain>/*.pgm`; returns how many of each (the fewest of any terrain).
 fn write_images(
     source: &Source,
     terrains: &[Terrain],
@@ -238,7 +240,7 @@ fn write_images(
     seed: u64,
     k: usize,
     out: &Path,
-) -> Result<(), FeetError> {
+) -> Result<usize, FeetError> {
     match source {
         Source::Simulator => {
             let samples = sim::dataset::generate(&sim::dataset::Options {
@@ -253,7 +255,9 @@ fn write_images(
                 .into_iter()
                 .filter(|s| terrains.contains(&s.terrain))
                 .collect();
-            crate::simdata::write_images(&mine, out).map_err(|e| FeetError::Io(e.0.clone(), e.1))
+            crate::simdata::write_images(&mine, out)
+                .map_err(|e| FeetError::Io(e.0.clone(), e.1))?;
+            Ok(steps)
         }
         Source::SpeedPp2d(dir) => speedpp2d_images(dir, terrains, steps, k, out),
     }
@@ -262,14 +266,14 @@ fn write_images(
 /// SpeedPP2D's first four people (`DIR/subj00`..`subj03`, as `scripts/speedpp2d.py` writes
 /// them) as the terrains: session `k` takes its own share of each person's 60 maps (at most
 /// `steps`), scaled to 8 bits by the largest count of all (an
-/// array's full scale is one for the whole foot).
+/// array's full scale is one for the whole foot). Returns the fewest maps of any person.
 fn speedpp2d_images(
     dir: &Path,
     terrains: &[Terrain],
     steps: usize,
     k: usize,
     out: &Path,
-) -> Result<(), FeetError> {
+) -> Result<usize, FeetError> {
     let people = ["subj00", "subj01", "subj02", "subj03"];
     // Each session its own maps, every speed in each: of every 12 in recording order, the
     // first session takes 5, the second 5, the third 2 (25, 25 and 10 of a person's 60).
@@ -326,7 +330,7 @@ fn speedpp2d_images(
             .map_err(|e| FeetError::Io(path.display().to_string(), e))?;
         }
     }
-    Ok(())
+    Ok(chosen.iter().map(|(_, v)| v.len()).min().unwrap_or(0))
 }
 
 /// Captures every recording of `s` into the set at `set`, as `presrs capture` does.

@@ -313,12 +313,15 @@ impl Writer {
             Some(_) => "known",
             None => c.unknown_reason().map_or("", UnknownReason::name),
         };
+        // An unknown step chose no terrain: no confidence (the frame's is the rejected
+        // class's), as the step table and the replay print it.
+        let confidence =
+            crate::replay::known_confidence(c).map_or(String::new(), |p| format!("{p:.1}"));
         let line = format!(
-            "{file},{},{},{reason},{},{:.1},{:.1},{},{}\n",
+            "{file},{},{},{reason},{},{confidence},{:.1},{},{}\n",
             step.foot,
             step.step,
             c.flags,
-            c.confidence_pct,
             c.damage_pct,
             s.gait.map(|g| g.to_string()).unwrap_or_default(),
             self.source,
