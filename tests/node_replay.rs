@@ -497,6 +497,52 @@ fn keep_unknown_keeps_each_step_called_unknown_on_its_image_and_nothing_twice() 
         "{said}"
     );
     assert_eq!(std::fs::read(&terrains).unwrap(), before);
+    // The lab's word instead of a group: the kept stances named in a file; and the gait the
+    // controller will run there, added to its config with the lab's consent.
+    let mine = dir.join("mine.txt");
+    std::fs::write(&mine, files.join("\n")).unwrap();
+    let ctl = dir.join("controller.toml");
+    std::fs::write(&ctl, "safe_gait = 1\n\n[terrain_gaits]\nwood = 3\n").unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_presrs"))
+        .arg("discover")
+        .arg(&kept)
+        .arg("--model")
+        .arg(&model_path)
+        .args(["--add", "clay", "--stances"])
+        .arg(&mine)
+        .arg("--controller-config")
+        .arg(&ctl)
+        .arg("--out-model")
+        .arg(dir.join("clay-word.json"))
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{said}");
+    assert!(
+        said.contains(&format!("--stances: {} of the", files.len())),
+        "{said}"
+    );
+    assert!(said.contains("added `clay = 1` (its safe gait)"), "{said}");
+    let cfg = controller::ControllerConfig::load(&ctl).unwrap();
+    assert_eq!(cfg.terrain_gaits.get("clay"), Some(&1));
+    let word = node::classifier::Model::load(&dir.join("clay-word.json")).unwrap();
+    assert_eq!(word.classes.last().map(|c| c.name.as_str()), Some("clay"));
+    // Steps that name no kept stance: refused by what it found, nothing written.
+    let o = Command::new(env!("CARGO_BIN_EXE_presrs"))
+        .arg("discover")
+        .arg(&kept)
+        .arg("--model")
+        .arg(&model_path)
+        .args(["--add", "clay", "--stances", "9000-9001", "--out-model"])
+        .arg(dir.join("clay-none.json"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("0 stances to add"),
+        "{err}"
+    );
+    assert!(!dir.join("clay-none.json").exists());
     let mut fresh = SimRobot::new(SimConfig::default(), 6);
     let log2 = dir.join("run2.log");
     let mut w = std::io::BufWriter::new(std::fs::File::create(&log2).unwrap());

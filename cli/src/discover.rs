@@ -22,6 +22,16 @@ pub struct DiscoverArgs {
     #[arg(long, value_name = "N[,M...]", requires = "add", value_delimiter = ',',
           value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
     pub group: Vec<usize>,
+    /// The lab's word instead of a group: which kept stances were the new ground, as step
+    /// ranges (`12-40`, `0:12-40` for foot 0), a labels CSV (`start_s,end_s,terrain[,foot]`:
+    /// its rows naming --add's terrain) or a file listing kept.csv's file names.
+    #[arg(long, value_name = "SPEC", requires = "add", conflicts_with = "group")]
+    pub stances: Option<String>,
+    /// The controller's config: --add says which gait it will run on the new terrain, and adds
+    /// `NAME = <its safe gait>` under [terrain_gaits] (the file is checked, and kept as it was
+    /// if the line would not load). Without it, --add prints the line to add.
+    #[arg(long, value_name = "FILE", requires = "add")]
+    pub controller_config: Option<PathBuf>,
     /// Where --add writes the model with the new terrain (a new file; the node's own model
     /// is not touched until you move this one in place and send SIGHUP).
     #[arg(long, value_name = "FILE")]

@@ -194,6 +194,63 @@ impl ControllerConfig {
         let (text, name) = protocol::config::read_text(path)?;
         Self::parse(&text, &name)
     }
+
+    /// The gait this config runs on `terrain`: its `terrain_gaits` entry, else the safe gait
+    /// (`false`: not named).
+    pub fn gait_for(&self, terrain: &str) -> (u8, bool) {
+        match self.terrain_gaits.get(terrain) {
+            Some(&g) => (g, true),
+            None => (self.safe_gait, false),
+        }
+    }
+}
+
+/// Adds `terrain = gait` under `[terrain_gaits]` in the config file at `path` (the table
+/// made at its end if missing), keeping every other line and comment as it was; the file is
+/// read back and checked, and left as it was when the result does not load. A terrain the
+/// file names already is left alone (`Ok(false)`).
+pub fn add_terrain_gait(
+    path: &std::path::Path,
+    terrain: &str,
+    gait: u8,
+) -> Result<bool, AddGaitError> {
+    let (text, name) = protocol::config::read_text(path)?;
+    let cfg = ControllerConfig::parse(&text, &name)?;
+    if cfg.terrain_gaits.contains_key(terrain) {
+        return Ok(false);
+    }
+    // A line edit, not a re-serialisation: the lab's comments and order stay (no maintained
+    // crate keeps them through serde's round trip).
+    let line = format!("{terrain} = {gait}                  # added by `presrs discover --add`");
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    match lines
+        .iter()
+        .position(|l| l.trim_start().starts_with("[terrain_gaits]"))
+    {
+        Some(i) => lines.insert(i + 1, line),
+        None => {
+            // The file ran on the default table: a table of its own must carry it whole.
+            lines.push(String::new());
+            lines.push("[terrain_gaits]".into());
+            lines.extend(cfg.terrain_gaits.iter().map(|(t, g)| format!("{t} = {g}")));
+            lines.push(line);
+        }
+    }
+    let new = lines.join("\n") + "\n";
+    ControllerConfig::parse(&new, &name)?;
+    std::fs::write(path, new).map_err(|e| AddGaitError::Write(name, e))?;
+    Ok(true)
+}
+
+/// Why [`add_terrain_gait`] left the file as it was.
+#[derive(Debug, thiserror::Error)]
+pub enum AddGaitError {
+    /// The file does not load, before or with the line.
+    #[error(transparent)]
+    Config(#[from] ConfigFileError),
+    /// It could not be written.
+    #[error("cannot write {0}: {1}")]
+    Write(String, #[source] std::io::Error),
 }
 
 #[cfg(test)]
@@ -235,5 +292,30 @@ pub(crate) mod tests {
         };
         assert_eq!(source.key, "min_confidence_pct");
         assert!(source.message.contains("0..=100"), "{e}");
+    }
+
+    #[test]
+    fn a_new_terrains_gait_is_added_to_the_file_with_its_comments_kept() {
+        let dir = std::env::temp_dir().join(format!("presrs-ctl-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("c.toml");
+        std::fs::write(&p, "# the lab's\nsafe_gait = 2\n").unwrap();
+        assert!(add_terrain_gait(&p, "sandpaper_60", 2).unwrap());
+        let text = std::fs::read_to_string(&p).unwrap();
+        assert!(text.starts_with("# the lab's\n"), "{text}");
+        let c = ControllerConfig::load(&p).unwrap();
+        assert_eq!(c.gait_for("sandpaper_60"), (2, true));
+        // The file ran on the default table: it keeps every terrain of it.
+        let d = ControllerConfig::default();
+        assert_eq!(c.gait_for("wood"), d.gait_for("wood"));
+        // Named already: left alone. A terrain no catalog has: refused, the file as it was.
+        assert!(!add_terrain_gait(&p, "sandpaper_60", 1).unwrap());
+        assert!(add_terrain_gait(&p, "moon_dust", 2).is_err());
+        assert_eq!(std::fs::read_to_string(&p).unwrap(), text);
+        assert_eq!(
+            ControllerConfig::default().gait_for("moon_dust"),
+            (1, false)
+        );
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }

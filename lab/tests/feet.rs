@@ -60,5 +60,11 @@ fn the_readme_path_holds_on_feet_that_are_not_the_papers() {
         let ms = t.frame_ms.expect("a deciding frame");
         assert!(ms >= 90, "{}: frame {ms} ms: {}", t.foot, t.frame_why);
         assert!(!t.frame_why.contains("measured"), "{}", t.frame_why);
+        // The confidence is the measured chance of being right: known ground's decisions are
+        // right about as often as they say (the full table's worst seed: 10 points), and new
+        // ground is not taken for known ground at 90% or more.
+        let ece = t.calibration_error().expect("known ground decided");
+        assert!(ece <= 0.12, "{}: calibration error {ece}", t.foot);
+        assert!(t.new_confident * 20 <= t.new.0, "{}: {t:?}", t.foot);
     }
 }

@@ -312,8 +312,7 @@ fn next_step(s: &mut String, a: &Added, name: &str, out_model: &Path) {
         let _ = writeln!(
             s,
             "next: move {} to the node's model path and send it SIGHUP (it reads the model and \
-             its terrains file again); the controller takes its safe gait on `{name}` until its \
-             terrain_gaits gives one ({name} = N)",
+             its terrains file again)",
             out_model.display()
         );
         return;

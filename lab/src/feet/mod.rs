@@ -232,6 +232,19 @@ impl std::fmt::Display for FeetTable {
                     100.0 * without / n
                 )?;
             }
+            let (new_conf, new_steps) = ok
+                .iter()
+                .fold((0, 0), |(c, n), t| (c + t.new_confident, n + t.new.0));
+            let ece: Vec<f64> = ok.iter().filter_map(|t| t.calibration_error()).collect();
+            writeln!(
+                f,
+                "  confidence: new ground taken for known at 90% or more {new_conf} of {new_steps} \
+                 steps; known ground's calibration error {} points (worst seed)",
+                ece.iter()
+                    .copied()
+                    .fold(None::<f64>, |m, e| Some(m.map_or(e, |m| m.max(e))))
+                    .map_or("-".into(), |e| format!("{:.1}", 100.0 * e))
+            )?;
             for t in ts.iter().filter(|t| t.error.is_some()) {
                 writeln!(f, "  seed {}: {}", t.seed, t.error.as_deref().unwrap_or(""))?;
             }

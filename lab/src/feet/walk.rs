@@ -37,6 +37,11 @@ pub struct Trial {
     /// Where `train` kept a crop: the known ground right had it kept none (the same path with
     /// `--crop 0,0,0,0`), steps and right.
     pub uncropped: Option<(usize, usize)>,
+    /// New ground steps taken for a known terrain at a confidence of 90% or more.
+    pub new_confident: usize,
+    /// The third session's known ground decided known: each decision's confidence (0..=1) and
+    /// whether it was right, for the calibration error.
+    pub confidences: Vec<(f64, bool)>,
     /// The largest distance of a decided step's touchdown from the truth, ms.
     pub touchdown_err_ms: Option<f64>,
     /// Why the trial could not finish.
@@ -59,6 +64,34 @@ impl Trial {
         self.new.1 as f64 / self.new.0.max(1) as f64
     }
 
+    /// Expected calibration error of the known ground's decisions (the confidence bands of
+    /// `node::classifier::confidence`): `None` without decisions.
+    pub fn calibration_error(&self) -> Option<f64> {
+        use node::classifier::confidence::{BANDS, ConfidenceMap, ReliabilityBin};
+        if self.confidences.is_empty() {
+            return None;
+        }
+        let table: Vec<ReliabilityBin> = BANDS
+            .iter()
+            .map(|&(lo, hi)| {
+                let inside: Vec<&(f64, bool)> = self
+                    .confidences
+                    .iter()
+                    .filter(|c| c.0 >= lo && (c.0 < hi || hi >= 1.0))
+                    .collect();
+                let n = inside.len();
+                ReliabilityBin {
+                    lo,
+                    hi,
+                    n,
+                    right: inside.iter().filter(|c| c.1).count(),
+                    mean: inside.iter().map(|c| c.0).sum::<f64>() / n.max(1) as f64,
+                }
+            })
+            .collect();
+        Some(ConfidenceMap::calibration_error(&table))
+    }
+
     /// The trial as JSON.
     pub fn to_json(&self) -> serde_json::Value {
         serde_json::json!({
@@ -74,6 +107,8 @@ impl Trial {
             "new_steps": self.new.0,
             "new_found": self.new.1,
             "uncropped_known_right": self.uncropped.map(|u| u.1),
+            "new_confident": self.new_confident,
+            "known_calibration_error": self.calibration_error(),
             "touchdown_err_ms": self.touchdown_err_ms,
             "error": self.error,
         })
@@ -100,6 +135,8 @@ pub fn walk(
         known: (0, 0, 0),
         new: (0, 0),
         uncropped: None,
+        new_confident: 0,
+        confidences: Vec::new(),
         touchdown_err_ms: None,
         error: None,
     };
@@ -359,7 +396,7 @@ fn replay(s: &Session, model: node::classifier::Model, t: &mut Trial) -> Result<
     let mut worst_td: Option<f64> = None;
     for r in &s.recordings {
         let mut node = NodeService::new(NodeConfig::default(), model.clone())?;
-        let mut said: Vec<(u8, u64, u8)> = Vec::new();
+        let mut said: Vec<(u8, u64, u8, f64)> = Vec::new();
         node.replay(&r.frames, &mut |(_, o): (u64, Output)| {
             if let Output::Class {
                 foot,
@@ -368,7 +405,12 @@ fn replay(s: &Session, model: node::classifier::Model, t: &mut Trial) -> Result<
                 ..
             } = o
             {
-                said.push((foot, touchdown_us, class.terrain));
+                said.push((
+                    foot,
+                    touchdown_us,
+                    class.terrain,
+                    class.confidence_pct / 100.0,
+                ));
             }
         });
         let end = r.frames.last().map_or(0, |f| f.t_us) + 2_000_000;
@@ -380,7 +422,12 @@ fn replay(s: &Session, model: node::classifier::Model, t: &mut Trial) -> Result<
                 ..
             } = o
             {
-                said.push((foot, touchdown_us, class.terrain));
+                said.push((
+                    foot,
+                    touchdown_us,
+                    class.terrain,
+                    class.confidence_pct / 100.0,
+                ));
             }
         });
         for &(foot, td, terrain) in &r.truth {
@@ -395,13 +442,18 @@ fn replay(s: &Session, model: node::classifier::Model, t: &mut Trial) -> Result<
                 worst_td = Some(worst_td.map_or(e, |w| w.max(e)));
             }
             let got = d.map(|d| d.2);
+            let decided_known = d.filter(|d| d.2 != TERRAIN_UNKNOWN);
             if ids.contains(&terrain.id()) {
                 t.known.0 += 1;
                 t.known.1 += usize::from(got == Some(terrain.id()));
                 t.known.2 += usize::from(got == Some(TERRAIN_UNKNOWN));
+                if let Some(d) = decided_known {
+                    t.confidences.push((d.3, d.2 == terrain.id()));
+                }
             } else {
                 t.new.0 += 1;
                 t.new.1 += usize::from(got == Some(TERRAIN_UNKNOWN));
+                t.new_confident += usize::from(decided_known.is_some_and(|d| d.3 >= 0.9));
             }
         }
     }

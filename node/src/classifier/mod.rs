@@ -6,6 +6,7 @@
 //! sensor lines; [`train`]ing with the paper's 13/7 split; the [`model`] file; [`dataset`]
 //! readers.
 
+pub mod confidence;
 pub mod dataset;
 mod decision;
 pub mod features;

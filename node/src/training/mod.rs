@@ -4,6 +4,7 @@
 //! deployed path depends on no simulator or lab code.
 
 pub mod choice;
+mod confidence_fit;
 pub mod footprint;
 pub mod frame;
 pub mod held_out;

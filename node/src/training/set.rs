@@ -511,6 +511,16 @@ fn train_sets(
         let maps = crate::unknown::energy::fit(&stances, model.classes.len(), model.unknown.rate);
         model.unknown.energy = maps.iter().any(Option::is_some).then_some(maps);
     }
+    // The decision's confidence as its measured chance of being right.
+    if let Some((_, names)) = calibration {
+        model.confidence = super::confidence_fit::fit(
+            &train_set.labelled(),
+            &cal_labelled,
+            names,
+            &train_set.classes,
+            opts,
+        );
+    }
     model.gaits = seen_gaits(train_set, &split, calibration);
     model.unknown.choice = (opts.unknown_rate > 0.0).then(|| choice.record());
     let mut sessions = train_set.session_counts("trained");

@@ -57,6 +57,7 @@ impl Trained {
             let _ = writeln!(o, "{}", self.unknown_line());
         }
         let _ = writeln!(o, "{}", self.calibration_short(unknown_rate));
+        let _ = writeln!(o, "{}", self.confidence_line());
         for w in self.warnings() {
             let _ = writeln!(o, "{w}");
         }
@@ -67,6 +68,37 @@ impl Trained {
              candidate measured and why each was chosen"
         );
         o
+    }
+
+    /// What a decision's confidence means: the reliability table it was measured on.
+    pub fn confidence_line(&self) -> String {
+        let Some(c) = &self.model.confidence else {
+            return "confidence: the Parzen posterior (no calibration run to measure the chance \
+                    of being right on: capture a second session)"
+                .into();
+        };
+        let bands: Vec<String> = c
+            .reliability
+            .iter()
+            .filter(|b| b.n > 0)
+            .map(|b| {
+                format!(
+                    "{:.0}-{:.0}%: {} of {} right",
+                    100.0 * b.lo,
+                    100.0 * b.hi,
+                    b.right,
+                    b.n
+                )
+            })
+            .collect();
+        format!(
+            "confidence: the measured chance of being right, from {} decisions of models that \
+             left each terrain out in turn ({} right; new ground taken for known counted \
+             wrong); reliability: {}",
+            c.judged,
+            c.right,
+            bands.join(", ")
+        )
     }
 
     /// `crop 0,3,6,0 (measured) · h = 12 PCA dimensions · deciding frame 120 ms (measured)`.

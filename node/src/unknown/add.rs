@@ -129,13 +129,36 @@ pub fn add_group(
     groups: &[usize],
     terrain: ClassInfo,
 ) -> Result<Added, DiscoverError> {
-    let add = |m: String| DiscoverError::Add(m);
     let groups = pick(d, groups)?;
-    let images: Vec<PressureImage> = groups
+    let members: Vec<usize> = groups
         .iter()
-        .flat_map(|&g| &d.groups[g].members)
+        .flat_map(|&g| d.groups[g].members.iter().copied())
+        .collect();
+    let mut a = add_stances(model, stances, &members, terrain)?;
+    a.groups = groups;
+    Ok(a)
+}
+
+/// `model` with the kept stances `members` (indices into `stances`) added as terrain
+/// `terrain`: a group's, or those the lab names ([`super::lab_word`]). See the module docs.
+pub fn add_stances(
+    model: &Model,
+    stances: &[KeptStance],
+    members: &[usize],
+    terrain: ClassInfo,
+) -> Result<Added, DiscoverError> {
+    let add = |m: String| DiscoverError::Add(m);
+    let images: Vec<PressureImage> = members
+        .iter()
         .filter_map(|&i| stances.get(i).map(|s| s.image.clone()))
         .collect();
+    if images.len() < super::discover::MIN_GROUP {
+        return Err(add(format!(
+            "{} stances to add; a terrain needs at least {}",
+            images.len(),
+            super::discover::MIN_GROUP
+        )));
+    }
     // The run's known stances of terrains the model has, every other one of each terrain to
     // calibrate on and the rest to score with.
     let mut seen = vec![0usize; model.classes.len()];
@@ -180,7 +203,7 @@ pub fn add_group(
         before: told_apart(model),
         after: told_apart(&m),
         model: m,
-        groups,
+        groups: Vec::new(),
         candidates,
         chosen,
     })
@@ -275,11 +298,18 @@ fn pick(d: &Discovery, groups: &[usize]) -> Result<Vec<usize>, DiscoverError> {
     let new: Vec<usize> = d.new_ground().map(|(g, _)| g).collect();
     match new[..] {
         [g] => Ok(vec![g]),
-        [] => Err(add(
-            "no group is new ground: nothing to add (a group the table calls known ground can \
-             still be added with --group N)"
+        [] if d.groups.is_empty() => Err(add(
+            "no group was formed of the kept stances: say which were the new ground with \
+             --stances (step ranges like 12-40, a labels CSV of the run, or a file of kept.csv's \
+             names)"
                 .into(),
         )),
+        [] => Err(add(format!(
+            "no group is new ground: a group the table calls known ground can still be added \
+             with --group N (1-{}), or say which stances were the new ground with --stances \
+             (step ranges like 12-40, a labels CSV of the run, or a file of kept.csv's names)",
+            d.groups.len()
+        ))),
         _ => Err(add(format!(
             "{} groups are new ground: say which with --group N (or N,M for one ground in \
              several groups: the contact sheets show which look alike)",

@@ -36,6 +36,7 @@ pub mod discover;
 pub mod energy;
 pub mod energy_fit;
 pub mod keep;
+pub mod lab_word;
 pub mod novelty;
 
 pub use protocol::messages::UnknownReason as Reason;

@@ -175,6 +175,11 @@ pub struct Model {
     /// `sample_ms` (the paper's 70).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sample_ms: Option<u32>,
+    /// The measured chance that a decision is right, from its margin and its room under the
+    /// novelty threshold ([`super::confidence`]): the decision's confidence. Absent in older
+    /// files and where `train` had nothing to measure it on: the Parzen posterior.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub confidence: Option<super::confidence::ConfidenceMap>,
     /// Everything that calls a stance unknown ground: format 3's one `unknown` section
     /// ([`crate::unknown::checks`]; format 1 and 2 files have it made from their keys).
     pub unknown: crate::unknown::checks::Checks,

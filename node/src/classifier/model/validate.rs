@@ -132,6 +132,12 @@ impl Model {
                 ),
             ));
         }
+        if self.confidence.as_ref().is_some_and(|c| !c.is_valid()) {
+            return Err(Invalid::new(
+                "confidence",
+                "the confidence map's weights must be finite numbers (retrain to measure it again)",
+            ));
+        }
         if let Some(ms) = self.sample_ms
             && !(1..=1000).contains(&ms)
         {

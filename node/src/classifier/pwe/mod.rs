@@ -223,6 +223,23 @@ impl Classifier {
         let reason = self.verdict(measured);
         let m = &self.model;
         let known = reason.is_none();
+        // The measured chance of being right where `train` measured it, else the posterior.
+        let confidence = match &m.confidence {
+            Some(map) => {
+                let lp = &self.log_posteriors;
+                let next = (0..lp.len())
+                    .filter(|&k| k != best)
+                    .map(|k| lp[k])
+                    .fold(f64::NEG_INFINITY, f64::max);
+                let f = super::confidence::features(
+                    lp[best] - next,
+                    measured.novelty,
+                    measured.threshold,
+                );
+                map.chance(f)
+            }
+            None => self.log_posteriors[best].exp(),
+        };
         Decision {
             class: known.then_some(best),
             best,
@@ -231,7 +248,7 @@ impl Classifier {
             } else {
                 protocol::messages::TERRAIN_UNKNOWN
             },
-            confidence: self.log_posteriors[best].exp(),
+            confidence,
             log_density: self.log_dens[best],
             contact: true,
             novelty: measured.novelty,

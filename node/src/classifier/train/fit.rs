@@ -194,6 +194,7 @@ pub(crate) fn train_variants(
         }),
         gaits: None,
         sample_ms: None,
+        confidence: None,
         unknown: Checks {
             rate: o.unknown_rate,
             ..Checks::none(classes.len())
