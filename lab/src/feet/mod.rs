@@ -15,12 +15,14 @@
 //! feet press them.
 
 mod emulator;
+mod new_ground;
 mod session;
 mod walk;
 
 use std::path::PathBuf;
 
 pub use emulator::{EMULATOR_FEET, Emulator};
+pub use new_ground::Learned;
 pub use session::{Recording, Session};
 pub use walk::{Trial, walk};
 
@@ -245,6 +247,25 @@ impl std::fmt::Display for FeetTable {
                     .fold(None::<f64>, |m, e| Some(m.map_or(e, |m| m.max(e))))
                     .map_or("-".into(), |e| format!("{:.1}", 100.0 * e))
             )?;
+            // New ground: kept, grouped, added, met again (per seed).
+            let each: Vec<String> = ok
+                .iter()
+                .filter_map(|t| t.learned.as_ref().map(|l| (t, l)))
+                .map(|(t, l)| {
+                    let group = l.group.map_or("no group".into(), |(n, of)| {
+                        format!("group {of}/{n} of {}", t.new.0)
+                    });
+                    let (nn, nr) = l.fresh_new;
+                    let (kn, kb, ka) = l.fresh_known;
+                    format!(
+                        "seed {}: {group}, by {}; then new {nr}/{nn}, known {kb}->{ka} of {kn}",
+                        t.seed, l.added_by
+                    )
+                })
+                .collect();
+            if !each.is_empty() {
+                writeln!(f, "  new ground: {}", each.join("; "))?;
+            }
             for t in ts.iter().filter(|t| t.error.is_some()) {
                 writeln!(f, "  seed {}: {}", t.seed, t.error.as_deref().unwrap_or(""))?;
             }

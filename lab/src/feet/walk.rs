@@ -44,6 +44,8 @@ pub struct Trial {
     pub confidences: Vec<(f64, bool)>,
     /// The largest distance of a decided step's touchdown from the truth, ms.
     pub touchdown_err_ms: Option<f64>,
+    /// New ground grouped, added and met again (`None`: the trial did not get that far).
+    pub learned: Option<super::new_ground::Learned>,
     /// Why the trial could not finish.
     pub error: Option<String>,
 }
@@ -110,6 +112,13 @@ impl Trial {
             "new_confident": self.new_confident,
             "known_calibration_error": self.calibration_error(),
             "touchdown_err_ms": self.touchdown_err_ms,
+            "learned": self.learned.as_ref().map(|l| serde_json::json!({
+                "kept_new": l.kept_new,
+                "group": l.group,
+                "added_by": l.added_by,
+                "fresh_new": l.fresh_new,
+                "fresh_known": l.fresh_known,
+            })),
             "error": self.error,
         })
     }
@@ -138,6 +147,7 @@ pub fn walk(
         new_confident: 0,
         confidences: Vec::new(),
         touchdown_err_ms: None,
+        learned: None,
         error: None,
     };
     let slug: String = format!("{}-{}-{seed}", t.foot, t.source)
@@ -173,18 +183,10 @@ fn try_walk(
     let (known, new) = terrains(source, &catalog)?;
     let mut all = known.clone();
     all.push(new);
-    let mut sessions = Vec::new();
-    for (k, (terrains, steps)) in [
-        (&known, opts.steps),
-        (&known, opts.steps),
-        (&all, opts.third_steps),
-    ]
-    .into_iter()
-    .enumerate()
-    {
+    let make = |k: usize, terrains: &[Terrain], steps: usize| -> Result<Session, FeetError> {
         let name = format!("s{}", k + 1);
         let s_seed = seed * 10 + k as u64 + 1;
-        sessions.push(match foot {
+        Ok(match foot {
             Foot::Sim(m) => session::simulated(m, terrains, steps, s_seed, &name)
                 .map_err(|e| FeetError::Emulator(e.to_string()))?,
             Foot::Emulator { flags, .. } => {
@@ -196,8 +198,13 @@ fn try_walk(
                 let flags: Vec<&str> = flags.iter().map(String::as_str).collect();
                 em.session(&images, &flags, n, s_seed, &name, &catalog)?
             }
-        });
-    }
+        })
+    };
+    let sessions = vec![
+        make(0, &known, opts.steps)?,
+        make(1, &known, opts.steps)?,
+        make(2, &all, opts.third_steps)?,
+    ];
     let set = dir.join("set");
     for s in &sessions[..2] {
         capture(s, &set)?;
@@ -227,12 +234,29 @@ fn try_walk(
         u.new = (0, 0);
         replay(
             &sessions[2],
-            training.train_calibrated(&none, None)?.model,
+            &training.train_calibrated(&none, None)?.model,
             &mut u,
+            None,
         )?;
         t.uncropped = Some((u.known.0, u.known.1));
     }
-    replay(&sessions[2], model, t)
+    let kept = dir.join("kept");
+    replay(&sessions[2], &model, t, Some(&kept))?;
+    // New ground: the kept stances grouped and added, then a fresh session.
+    let (mut learned, added) = super::new_ground::learn(&kept, &sessions[2], &model, new)?;
+    if let Some(added) = added {
+        let fourth = make(3, &all, opts.third_steps)?;
+        (learned.fresh_new, learned.fresh_known) = fresh(&fourth, &model, &added, new)?;
+        if opts.keep {
+            let m = dir.join("added.json");
+            added
+                .save(&m)
+                .map_err(|e| FeetError::Emulator(format!("{}: {e}", m.display())))?;
+            write_logs(std::slice::from_ref(&fourth), dir)?;
+        }
+    }
+    t.learned = Some(learned);
+    Ok(())
 }
 
 /// Each session's recordings as candump logs (`DIR/<source>.log`), for a trial kept.
@@ -389,15 +413,36 @@ fn capture(s: &Session, set: &Path) -> Result<(), FeetError> {
     Ok(())
 }
 
-/// The third session through the node with `model`, each decided step held against its true
-/// terrain and touchdown; a step the node never decided counts against it.
-fn replay(s: &Session, model: node::classifier::Model, t: &mut Trial) -> Result<(), FeetError> {
-    let ids: Vec<u8> = model.classes.iter().map(|c| c.terrain_id).collect();
-    let mut worst_td: Option<f64> = None;
+/// One true step of a session and what the node made of it.
+struct Decided {
+    /// Its true terrain.
+    terrain: Terrain,
+    /// The decision whose touchdown lies nearest the truth's, within 50 ms: its terrain id
+    /// and confidence (0..=1), and how far its touchdown lies from the truth, ms.
+    got: Option<(u8, f64, f64)>,
+}
+
+/// Every true step of `s` with the node's decision under `model`; the unknown stances kept in
+/// `keep` when given (as `node --replay --keep-unknown`).
+fn decide(
+    s: &Session,
+    model: &node::classifier::Model,
+    keep: Option<&Path>,
+) -> Result<Vec<Decided>, FeetError> {
+    let mut out = Vec::new();
     for r in &s.recordings {
         let mut node = NodeService::new(NodeConfig::default(), model.clone())?;
+        let writer = match keep {
+            Some(dir) => {
+                let (keeper, writer) =
+                    node::unknown::keep::UnknownKeeper::create(dir, &r.source, node.catalog())?;
+                node.set_keep_unknown(keeper.waiting());
+                Some(writer)
+            }
+            None => None,
+        };
         let mut said: Vec<(u8, u64, u8, f64)> = Vec::new();
-        node.replay(&r.frames, &mut |(_, o): (u64, Output)| {
+        let mut hear = |o: Output| {
             if let Output::Class {
                 foot,
                 class,
@@ -412,51 +457,82 @@ fn replay(s: &Session, model: node::classifier::Model, t: &mut Trial) -> Result<
                     class.confidence_pct / 100.0,
                 ));
             }
-        });
+        };
+        node.replay(&r.frames, &mut |(_, o): (u64, Output)| hear(o));
         let end = r.frames.last().map_or(0, |f| f.t_us) + 2_000_000;
-        node.tick(end, &mut |o: Output| {
-            if let Output::Class {
-                foot,
-                class,
-                touchdown_us,
-                ..
-            } = o
-            {
-                said.push((
-                    foot,
-                    touchdown_us,
-                    class.terrain,
-                    class.confidence_pct / 100.0,
-                ));
-            }
-        });
+        node.tick(end, &mut hear);
+        drop(node);
+        if let Some(w) = writer {
+            w.finish()?;
+        }
         for &(foot, td, terrain) in &r.truth {
-            // The decision whose touchdown lies nearest the truth's, within 50 ms.
             let d = said
                 .iter()
                 .filter(|d| d.0 == foot)
                 .min_by_key(|d| d.1.abs_diff(td))
                 .filter(|d| d.1.abs_diff(td) <= 50_000);
-            if let Some(d) = d {
-                let e = d.1.abs_diff(td) as f64 / 1000.0;
-                worst_td = Some(worst_td.map_or(e, |w| w.max(e)));
-            }
-            let got = d.map(|d| d.2);
-            let decided_known = d.filter(|d| d.2 != TERRAIN_UNKNOWN);
-            if ids.contains(&terrain.id()) {
-                t.known.0 += 1;
-                t.known.1 += usize::from(got == Some(terrain.id()));
-                t.known.2 += usize::from(got == Some(TERRAIN_UNKNOWN));
-                if let Some(d) = decided_known {
-                    t.confidences.push((d.3, d.2 == terrain.id()));
-                }
-            } else {
-                t.new.0 += 1;
-                t.new.1 += usize::from(got == Some(TERRAIN_UNKNOWN));
-                t.new_confident += usize::from(decided_known.is_some_and(|d| d.3 >= 0.9));
-            }
+            out.push(Decided {
+                terrain,
+                got: d.map(|d| (d.2, d.3, d.1.abs_diff(td) as f64 / 1000.0)),
+            });
         }
     }
-    t.touchdown_err_ms = worst_td;
+    Ok(out)
+}
+
+/// The third session through the node with `model` (its unknown stances kept in `keep`),
+/// each decided step held against its true terrain and touchdown; a step the node never
+/// decided counts against it.
+fn replay(
+    s: &Session,
+    model: &node::classifier::Model,
+    t: &mut Trial,
+    keep: Option<&Path>,
+) -> Result<(), FeetError> {
+    let ids: Vec<u8> = model.classes.iter().map(|c| c.terrain_id).collect();
+    for d in decide(s, model, keep)? {
+        if let Some((_, _, e)) = d.got {
+            t.touchdown_err_ms = Some(t.touchdown_err_ms.map_or(e, |w| w.max(e)));
+        }
+        let got = d.got.map(|g| g.0);
+        let known_call = d.got.filter(|g| g.0 != TERRAIN_UNKNOWN);
+        let id = d.terrain.id();
+        if ids.contains(&id) {
+            t.known.0 += 1;
+            t.known.1 += usize::from(got == Some(id));
+            t.known.2 += usize::from(got == Some(TERRAIN_UNKNOWN));
+            if let Some(g) = known_call {
+                t.confidences.push((g.1, g.0 == id));
+            }
+        } else {
+            t.new.0 += 1;
+            t.new.1 += usize::from(got == Some(TERRAIN_UNKNOWN));
+            t.new_confident += usize::from(known_call.is_some_and(|g| g.1 >= 0.9));
+        }
+    }
     Ok(())
+}
+
+/// A fresh session's steps decided by the model before the add and after: the new terrain's
+/// steps and those decided as it; known steps, right before, right after.
+fn fresh(
+    s: &Session,
+    before: &node::classifier::Model,
+    after: &node::classifier::Model,
+    new: Terrain,
+) -> Result<((usize, usize), (usize, usize, usize)), FeetError> {
+    let (b, a) = (decide(s, before, None)?, decide(s, after, None)?);
+    let (mut n, mut k) = ((0, 0), (0, 0, 0));
+    for (db, da) in b.iter().zip(&a) {
+        let right = |d: &Decided| d.got.is_some_and(|g| g.0 == d.terrain.id());
+        if db.terrain == new {
+            n.0 += 1;
+            n.1 += usize::from(right(da));
+        } else {
+            k.0 += 1;
+            k.1 += usize::from(right(db));
+            k.2 += usize::from(right(da));
+        }
+    }
+    Ok((n, k))
 }
