@@ -246,7 +246,7 @@ fn try_walk(
     let (mut learned, added) = super::new_ground::learn(&kept, &sessions[2], &model, new)?;
     if let Some(added) = added {
         let fourth = make(3, &all, opts.third_steps)?;
-        (learned.fresh_new, learned.fresh_known) = fresh(&fourth, &model, &added, new)?;
+        fresh(&fourth, &model, &added, new, &mut learned)?;
         if opts.keep {
             let m = dir.join("added.json");
             added
@@ -513,14 +513,15 @@ fn replay(
     Ok(())
 }
 
-/// A fresh session's steps decided by the model before the add and after: the new terrain's
-/// steps and those decided as it; known steps, right before, right after.
+/// A fresh session's steps decided by the model before the add and after, into `l`: the new
+/// terrain's steps and those decided as it; known steps, right before, right after.
 fn fresh(
     s: &Session,
     before: &node::classifier::Model,
     after: &node::classifier::Model,
     new: Terrain,
-) -> Result<((usize, usize), (usize, usize, usize)), FeetError> {
+    l: &mut super::new_ground::Learned,
+) -> Result<(), FeetError> {
     let (b, a) = (decide(s, before, None)?, decide(s, after, None)?);
     let (mut n, mut k) = ((0, 0), (0, 0, 0));
     for (db, da) in b.iter().zip(&a) {
@@ -534,5 +535,6 @@ fn fresh(
             k.2 += usize::from(right(da));
         }
     }
-    Ok((n, k))
+    (l.fresh_new, l.fresh_known) = (n, k);
+    Ok(())
 }
