@@ -155,8 +155,12 @@ pub fn leave_class_out(src: &OpenSetSource, out_k: usize) -> Result<OpenSetRow, 
         let names = c.run_names();
         (c, names)
     });
-    let trained =
-        known.train_calibrated(&src.opts, cal.as_ref().map(|(c, n)| (c, n.as_slice())))?;
+    // The study counts decisions; their confidence is not read.
+    let opts = TrainOptions {
+        confidence: node::classifier::options::Confidence::Posterior,
+        ..src.opts.clone()
+    };
+    let trained = known.train_calibrated(&opts, cal.as_ref().map(|(c, n)| (c, n.as_slice())))?;
     let checks = trained.choice.candidate.to_string();
     let (model, split) = (trained.model, trained.split);
     let calibration_unknown = model

@@ -142,6 +142,21 @@ pub struct TrainOptions {
         )
     )]
     pub sample_ms: Option<u32>,
+    /// Whether `train` measures the decisions' chance of being right
+    /// ([`crate::classifier::confidence`]): a model for a robot does; a study that trains
+    /// hundreds of models to count their decisions need not (it costs a fit per terrain).
+    #[cfg_attr(feature = "clap", arg(skip = Confidence::Measure))]
+    pub confidence: Confidence,
+}
+
+/// What a model's confidence is: see [`TrainOptions::confidence`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Confidence {
+    /// The measured chance of being right (a robot's model).
+    #[default]
+    Measure,
+    /// The Parzen posterior (a study's model, whose confidence nobody reads).
+    Posterior,
 }
 
 /// `--downsample`: 1..=MAX_DOWNSAMPLE, refused as the command line is read (`train` refuses it
@@ -185,6 +200,7 @@ impl Default for TrainOptions {
             check_texture: false,
             unknown_checks: UnknownChecks::Auto,
             sample_ms: None,
+            confidence: Confidence::Measure,
         }
     }
 }

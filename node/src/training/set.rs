@@ -512,7 +512,9 @@ fn train_sets(
         model.unknown.energy = maps.iter().any(Option::is_some).then_some(maps);
     }
     // The decision's confidence as its measured chance of being right.
-    if let Some((_, names)) = calibration {
+    if let (Some((_, names)), crate::classifier::options::Confidence::Measure) =
+        (calibration, opts.confidence)
+    {
         model.confidence = super::confidence_fit::fit(
             &train_set.labelled(),
             &cal_labelled,
