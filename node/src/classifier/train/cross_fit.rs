@@ -160,20 +160,10 @@ pub(crate) fn nuisance_directions(residuals: &[Vec<f64>], r: usize) -> Vec<f32> 
     }
     let n = residuals[0].len();
     let e = DMatrix::<f64>::from_fn(residuals.len(), n, |i, j| residuals[i][j]);
-    let svd = e.svd(false, true);
-    let Some(v_t) = svd.v_t else {
-        return Vec::new();
-    };
-    let mut order: Vec<usize> = (0..svd.singular_values.len()).collect();
-    order.sort_by(|&a, &b| svd.singular_values[b].total_cmp(&svd.singular_values[a]));
-    let tol = svd.singular_values.max() * 1e-9;
+    let pca = super::pca::principal_axes(&e, r);
     let mut out = Vec::with_capacity(r * n);
-    for &axis in order
-        .iter()
-        .take(r)
-        .take_while(|&&a| svd.singular_values[a] > tol)
-    {
-        out.extend((0..n).map(|k| v_t[(axis, k)] as f32));
+    for axis in &pca.axes {
+        out.extend(axis.iter().map(|&v| v as f32));
     }
     out
 }

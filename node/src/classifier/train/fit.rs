@@ -332,35 +332,26 @@ pub(crate) fn fit(
     for mut r in x.row_iter_mut() {
         r -= &mean;
     }
-    let svd = x.clone().svd(false, true);
-    let v_t = svd.v_t.ok_or(TrainError::Pca)?;
-    let tol = svd.singular_values.max() * 1e-9;
-    let rank = svd
-        .singular_values
-        .iter()
-        .filter(|s| **s > tol)
-        .count()
-        .max(1);
     // PCA axes up to the paper's 52 (or --dims), as far as the rank allows.
-    let h_max = dims.unwrap_or(52).min(rank).max(1);
-    // Rows of V^T are the principal axes, sorted by singular value.
-    let mut order: Vec<usize> = (0..svd.singular_values.len()).collect();
-    order.sort_by(|&a, &b| svd.singular_values[b].total_cmp(&svd.singular_values[a]));
+    let pca = super::pca::principal_axes(&x, dims.unwrap_or(52));
+    if pca.axes.is_empty() {
+        return Err(TrainError::Pca);
+    }
+    let h_max = pca.axes.len();
     let mut u = vec![0f32; h_max * n];
-    for (j, &axis) in order.iter().take(h_max).enumerate() {
+    for (j, axis) in pca.axes.iter().enumerate() {
         for k in 0..n {
-            u[j * n + k] = v_t[(axis, k)] as f32;
+            u[j * n + k] = axis[k] as f32;
         }
     }
-    // Project T and V on all h_max axes once; a smaller h uses the leading coordinates.
+    // Project T and V on all h_max axes once (on the axes as the model stores them, f32, as the
+    // node projects); a smaller h uses the leading coordinates.
+    let axes = DMatrix::<f64>::from_fn(n, h_max, |k, j| u[j * n + k] as f64);
+    let projected = &x * axes;
     let mut proj = vec![0f32; work.len() * h_max];
     for row in 0..work.len() {
         for j in 0..h_max {
-            let mut acc = 0.0f64;
-            for k in 0..n {
-                acc += x[(row, k)] * u[j * n + k] as f64;
-            }
-            proj[row * h_max + j] = acc as f32;
+            proj[row * h_max + j] = projected[(row, j)] as f32;
         }
     }
     // Model selection on V (section 4.2: training determines h and the kernel): every candidate
@@ -386,14 +377,21 @@ pub(crate) fn fit(
             .flat_map(|r| proj[r * h_max..r * h_max + h].iter().copied())
             .collect();
         let nn = median_nn_distance(&t_proj, h);
+        // Each validation image's squared distances to T, once per h: the kernel widths below
+        // only rescale them.
+        let d2: Vec<f64> = (n_t..work.len())
+            .flat_map(|v| {
+                let q = &proj[v * h_max..v * h_max + h];
+                (0..n_t).map(|i| sq_dist(&t_proj[i * h..(i + 1) * h], q))
+            })
+            .collect();
         for step in -16..=8 {
             let sigma = nn * 2f64.powf(step as f64 / 2.0);
             let mut correct = 0;
             let mut margin = 0.0;
-            for v in n_t..work.len() {
-                let q = &proj[v * h_max..v * h_max + h];
-                let (best_k, lp) =
-                    parzen(&t_proj, &labels[..n_t], q, h, sigma, n_classes, labels[v]);
+            for (row, v) in (n_t..work.len()).enumerate() {
+                let d2 = &d2[row * n_t..(row + 1) * n_t];
+                let (best_k, lp) = parzen(d2, &labels[..n_t], sigma, n_classes, labels[v]);
                 correct += (best_k == labels[v]) as usize;
                 margin += lp.max(-50.0);
             }
@@ -421,13 +419,12 @@ pub(crate) fn fit(
     Ok((fitted(best), fitted(best_max)))
 }
 
-/// The Parzen decision for one projected vector `q` against stored samples `t` (equal class
-/// priors, as in [`crate::classifier::Classifier`]): the best class and the log-posterior of class `truth`.
+/// The Parzen decision for one projected vector from its squared distances `d2` to the stored
+/// samples of classes `labels` (equal class priors, as in [`crate::classifier::Classifier`]):
+/// the best class and the log-posterior of class `truth`.
 pub(crate) fn parzen(
-    t: &[f32],
+    d2: &[f64],
     labels: &[usize],
-    q: &[f32],
-    h: usize,
     sigma: f64,
     n_classes: usize,
     truth: usize,
@@ -437,8 +434,7 @@ pub(crate) fn parzen(
     let mut mx = [f64::NEG_INFINITY; MAX_CLASSES];
     let mut cnt = [0usize; MAX_CLASSES];
     for (i, &k) in labels.iter().enumerate() {
-        let d2 = sq_dist(&t[i * h..(i + 1) * h], q);
-        e[i] = -d2 * inv;
+        e[i] = -d2[i] * inv;
         mx[k] = mx[k].max(e[i]);
         cnt[k] += 1;
     }

@@ -29,6 +29,7 @@ mod density;
 pub mod error;
 mod extend;
 mod fit;
+mod pca;
 mod refit;
 
 pub use bands::{add_load_check, add_load_check_on, add_texture_check};
