@@ -16,6 +16,7 @@ mod discover_cmd;
 mod energy_cmd;
 mod experiment_cmd;
 mod feet_cmd;
+mod gaits_cmd;
 mod leg_cmd;
 mod mcap_cmd;
 mod node_cmd;
@@ -47,6 +48,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             LabCmd::Energy(a) => energy_cmd::run(a),
             LabCmd::Adaptation(a) => adaptation_cmd::run(a),
             LabCmd::Feet(a) => feet_cmd::run(a),
+            LabCmd::Gaits(a) => gaits_cmd::run(a),
         },
     }
 }

@@ -19,6 +19,7 @@ pub mod discover;
 pub mod energy;
 pub mod experiment;
 pub mod feet;
+pub mod gaits;
 pub mod leg;
 pub mod mcap;
 pub mod node;
@@ -81,7 +82,7 @@ pub enum Cmd {
     /// benchmark, the classifier's parts (classify, features, repair), the DBC, the energy fit.
     #[command(
         subcommand,
-        after_help = "On a real robot's recordings or bus: adaptation (a run's speed per terrain and gait), energy (the energy check's fit), dbc (the bus for cantools, SavvyCAN, ...), bench-node --iface (the node on the robot's computer), classify, features, repair (image files). On the simulator: sim, dataset, experiment."
+        after_help = "On a real robot's recordings or bus: adaptation (a run's speed per terrain and gait), energy (the energy check's fit), dbc (the bus for cantools, SavvyCAN, ...), bench-node --iface (the node on the robot's computer), classify, features, repair (image files). On the simulator: sim, dataset, experiment, feet, gaits."
     )]
     Lab(LabCmd),
 }
@@ -117,6 +118,10 @@ pub enum LabCmd {
     /// walked on feet that are not the paper's: the simulator's and the independent foot
     /// emulator's; a table per foot and the worst foot.
     Feet(feet::FeetArgs),
+    /// Each of the paper's gaits on each ground in the simulator: stride speed, cost of
+    /// transport, energy ratio and margin (the largest sudden speed loss it survives), and the
+    /// safe gait for unknown ground chosen by margin.
+    Gaits(gaits::GaitsArgs),
 }
 
 /// The commands that moved under `presrs lab`; their old names still run, with a pointer, for

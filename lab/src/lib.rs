@@ -39,6 +39,7 @@
 
 pub mod closed_loop;
 pub mod feet;
+pub mod gait_table;
 pub mod load;
 pub mod model;
 pub mod open_set;

@@ -90,9 +90,20 @@ pub fn fit_energy_on_sim(
     steps: usize,
     leg: Option<leg::LegConfig>,
 ) -> Result<node::unknown::energy_fit::EnergyFitReport, LabError> {
-    let track = sim::runner::Track::default();
     let ctrl = controller::ControllerConfig::default();
-    let mut p = crate::LoopParams::with_controller(&ctrl, steps, seed);
+    fit_energy_on_sim_with(m, seed, steps, leg, &ctrl)
+}
+
+/// [`fit_energy_on_sim`] with the controller `ctrl` on the run (its gaits, its sweep).
+pub fn fit_energy_on_sim_with(
+    m: &mut Model,
+    seed: u64,
+    steps: usize,
+    leg: Option<leg::LegConfig>,
+    ctrl: &controller::ControllerConfig,
+) -> Result<node::unknown::energy_fit::EnergyFitReport, LabError> {
+    let track = sim::runner::Track::default();
+    let mut p = crate::LoopParams::with_controller(ctrl, steps, seed);
     p.leg = leg;
     let mut log = Vec::new();
     let stop = std::sync::atomic::AtomicBool::new(false);

@@ -137,6 +137,13 @@ pub struct Hopper {
     pub foot_force: f64,
     /// Impact spike of the last touchdown: peak (N) and duration (s).
     pub impact: (f64, f64),
+    /// Positive work the leg's actuator has done since the hopper was made, J: the leg force
+    /// times the lengthening of the spring's rest length it commands in stance (eq. 4). What a
+    /// gait's cost of transport counts; a motor spends energy to push, and gets none back from
+    /// a leg that shortens under load.
+    pub actuator_work_j: f64,
+    /// The rest length commanded at the last stance step, m (None in flight).
+    last_rest: Option<f64>,
     ground: Ground,
 }
 
@@ -153,6 +160,8 @@ impl Hopper {
             phase: Phase::Flight,
             foot_force: 0.0,
             impact: (0.0, 0.0),
+            actuator_work_j: 0.0,
+            last_rest: None,
             ground: Ground {
                 stiffness: 1e6,
                 damping: 0.0,
@@ -165,6 +174,12 @@ impl Hopper {
     pub fn launch(params: HopperParams, gait: &controller::Gait) -> Self {
         let v0 = 2.0 * gait.zeta0 * gait.beta_des.sin() / 0.14;
         Self::new(params, gait.zeta0 + 0.02, v0)
+    }
+
+    /// The body's mechanical energy, J: kinetic and gravitational (height over the ground).
+    pub fn energy_j(&self) -> f64 {
+        let m = self.params.mass_kg;
+        0.5 * m * (self.vx * self.vx + self.vy * self.vy) + m * G * self.y
     }
 
     /// The foot is on the ground.
@@ -294,6 +309,13 @@ impl Hopper {
                 } => {
                     let s0 = [self.x, self.y, self.vx, self.vy];
                     let rest = cmd.stance_length(self.t - t_touchdown);
+                    let before = self.last_rest.unwrap_or(rest);
+                    if rest > before {
+                        // The force half-way through the step's change of rest length.
+                        let f = self.leg_force(&s0, foot_x, 0.5 * (rest + before));
+                        self.actuator_work_j += f.max(0.0) * (rest - before);
+                    }
+                    self.last_rest = Some(rest);
                     let s1 = self.rk4(s0, h, foot_x, rest);
                     let f1 = self.leg_force(&s1, foot_x, rest);
                     let moving_up = (s1[0] - foot_x) * s1[2] + s1[1] * s1[3] > 0.0;
@@ -306,6 +328,7 @@ impl Hopper {
                         let length = (self.x - foot_x).hypot(self.y);
                         self.phase = Phase::Flight;
                         self.foot_force = 0.0;
+                        self.last_rest = None;
                         return Some(Event::Liftoff {
                             t: self.t,
                             beta,

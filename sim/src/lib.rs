@@ -6,6 +6,7 @@ pub mod faults;
 pub mod field;
 pub mod fixed_gait;
 pub mod foot_model;
+pub mod gait_score;
 pub mod hopper;
 pub mod runner;
 pub mod service;

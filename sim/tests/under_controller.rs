@@ -117,7 +117,7 @@ fn after_a_forced_fall_the_hopper_steps_on_in_the_controllers_gait() {
     }
 }
 
-/// A node that stops for 2 s sends the controller to the safe gait (G1) and, when it is back,
+/// A node that stops for 2 s sends the controller to the safe gait (the config's) and, when it is back,
 /// to each terrain's gait again: both switches keep the hopper on its feet. Before eq. (5)
 /// walked beta_des to a new gait's in steps, 2 of 40 outages in-process were followed by a
 /// fall (the new gait's touchdown angle at the old gait's speed).

@@ -131,9 +131,10 @@ fn capture_path_over_socketcan_from_candump_logs_to_a_deployed_model() {
         .iter()
         .filter(|s| s["classified"] == "unknown")
         .count();
-    let first_safe = grass.iter().position(|s| s["gait"] == 1);
+    let safe = controller::ControllerConfig::default().safe_gait;
+    let first_safe = grass.iter().position(|s| s["gait"] == safe);
     eprintln!(
-        "grass, not in the model, with the controller: {unknown}/{} steps unknown, safe gait G1 after {first_safe:?} steps",
+        "grass, not in the model, with the controller: {unknown}/{} steps unknown, safe gait G{safe} after {first_safe:?} steps",
         grass.len()
     );
     assert!(grass.len() >= 8, "{} grass steps", grass.len());

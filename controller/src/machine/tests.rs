@@ -52,7 +52,12 @@ fn switches_in_flight_after_two_confident_steps() {
 /// unknown step in a terrain's run neither switches nor restarts that terrain's count.
 #[test]
 fn an_unknown_step_is_confirmed_before_the_safe_gait() {
-    let mut c = Controller::new(fresh(), &TerrainCatalog::paper());
+    // A safe gait other than wood's G3, so that the switch to it shows.
+    let cfg = ControllerConfig {
+        safe_gait: 1,
+        ..fresh()
+    };
+    let mut c = Controller::new(cfg, &TerrainCatalog::paper());
     let mut out = Vec::new();
     let hb = Message::NodeStatus(NodeStatus::default());
     let wood = protocol::Terrain::WOOD.id();
@@ -417,7 +422,15 @@ fn lost_heartbeat_goes_to_the_safe_gait() {
     c.tick(400_000, &mut out);
     assert_eq!(c.gait().id, 2);
     c.tick(501_000, &mut out);
-    assert_eq!((c.gait().id, c.reason()), (1, GaitReason::NodeLost));
+    assert_eq!(
+        (c.gait().id, c.reason()),
+        (fresh().safe_gait, GaitReason::NodeLost)
+    );
+    assert_ne!(
+        fresh().safe_gait,
+        2,
+        "the initial gait: no switch would show"
+    );
     assert!(
         out.iter()
             .any(|m| matches!(m, Message::GaitStatus(g) if g.reason == GaitReason::NodeLost))
@@ -542,6 +555,7 @@ fn a_sweep_runs_each_configured_gait_on_each_terrain_then_its_own() {
     cfg.terrain_gaits.retain(|_, g| *g != 2);
     cfg.terrain_gaits.insert("grass".into(), 3);
     cfg.initial_gait = 1;
+    cfg.safe_gait = 1;
     let catalog = TerrainCatalog::paper();
     cfg.validate(&catalog).unwrap();
     let mut c = Controller::new(cfg, &catalog);

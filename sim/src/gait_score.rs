@@ -1,0 +1,286 @@
+//! A gait judged on a ground, in the simulator: what a lab judges a gait by on its robot.
+//!
+//! - **Stride speed**: the body's travel from one touchdown to the next over that hop's time,
+//!   averaged over steady hops. (The body's speed at mid-stance, which the demo's table once
+//!   showed, reads about a quarter lower: the stance brakes, then pushes.)
+//! - **Cost of transport**: the leg actuator's positive work per metre over weight,
+//!   `W / (m g d)` ([`crate::hopper::Hopper::actuator_work_j`]), dimensionless.
+//! - **Energy ratio**: the body's energy at a touchdown over that at the touchdown before. A
+//!   steady gait keeps it at 1 whatever the ground takes, because the stance law puts back what
+//!   the hop lost; a gait that is running down or speeding up reads below or above 1.
+//! - **Margin**: the largest sudden loss of forward speed at one touchdown (a fraction of the
+//!   speed) after which the gait keeps hopping for [`ScoreOptions::recover_hops`] hops: a push,
+//!   a snag, a patch that grips. Found by bisection on the loss; what "robust" means when the
+//!   controller picks the gait for ground it does not know.
+//!
+//! Everything here is a fixed gait on one ground (the laws of eqs. 4 and 5 with no controller
+//! switching), so a score belongs to the pair and can be compared across gaits and grounds.
+
+use controller::Gait;
+
+use crate::fixed_gait::FixedGait;
+use crate::hopper::{Event, G, Ground, Hopper, HopperParams};
+
+/// How long a gait is hopped before and while it is scored.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ScoreOptions {
+    /// Hops from launch before anything is measured: the touchdown law settles in about ten.
+    pub settle_hops: usize,
+    /// Steady hops measured for speed, cost and energy ratio.
+    pub measure_hops: usize,
+    /// Hops a perturbed gait must keep hopping to count as having survived.
+    pub recover_hops: usize,
+    /// Halvings of the margin's bisection (0 to [`MAX_LOSS`]): 8 give 0.4% of speed.
+    pub halvings: usize,
+}
+
+impl Default for ScoreOptions {
+    fn default() -> Self {
+        Self {
+            settle_hops: 20,
+            measure_hops: 20,
+            recover_hops: 30,
+            halvings: 8,
+        }
+    }
+}
+
+/// The largest speed loss the margin's bisection tries: a hopper that loses 90% of its speed
+/// at one touchdown is standing.
+pub const MAX_LOSS: f64 = 0.9;
+
+/// A gait's figures on one ground.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GaitScore {
+    /// Mean stride speed over the measured hops, m/s.
+    pub stride_speed_m_s: f64,
+    /// Positive actuator work per metre over weight.
+    pub cost_of_transport: f64,
+    /// Mean energy ratio of the measured hops (touchdown to touchdown).
+    pub energy_ratio: f64,
+    /// Mean stance time, s.
+    pub stance_s: f64,
+    /// Largest sudden speed loss survived, a fraction of the speed (0 when even the unperturbed
+    /// gait does not keep hopping).
+    pub margin: f64,
+}
+
+/// The unperturbed gait did not keep hopping on this ground: it fell or stopped.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+#[error("gait G{gait} does not keep hopping on this ground (it fell or stopped at hop {hop})")]
+pub struct DoesNotHop {
+    /// The gait's id.
+    pub gait: u8,
+    /// The hop at which it fell or stopped.
+    pub hop: usize,
+}
+
+/// A hopper running one gait on one ground, hop by hop.
+struct Run {
+    hopper: Hopper,
+    cmd: FixedGait,
+    ground: Ground,
+}
+
+/// What a touchdown finds: the body's position, energy and time, and the stance before it.
+#[derive(Clone, Copy, Debug)]
+struct AtTouchdown {
+    t: f64,
+    x: f64,
+    energy_j: f64,
+    work_j: f64,
+}
+
+/// A hopper slower than this at touchdown has stopped (m/s).
+const STOPPED_M_S: f64 = 0.05;
+
+impl Run {
+    fn new(gait: &Gait, ground: Ground, params: &HopperParams) -> Self {
+        Self {
+            hopper: Hopper::launch(params.clone(), gait),
+            cmd: FixedGait::new(gait.clone()),
+            ground,
+        }
+    }
+
+    /// Hops to the next touchdown; `None` when the hopper fell, stopped or did not land within
+    /// two seconds.
+    fn next_touchdown(&mut self) -> Option<AtTouchdown> {
+        let deadline = self.hopper.t + 2.0;
+        while self.hopper.t < deadline {
+            match self.hopper.advance(0.001, self.ground, &mut self.cmd) {
+                Some(Event::Touchdown { beta, vx, .. }) => {
+                    self.cmd.on_touchdown(beta);
+                    if vx < STOPPED_M_S {
+                        return None;
+                    }
+                    return Some(self.at());
+                }
+                Some(Event::Liftoff { beta, .. }) => self.cmd.on_liftoff(beta),
+                Some(Event::Fell { .. }) => return None,
+                None => {}
+            }
+        }
+        None
+    }
+
+    fn at(&self) -> AtTouchdown {
+        AtTouchdown {
+            t: self.hopper.t,
+            x: self.hopper.x,
+            energy_j: self.hopper.energy_j(),
+            work_j: self.hopper.actuator_work_j,
+        }
+    }
+
+    /// Hops `n` times; the number of hops made before a failure, as the error.
+    fn hops(&mut self, n: usize) -> Result<Vec<AtTouchdown>, usize> {
+        let mut out = Vec::with_capacity(n);
+        for i in 0..n {
+            out.push(self.next_touchdown().ok_or(i)?);
+        }
+        Ok(out)
+    }
+}
+
+/// Scores `gait` on `ground`: steady figures, then the margin.
+pub fn score(
+    gait: &Gait,
+    ground: Ground,
+    params: &HopperParams,
+    opts: &ScoreOptions,
+) -> Result<GaitScore, DoesNotHop> {
+    let fail = |hop| DoesNotHop { gait: gait.id, hop };
+    let mut run = Run::new(gait, ground, params);
+    run.hops(opts.settle_hops).map_err(fail)?;
+    let first = run.next_touchdown().ok_or(fail(opts.settle_hops))?;
+    let rest = run
+        .hops(opts.measure_hops)
+        .map_err(|h| fail(opts.settle_hops + 1 + h))?;
+    let mut prev = first;
+    let mut ratio = 0.0;
+    for td in &rest {
+        ratio += td.energy_j / prev.energy_j;
+        prev = *td;
+    }
+    let last = rest.last().copied().unwrap_or(first);
+    let (dx, dt) = (last.x - first.x, last.t - first.t);
+    let weight = params.mass_kg * G;
+    let n = rest.len().max(1) as f64;
+    Ok(GaitScore {
+        stride_speed_m_s: if dt > 0.0 { dx / dt } else { 0.0 },
+        cost_of_transport: if dx > 0.0 {
+            (last.work_j - first.work_j) / (weight * dx)
+        } else {
+            f64::INFINITY
+        },
+        energy_ratio: ratio / n,
+        // On a fresh run of the same hops: the run above sees touchdowns only.
+        stance_s: mean_stance(gait, ground, params, opts),
+        margin: margin(gait, ground, params, opts),
+    })
+}
+
+/// Mean stance time of the steady hops, s.
+fn mean_stance(gait: &Gait, ground: Ground, params: &HopperParams, opts: &ScoreOptions) -> f64 {
+    let mut h = Hopper::launch(params.clone(), gait);
+    let mut cmd = FixedGait::new(gait.clone());
+    let (mut hops, mut td_t, mut sum, mut n) = (0, None, 0.0, 0usize);
+    let end = opts.settle_hops + opts.measure_hops;
+    let deadline = 2.0 * end as f64;
+    while hops < end && h.t < deadline {
+        match h.advance(0.001, ground, &mut cmd) {
+            Some(Event::Touchdown { t, beta, .. }) => {
+                cmd.on_touchdown(beta);
+                hops += 1;
+                td_t = (hops > opts.settle_hops).then_some(t);
+            }
+            Some(Event::Liftoff { t, beta, .. }) => {
+                cmd.on_liftoff(beta);
+                if let Some(t0) = td_t.take() {
+                    sum += t - t0;
+                    n += 1;
+                }
+            }
+            Some(Event::Fell { .. }) => break,
+            None => {}
+        }
+    }
+    if n == 0 { 0.0 } else { sum / n as f64 }
+}
+
+/// The largest sudden loss of forward speed at one touchdown (a fraction in 0..[`MAX_LOSS`])
+/// after which `gait` keeps hopping on `ground` for `opts.recover_hops` hops.
+pub fn margin(gait: &Gait, ground: Ground, params: &HopperParams, opts: &ScoreOptions) -> f64 {
+    let survives = |loss: f64| {
+        let mut run = Run::new(gait, ground, params);
+        if run.hops(opts.settle_hops).is_err() {
+            return false;
+        }
+        run.hopper.vx *= 1.0 - loss;
+        run.hops(opts.recover_hops).is_ok()
+    };
+    if !survives(0.0) {
+        return 0.0;
+    }
+    let (mut lo, mut hi) = (0.0, MAX_LOSS);
+    if survives(hi) {
+        return hi;
+    }
+    for _ in 0..opts.halvings {
+        let mid = 0.5 * (lo + hi);
+        if survives(mid) {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    lo
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::terrain::Physics;
+
+    fn g(gait: Gait, physics: Physics) -> GaitScore {
+        score(
+            &gait,
+            physics.ground(),
+            &HopperParams::default(),
+            &ScoreOptions::default(),
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn a_steady_gait_keeps_its_energy_from_touchdown_to_touchdown() {
+        for gait in Gait::paper_gaits() {
+            for p in [Physics::Wood, Physics::Clay, Physics::Grass] {
+                let s = g(gait.clone(), p);
+                assert!(
+                    (s.energy_ratio - 1.0).abs() <= 0.02,
+                    "G{} on {p:?}: {s:?}",
+                    gait.id
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn faster_gaits_are_faster_and_a_gait_costs_work() {
+        let s: Vec<GaitScore> = Gait::paper_gaits()
+            .into_iter()
+            .map(|gait| g(gait, Physics::Wood))
+            .collect();
+        assert!(s[0].stride_speed_m_s < s[1].stride_speed_m_s, "{s:?}");
+        assert!(s[1].stride_speed_m_s < s[2].stride_speed_m_s, "{s:?}");
+        for x in &s {
+            assert!(
+                x.cost_of_transport > 0.0 && x.cost_of_transport < 1.0,
+                "{x:?}"
+            );
+            assert!(x.margin > 0.0 && x.margin < MAX_LOSS, "{x:?}");
+        }
+    }
+}
