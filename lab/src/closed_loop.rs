@@ -248,13 +248,8 @@ pub fn run_recorded(
     let first = NodeService::new(node_cfg, model)?;
     let catalog = first.catalog().clone();
     let mut node = Some(first);
-    let new_controller = || {
-        p.controller
-            .map(|c| ControllerService::new(c.clone()))
-            .transpose()
-    };
-    let mut ctrl = new_controller()?;
-    let (tap, mut log, epoch_us, pace, stop, mut truth) = match rec {
+    let mut ctrl = new_controller(p)?;
+    let (tap, log, epoch_us, pace, stop, mut truth) = match rec {
         Some(r) => (
             r.tap,
             r.log,
@@ -265,8 +260,6 @@ pub fn run_recorded(
         ),
         None => (None, None, 0, None, None, None),
     };
-    // Set by `sent` (which the bus holds), read between milliseconds.
-    let log_error = std::cell::Cell::new(None);
     // The robot's truth every 10 ms of simulated time, for a recording.
     let mut observe = |t_us: u64, robot: &SimRobot| {
         if let Some(f) = truth.as_mut() {
@@ -274,21 +267,7 @@ pub fn run_recorded(
         }
     };
     let mut sim = SimService::new(sim_cfg, p.seed, None, &catalog, &mut observe);
-    let mut sent = |st: protocol::Stamped| {
-        let st = protocol::Stamped {
-            t_us: epoch_us + st.t_us,
-            ..st
-        };
-        if let Some(tap) = tap {
-            tap.offer(&st);
-        }
-        if let Some(w) = log.as_mut()
-            && let Err(e) = protocol::candump::write_record(w, LOG_IFACE, &st)
-        {
-            let first = log_error.take();
-            log_error.set(first.or(Some(e)));
-        }
-    };
+    let mut sent = Sent::new(tap, log, epoch_us);
     // Parts in turn within a millisecond: the robot (it hears the controller's last
     // commands, then moves), the node, the controller; with a leg of motors, its bridge last
     // (it hears the motors' replies and the controller's command of this millisecond).
@@ -308,25 +287,15 @@ pub fn run_recorded(
         }
         keep_pace(pace, tap, t_us, wall);
         bus.set_link(!during(p.link_down, t_us));
-        // Killed processes, and new ones started after their windows: a new one knows only
-        // what the bus says from then on.
-        if during(p.node_restart, t_us) {
-            node = None;
-        } else if node.is_none()
-            && let Some((cfg, model)) = &restart_with
-        {
-            let mut n = NodeService::new(cfg.clone(), model.clone())?;
-            bus.start(1, &mut n, &mut sent)?;
-            node = Some(n);
-        }
-        if during(p.controller_restart, t_us) {
-            ctrl = None;
-        } else if ctrl.is_none() {
-            ctrl = new_controller()?;
-            if let Some(c) = ctrl.as_mut() {
-                bus.start(2, c, &mut sent)?;
-            }
-        }
+        restarts(
+            p,
+            t_us,
+            &mut node,
+            &restart_with,
+            &mut ctrl,
+            &mut bus,
+            &mut sent,
+        )?;
         let mut stalled = bridge.as_mut().map(|b| Stalled {
             inner: b,
             window: p.leg_stall,
@@ -339,7 +308,7 @@ pub fn run_recorded(
             stalled.as_mut().map(|s| s as &mut dyn Component),
         ];
         bus.step(t_us, &mut parts, &mut sent)?;
-        if let Some(e) = log_error.take() {
+        if let Some(e) = sent.error.take() {
             return Err(LabError::Log(e));
         }
         for row in &sim.records()[reported..] {
@@ -353,10 +322,89 @@ pub fn run_recorded(
         &mut parts_of(&mut sim, &mut node, &mut ctrl, bridge.as_mut()),
         &mut sent,
     )?;
-    if let Some(e) = log_error.take() {
+    if let Some(e) = sent.error.take() {
         return Err(LabError::Log(e));
     }
     Ok(finish(sim, bridge, epoch_us))
+}
+
+/// Where the loop's frames go: stamped `epoch_us` on, to the tap and the candump log; the first
+/// write error is kept for the loop to end the run with (the bus holds this while it steps).
+struct Sent<'a> {
+    tap: Option<&'a dyn protocol::bus::Tap>,
+    log: Option<&'a mut dyn std::io::Write>,
+    epoch_us: u64,
+    error: Option<std::io::Error>,
+}
+
+impl<'a> Sent<'a> {
+    fn new(
+        tap: Option<&'a dyn protocol::bus::Tap>,
+        log: Option<&'a mut dyn std::io::Write>,
+        epoch_us: u64,
+    ) -> Self {
+        Self {
+            tap,
+            log,
+            epoch_us,
+            error: None,
+        }
+    }
+}
+
+impl protocol::emit::Emit<protocol::Stamped> for Sent<'_> {
+    fn emit(&mut self, st: protocol::Stamped) {
+        let st = protocol::Stamped {
+            t_us: self.epoch_us + st.t_us,
+            ..st
+        };
+        if let Some(tap) = self.tap {
+            tap.offer(&st);
+        }
+        if let Some(w) = self.log.as_mut()
+            && let Err(e) = protocol::candump::write_record(w, LOG_IFACE, &st)
+        {
+            self.error.get_or_insert(e);
+        }
+    }
+}
+
+/// The loop's controller, as `p` asks for one.
+fn new_controller(p: &LoopParams) -> Result<Option<ControllerService>, LabError> {
+    Ok(p.controller
+        .map(|c| ControllerService::new(c.clone()))
+        .transpose()?)
+}
+
+/// Killed processes, and new ones started after their windows (`p.node_restart`,
+/// `p.controller_restart`): a new one knows only what the bus says from then on.
+fn restarts(
+    p: &LoopParams,
+    t_us: u64,
+    node: &mut Option<NodeService>,
+    restart_with: &Option<(NodeConfig, Model)>,
+    ctrl: &mut Option<ControllerService>,
+    bus: &mut LockStep,
+    sent: &mut dyn protocol::emit::Emit<protocol::Stamped>,
+) -> Result<(), LabError> {
+    if during(p.node_restart, t_us) {
+        *node = None;
+    } else if node.is_none()
+        && let Some((cfg, model)) = restart_with
+    {
+        let mut n = NodeService::new(cfg.clone(), model.clone())?;
+        bus.start(1, &mut n, sent)?;
+        *node = Some(n);
+    }
+    if during(p.controller_restart, t_us) {
+        *ctrl = None;
+    } else if ctrl.is_none() {
+        *ctrl = new_controller(p)?;
+        if let Some(c) = ctrl.as_mut() {
+            bus.start(2, c, sent)?;
+        }
+    }
+    Ok(())
 }
 
 /// The loop's parts in their bus order: the robot, the node, the controller, the leg bridge.

@@ -402,6 +402,52 @@ pub fn value_table(name: &str, terrains: &TerrainCatalog) -> Vec<(u32, String)> 
     }
 }
 
+/// Every message of `ids` as the DBC names it: (DBC identifier, name, kind), one per foot for
+/// the per-foot kinds.
+fn messages(ids: &IdConfig) -> Vec<(u32, String, MessageKind)> {
+    let mut msgs = Vec::new();
+    for kind in MessageKind::ALL {
+        let n = if kind.per_foot() { MAX_FEET } else { 1 };
+        for f in 0..n {
+            let raw = ids.id(kind, f);
+            let dbc_id = if ids.extended { raw | 0x8000_0000 } else { raw };
+            let name = if kind.per_foot() {
+                format!("{}_F{f}", kind.name())
+            } else {
+                kind.name().to_string()
+            };
+            msgs.push((dbc_id, name, kind));
+        }
+    }
+    msgs
+}
+
+/// The bus type and each message's frame format (classic or FD, standard or extended).
+fn write_attributes(o: &mut String, msgs: &[(u32, String, MessageKind)], ids: &IdConfig) {
+    let _ = writeln!(o, "BA_DEF_  \"BusType\" STRING ;");
+    let _ = writeln!(
+        o,
+        "BA_DEF_ BO_  \"VFrameFormat\" ENUM  \"StandardCAN\",\"ExtendedCAN\",\"reserved\",\"J1939PG\",\"reserved\",\"reserved\",\"reserved\",\"reserved\",\"reserved\",\"reserved\",\"reserved\",\"reserved\",\"reserved\",\"reserved\",\"StandardCAN_FD\",\"ExtendedCAN_FD\";"
+    );
+    let _ = writeln!(o, "BA_DEF_ BO_  \"CANFD_BRS\" ENUM  \"0\",\"1\";");
+    let _ = writeln!(o, "BA_DEF_DEF_  \"BusType\" \"CAN FD\";");
+    let _ = writeln!(o, "BA_DEF_DEF_  \"VFrameFormat\" \"StandardCAN\";");
+    let _ = writeln!(o, "BA_DEF_DEF_  \"CANFD_BRS\" \"1\";");
+    let _ = writeln!(o, "BA_ \"BusType\" \"CAN FD\";");
+    for (dbc_id, _, kind) in msgs {
+        let fmt = match (kind.is_fd(), ids.extended) {
+            (false, false) => 0,
+            (false, true) => 1,
+            (true, false) => 14,
+            (true, true) => 15,
+        };
+        let _ = writeln!(o, "BA_ \"VFrameFormat\" BO_ {dbc_id} {fmt};");
+        if kind.is_fd() {
+            let _ = writeln!(o, "BA_ \"CANFD_BRS\" BO_ {dbc_id} 1;");
+        }
+    }
+}
+
 /// The DBC text for an identifier map, with the catalog's terrains in the TerrainId value table.
 pub fn generate(ids: &IdConfig, terrains: &TerrainCatalog) -> String {
     let mut o = String::new();
@@ -431,21 +477,7 @@ pub fn generate(ids: &IdConfig, terrains: &TerrainCatalog) -> String {
     }
     o.push('\n');
 
-    // (dbc id, name, kind)
-    let mut msgs = Vec::new();
-    for kind in MessageKind::ALL {
-        let n = if kind.per_foot() { MAX_FEET } else { 1 };
-        for f in 0..n {
-            let raw = ids.id(kind, f);
-            let dbc_id = if ids.extended { raw | 0x8000_0000 } else { raw };
-            let name = if kind.per_foot() {
-                format!("{}_F{f}", kind.name())
-            } else {
-                kind.name().to_string()
-            };
-            msgs.push((dbc_id, name, kind));
-        }
-    }
+    let msgs = messages(ids);
     let mut vals = String::new();
     let mut muxvals = String::new();
     for (dbc_id, name, kind) in &msgs {
@@ -493,28 +525,7 @@ pub fn generate(ids: &IdConfig, terrains: &TerrainCatalog) -> String {
         }
     }
     o.push('\n');
-    let _ = writeln!(o, "BA_DEF_  \"BusType\" STRING ;");
-    let _ = writeln!(
-        o,
-        "BA_DEF_ BO_  \"VFrameFormat\" ENUM  \"StandardCAN\",\"ExtendedCAN\",\"reserved\",\"J1939PG\",\"reserved\",\"reserved\",\"reserved\",\"reserved\",\"reserved\",\"reserved\",\"reserved\",\"reserved\",\"reserved\",\"reserved\",\"StandardCAN_FD\",\"ExtendedCAN_FD\";"
-    );
-    let _ = writeln!(o, "BA_DEF_ BO_  \"CANFD_BRS\" ENUM  \"0\",\"1\";");
-    let _ = writeln!(o, "BA_DEF_DEF_  \"BusType\" \"CAN FD\";");
-    let _ = writeln!(o, "BA_DEF_DEF_  \"VFrameFormat\" \"StandardCAN\";");
-    let _ = writeln!(o, "BA_DEF_DEF_  \"CANFD_BRS\" \"1\";");
-    let _ = writeln!(o, "BA_ \"BusType\" \"CAN FD\";");
-    for (dbc_id, _, kind) in &msgs {
-        let fmt = match (kind.is_fd(), ids.extended) {
-            (false, false) => 0,
-            (false, true) => 1,
-            (true, false) => 14,
-            (true, true) => 15,
-        };
-        let _ = writeln!(o, "BA_ \"VFrameFormat\" BO_ {dbc_id} {fmt};");
-        if kind.is_fd() {
-            let _ = writeln!(o, "BA_ \"CANFD_BRS\" BO_ {dbc_id} 1;");
-        }
-    }
+    write_attributes(&mut o, &msgs, ids);
     o.push('\n');
     o.push_str(&vals);
     o.push('\n');

@@ -215,74 +215,9 @@ impl Physics {
                 f.add(&backing(rows, cols, cell_mm, rng));
                 (f, 1e5)
             }
-            Physics::Wood => {
-                // Planed pine: grain ridges about 2-4 mm apart (earlywood/latewood), a few
-                // microns to tens of microns high, along the plank; now and then a plank seam.
-                let mut f = plate(rows, cols, cell_mm, 0.002, rng);
-                let angle = rng.random_range(-0.15..0.15f64) + PI / 2.0;
-                let period = rng.random_range(2.0..4.0);
-                let phase = rng.random_range(0.0..1.0);
-                let (s, c) = angle.sin_cos();
-                let seam = rng.random_bool(0.3).then(|| rng.random_range(0.2..0.8) * w);
-                for r in 0..rows {
-                    for col in 0..cols {
-                        let (y, x) = f.pos(r, col);
-                        let u = x * c + y * s;
-                        let ring = (u / period + phase).fract();
-                        let mut z = if ring < 0.3 { 0.03 } else { 0.0 };
-                        if seam.is_some_and(|sx| (x - sx).abs() < 0.6) {
-                            z -= 0.5;
-                        }
-                        f.v[r * cols + col] += z as f32;
-                    }
-                }
-                (f, 2e3)
-            }
-            Physics::Carpet => {
-                // Loop pile: tufts on a square gauge of 3.6 mm. One carpet: the gauge varies only
-                // by manufacturing tolerance, the orientation and offset by where the foot lands
-                // (a gauge drawn anew per stance made every step a different carpet). The loops
-                // are far stiffer than the skin's felt, so each presses through as a bump the
-                // sensor can see.
-                let mut f = Field::zeros(rows, cols, cell_mm);
-                let gauge = rng.random_range(3.5..3.7);
-                let (oy, ox) = (rng.random_range(0.0..gauge), rng.random_range(0.0..gauge));
-                let angle: f64 = rng.random_range(-0.2..0.2);
-                let (s, c) = angle.sin_cos();
-                let jitter = normal(0.0, 0.08);
-                for r in 0..rows {
-                    for col in 0..cols {
-                        let (y, x) = f.pos(r, col);
-                        let (u, v) = (x * c + y * s + ox, -x * s + y * c + oy);
-                        let du = (u / gauge).fract() - 0.5;
-                        let dv = (v / gauge).fract() - 0.5;
-                        let r2 = (du * du + dv * dv) * gauge * gauge;
-                        let tuft = 1.2 * (-r2 / (2.0 * 0.6f64.powi(2))).exp();
-                        f.v[r * cols + col] = (tuft + jitter.sample(rng)) as f32;
-                    }
-                }
-                (f, 1000.0)
-            }
-            Physics::Clay => {
-                // Semi-moist clay dirt: a soft, mostly conforming bed with clods and a few
-                // embedded pebbles, and drying cracks.
-                let mut f = Field::random_smooth(rows, cols, cell_mm, 0.25, 5.0, rng);
-                let clods = Field::random_smooth(rows, cols, cell_mm, 0.10, 1.0, rng);
-                f.add(&clods);
-                for _ in 0..rng.random_range(1..4) {
-                    let (cy, cx, rad) = (
-                        rng.random_range(0.0..h),
-                        rng.random_range(0.0..w),
-                        rng.random_range(1.0..2.5),
-                    );
-                    bump(&mut f, cy, cx, rad, 0.6);
-                }
-                if rng.random_bool(0.5) {
-                    let (y0, a) = (rng.random_range(0.0..h), rng.random_range(0.0..PI));
-                    crack(&mut f, y0, a, 0.8, -1.0);
-                }
-                (f, 15.0)
-            }
+            Physics::Wood => (wood(rows, cols, cell_mm, w, rng), 2e3),
+            Physics::Carpet => (carpet(rows, cols, cell_mm, rng), 1000.0),
+            Physics::Clay => (clay(rows, cols, cell_mm, w, h, rng), 15.0),
             Physics::Grass => {
                 // Thick grass: many blades 3-6 mm wide lying in random directions at several
                 // heights; the foot presses the top layer.
@@ -295,6 +230,80 @@ impl Physics {
             stiffness_kpa_mm,
         }
     }
+}
+
+/// Planed wood's height field (the [`Physics::Wood`] surface).
+fn wood(rows: usize, cols: usize, cell_mm: f64, w: f64, rng: &mut impl Rng) -> Field {
+    // Planed pine: grain ridges about 2-4 mm apart (earlywood/latewood), a few
+    // microns to tens of microns high, along the plank; now and then a plank seam.
+    let mut f = plate(rows, cols, cell_mm, 0.002, rng);
+    let angle = rng.random_range(-0.15..0.15f64) + PI / 2.0;
+    let period = rng.random_range(2.0..4.0);
+    let phase = rng.random_range(0.0..1.0);
+    let (s, c) = angle.sin_cos();
+    let seam = rng.random_bool(0.3).then(|| rng.random_range(0.2..0.8) * w);
+    for r in 0..rows {
+        for col in 0..cols {
+            let (y, x) = f.pos(r, col);
+            let u = x * c + y * s;
+            let ring = (u / period + phase).fract();
+            let mut z = if ring < 0.3 { 0.03 } else { 0.0 };
+            if seam.is_some_and(|sx| (x - sx).abs() < 0.6) {
+                z -= 0.5;
+            }
+            f.v[r * cols + col] += z as f32;
+        }
+    }
+    f
+}
+
+/// Loop-pile carpet's height field (the [`Physics::Carpet`] surface).
+fn carpet(rows: usize, cols: usize, cell_mm: f64, rng: &mut impl Rng) -> Field {
+    // Loop pile: tufts on a square gauge of 3.6 mm. One carpet: the gauge varies only
+    // by manufacturing tolerance, the orientation and offset by where the foot lands
+    // (a gauge drawn anew per stance made every step a different carpet). The loops
+    // are far stiffer than the skin's felt, so each presses through as a bump the
+    // sensor can see.
+    let mut f = Field::zeros(rows, cols, cell_mm);
+    let gauge = rng.random_range(3.5..3.7);
+    let (oy, ox) = (rng.random_range(0.0..gauge), rng.random_range(0.0..gauge));
+    let angle: f64 = rng.random_range(-0.2..0.2);
+    let (s, c) = angle.sin_cos();
+    let jitter = normal(0.0, 0.08);
+    for r in 0..rows {
+        for col in 0..cols {
+            let (y, x) = f.pos(r, col);
+            let (u, v) = (x * c + y * s + ox, -x * s + y * c + oy);
+            let du = (u / gauge).fract() - 0.5;
+            let dv = (v / gauge).fract() - 0.5;
+            let r2 = (du * du + dv * dv) * gauge * gauge;
+            let tuft = 1.2 * (-r2 / (2.0 * 0.6f64.powi(2))).exp();
+            f.v[r * cols + col] = (tuft + jitter.sample(rng)) as f32;
+        }
+    }
+    f
+}
+
+/// Clay dirt's height field (the [`Physics::Clay`] surface).
+fn clay(rows: usize, cols: usize, cell_mm: f64, w: f64, h: f64, rng: &mut impl Rng) -> Field {
+    // Semi-moist clay dirt: a soft, mostly conforming bed with clods and a few
+    // embedded pebbles, and drying cracks.
+    let mut f = Field::random_smooth(rows, cols, cell_mm, 0.25, 5.0, rng);
+    let clods = Field::random_smooth(rows, cols, cell_mm, 0.10, 1.0, rng);
+    f.add(&clods);
+    for _ in 0..rng.random_range(1..4) {
+        let (cy, cx, rad) = (
+            rng.random_range(0.0..h),
+            rng.random_range(0.0..w),
+            rng.random_range(1.0..2.5),
+        );
+        bump(&mut f, cy, cx, rad, 0.6);
+    }
+    if rng.random_bool(0.5) {
+        let (y0, a) = (rng.random_range(0.0..h), rng.random_range(0.0..PI));
+        crack(&mut f, y0, a, 0.8, -1.0);
+    }
+    f
 }
 
 /// A flat plate with a random tilt and waviness `rough_mm` (over about 2 mm).

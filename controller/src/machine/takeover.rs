@@ -4,7 +4,7 @@
 use protocol::emit::Emit;
 use protocol::messages::{GaitReason, Message};
 
-use super::*;
+use super::{BETA_DES_STEP, Controller, Gait, MAX_ANGLE_FROM_DESIRED, laws};
 
 /// What a starting controller has heard before it takes over (see
 /// [`ControllerConfig::takeover_ms`]).

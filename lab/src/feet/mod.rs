@@ -216,59 +216,7 @@ impl std::fmt::Display for FeetTable {
                 td.map_or("-".into(), |e| format!("{e:.1}")),
                 frames.join(" ")
             )?;
-            // Where a crop was kept: what the same path gave without one.
-            let cropped: Vec<&&&Trial> = ok.iter().filter(|t| t.uncropped.is_some()).collect();
-            if !cropped.is_empty() {
-                let (with, without) = cropped.iter().fold((0.0, 0.0), |(a, b), t| {
-                    let (n, r) = t.uncropped.unwrap_or((1, 0));
-                    (a + t.known_right(), b + r as f64 / n.max(1) as f64)
-                });
-                let n = cropped.len() as f64;
-                writeln!(
-                    f,
-                    "  {} of {} seeds kept a crop: known ground right {:.1}% with it, {:.1}% \
-                     with none (the mean of those seeds)",
-                    cropped.len(),
-                    ok.len(),
-                    100.0 * with / n,
-                    100.0 * without / n
-                )?;
-            }
-            let (new_conf, new_steps) = ok
-                .iter()
-                .fold((0, 0), |(c, n), t| (c + t.new_confident, n + t.new.0));
-            let ece: Vec<f64> = ok.iter().filter_map(|t| t.calibration_error()).collect();
-            writeln!(
-                f,
-                "  confidence: new ground taken for known at 90% or more {new_conf} of {new_steps} \
-                 steps; known ground's calibration error {} points (worst seed)",
-                ece.iter()
-                    .copied()
-                    .fold(None::<f64>, |m, e| Some(m.map_or(e, |m| m.max(e))))
-                    .map_or("-".into(), |e| format!("{:.1}", 100.0 * e))
-            )?;
-            // New ground: kept, grouped, added, met again (per seed).
-            let each: Vec<String> = ok
-                .iter()
-                .filter_map(|t| t.learned.as_ref().map(|l| (t, l)))
-                .map(|(t, l)| {
-                    let group = l.group.map_or("no group".into(), |(n, of)| {
-                        format!("group {of}/{n} of {}", t.new.0)
-                    });
-                    let (nn, nr) = l.fresh_new;
-                    let (kn, kb, ka) = l.fresh_known;
-                    format!(
-                        "seed {}: {group}, by {}; then new {nr}/{nn}, known {kb}->{ka} of {kn}",
-                        t.seed, l.added_by
-                    )
-                })
-                .collect();
-            if !each.is_empty() {
-                writeln!(f, "  new ground: {}", each.join("; "))?;
-            }
-            for t in ts.iter().filter(|t| t.error.is_some()) {
-                writeln!(f, "  seed {}: {}", t.seed, t.error.as_deref().unwrap_or(""))?;
-            }
+            write_details(f, &ok, &ts)?;
         }
         if let Some(w) = self.worst() {
             writeln!(
@@ -288,6 +236,69 @@ impl std::fmt::Display for FeetTable {
         }
         Ok(())
     }
+}
+
+/// The lines under a foot's row: where a crop was kept, what the same path gave without one;
+/// the confidence; new ground per seed; each seed that failed.
+fn write_details(
+    f: &mut std::fmt::Formatter<'_>,
+    ok: &[&&Trial],
+    ts: &[&Trial],
+) -> std::fmt::Result {
+    // Where a crop was kept: what the same path gave without one.
+    let cropped: Vec<&&&Trial> = ok.iter().filter(|t| t.uncropped.is_some()).collect();
+    if !cropped.is_empty() {
+        let (with, without) = cropped.iter().fold((0.0, 0.0), |(a, b), t| {
+            let (n, r) = t.uncropped.unwrap_or((1, 0));
+            (a + t.known_right(), b + r as f64 / n.max(1) as f64)
+        });
+        let n = cropped.len() as f64;
+        writeln!(
+            f,
+            "  {} of {} seeds kept a crop: known ground right {:.1}% with it, {:.1}% \
+             with none (the mean of those seeds)",
+            cropped.len(),
+            ok.len(),
+            100.0 * with / n,
+            100.0 * without / n
+        )?;
+    }
+    let (new_conf, new_steps) = ok
+        .iter()
+        .fold((0, 0), |(c, n), t| (c + t.new_confident, n + t.new.0));
+    let ece: Vec<f64> = ok.iter().filter_map(|t| t.calibration_error()).collect();
+    writeln!(
+        f,
+        "  confidence: new ground taken for known at 90% or more {new_conf} of {new_steps} \
+         steps; known ground's calibration error {} points (worst seed)",
+        ece.iter()
+            .copied()
+            .fold(None::<f64>, |m, e| Some(m.map_or(e, |m| m.max(e))))
+            .map_or("-".into(), |e| format!("{:.1}", 100.0 * e))
+    )?;
+    // New ground: kept, grouped, added, met again (per seed).
+    let each: Vec<String> = ok
+        .iter()
+        .filter_map(|t| t.learned.as_ref().map(|l| (t, l)))
+        .map(|(t, l)| {
+            let group = l.group.map_or("no group".into(), |(n, of)| {
+                format!("group {of}/{n} of {}", t.new.0)
+            });
+            let (nn, nr) = l.fresh_new;
+            let (kn, kb, ka) = l.fresh_known;
+            format!(
+                "seed {}: {group}, by {}; then new {nr}/{nn}, known {kb}->{ka} of {kn}",
+                t.seed, l.added_by
+            )
+        })
+        .collect();
+    if !each.is_empty() {
+        writeln!(f, "  new ground: {}", each.join("; "))?;
+    }
+    for t in ts.iter().filter(|t| t.error.is_some()) {
+        writeln!(f, "  seed {}: {}", t.seed, t.error.as_deref().unwrap_or(""))?;
+    }
+    Ok(())
 }
 
 /// Walks every foot in `feet` with every seed (and each emulator foot on every source in

@@ -1,7 +1,10 @@
 //! The feet the bench plays: the stance images, the fixed schedule, the frame each step's
 //! decision must come from.
 
-use super::*;
+use super::{
+    CanFrame, FRAME_US, FootContact, IdConfig, ImageRef, LoadError, Message, SAMPLE_US, SIDE,
+    STANCE_US, STEP_US, Segmenter, Variant,
+};
 use protocol::emit::Emit;
 
 /// Eight G2 stance images per dynamic terrain from the simulator's skin, with their terrain ids.

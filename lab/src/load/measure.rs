@@ -1,6 +1,9 @@
 //! Playing the schedule in real time and matching the node's TerrainClass per step.
 
-use super::*;
+use super::{
+    AtomicBool, CanBus, Duration, Feet, HashMap, IdConfig, Instant, LoadError, Message, Ordering,
+    SAMPLE_US, Sampled, TerrainClass, WARMUP_US, flags, messages, mpsc,
+};
 
 /// What a measured run saw.
 #[derive(Clone, Debug, Default)]

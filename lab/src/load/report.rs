@@ -1,6 +1,6 @@
 //! The bench's report: latency, CPU and memory, as text and `--json`.
 
-use super::*;
+use super::{FRAME_US, SIDE, Tally, Variant};
 
 /// `presrs lab bench-node`'s report of one measurement.
 pub struct BenchReport<'a> {

@@ -1,6 +1,9 @@
 //! A bench run: the node in this process or as a process, under the feet's load.
 
-use super::*;
+use super::{
+    CanBus, Duration, Feet, IdConfig, LoadError, Tally, measure, memory_mb, task_cpu_ns,
+    task_slices,
+};
 
 /// What a bench run measured, and of what (for [`BenchReport`]).
 pub struct BenchRun {

@@ -1,6 +1,13 @@
 //! Figures 17-18: accuracy as sensor lines die, with and without the repair filter, and the sensor's lifespan.
 
-use super::*;
+use super::{
+    BLACK, BLUE, BitMapBackend, ChartBuilder, Curves, DAMAGE_PCT_PER_STEP, DEAD_AFTER_STANCES,
+    FOOT_CROP, GREEN, Kind, LineSeries, MAGENTA, PathElement, RED, Report, ReportError,
+    SeriesLabelPosition, WHITE, dataset, legend, pct, pe, train_on,
+};
+use plotters::drawing::IntoDrawingArea;
+use plotters::style::Color;
+use std::fmt::Write;
 
 pub(super) const ARMS: [&str; 4] = [
     "without repair",

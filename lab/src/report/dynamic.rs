@@ -1,6 +1,11 @@
 //! Table 5 and Figure 16: the dynamic features while hopping.
 
-use super::*;
+use super::{
+    BitMapBackend, FOOT_CROP, FeatureExtractor, Kind, Report, ReportError, WHITE, dataset,
+    draw_features, pe,
+};
+use plotters::drawing::IntoDrawingArea;
+use std::fmt::Write;
 
 /// Mean feature vector per terrain and gait (Figure 13).
 pub(super) fn dynamic_features(ctx: &Report) -> Result<String, ReportError> {

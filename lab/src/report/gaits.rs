@@ -1,6 +1,7 @@
 //! Table 6: each gait's speed per terrain.
 
-use super::*;
+use super::{FOOT_CROP, NORMALIZE_DYNAMIC, Report, ReportError, Terrain, TrainingSet, pct};
+use std::fmt::Write;
 
 /// Table 5: C_i trained on G_i, tested on every gait; Table 3: speeds.
 pub(super) fn gaits(ctx: &Report) -> Result<String, ReportError> {

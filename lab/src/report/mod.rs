@@ -10,7 +10,6 @@
 //! One file per section (`static_table`, `resolution`, `dynamic`, `gaits`, `damage` with the
 //! lifespan, `adaptation`, `open_set`); `plot` draws what they share.
 
-use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use node::classifier::Model;

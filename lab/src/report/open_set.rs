@@ -3,7 +3,8 @@
 use super::open_set_seeds::{
     OptionSpreads, open_set_by_gait, open_set_options, open_set_options_separable, open_set_spread,
 };
-use super::*;
+use super::{Crop, FOOT_CROP, Kind, Report, ReportError, STATIC_CROP, pct};
+use std::fmt::Write;
 
 /// The open-set section's sources for `seed`: the lab's and extra sets (the seed draws the
 /// split), then without `--data` the simulated ones (the seed also draws their runs).
@@ -101,17 +102,8 @@ pub(super) fn open_set_images(ctx: &Report) -> usize {
     if ctx.quick { 30 } else { 60 }
 }
 
-/// Leave-one-class-out per source (the simulator's static, sandpaper and dynamic sets, each in
-/// three runs on three sensors; the lab's own set and any extra sources, split by their runs):
-/// how much of a class the model never saw is called unknown, and how much of a fresh run of
-/// the known ones; with `open_set_seeds` above 1, the spread of the means over
-/// that many seeds.
-pub(super) fn open_set(ctx: &Report) -> Result<String, ReportError> {
-    use crate::open_set::{OpenSetMeans, SeedSpread, leave_one_class_out};
-    let rate = ctx.open_set_models.options().unknown_rate;
-    let n = open_set_images(ctx);
-    let sources = open_set_sources(ctx, ctx.seed);
-    let mut spreads: Vec<SeedSpread> = vec![SeedSpread::default(); sources.len()];
+/// The section's heading and what its tables measure.
+fn open_set_intro(ctx: &Report, n: usize, rate: f64) -> String {
     let mut md = String::from("## Unknown terrain: leave one class out, judged on a fresh run\n\n");
     let _ = writeln!(
         md,
@@ -154,6 +146,21 @@ pub(super) fn open_set(ctx: &Report) -> Result<String, ReportError> {
             ""
         },
     );
+    md
+}
+
+/// Leave-one-class-out per source (the simulator's static, sandpaper and dynamic sets, each in
+/// three runs on three sensors; the lab's own set and any extra sources, split by their runs):
+/// how much of a class the model never saw is called unknown, and how much of a fresh run of
+/// the known ones; with `open_set_seeds` above 1, the spread of the means over
+/// that many seeds.
+pub(super) fn open_set(ctx: &Report) -> Result<String, ReportError> {
+    use crate::open_set::{OpenSetMeans, SeedSpread, leave_one_class_out};
+    let rate = ctx.open_set_models.options().unknown_rate;
+    let n = open_set_images(ctx);
+    let sources = open_set_sources(ctx, ctx.seed);
+    let mut spreads: Vec<SeedSpread> = vec![SeedSpread::default(); sources.len()];
+    let mut md = open_set_intro(ctx, n, rate);
     let _ = writeln!(
         md,
         "| source | calibrated on | AUROC: ours | density (before) | nearest neighbour | left-out unknown | fresh known unknown (taken for another terrain) | known right: rejection on | off | calibration check |"

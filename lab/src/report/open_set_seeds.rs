@@ -3,7 +3,9 @@
 //! default against one option fixed by hand (over every class, then the separable ones).
 //! `open_set.rs` runs the experiment and writes the first seed's tables.
 
-use super::*;
+use std::fmt::Write as _;
+
+use super::pct;
 use crate::open_set::SeedSpread;
 
 /// Each single option's spread over the seeds, for one source.
@@ -376,7 +378,6 @@ The targets where they apply. The AUROC and left-out targets hold \"where the cl
 #[cfg(test)]
 mod tests {
     use super::*;
-
     #[test]
     fn the_spread_table_gives_median_and_range_and_the_seeds_off_target() {
         use crate::open_set::{SeedSpread, mean_row as row};

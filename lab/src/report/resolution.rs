@@ -1,6 +1,12 @@
 //! Figure 12 and Table 3: accuracy against the sensor's resolution.
 
-use super::*;
+use super::{
+    BLACK, BLUE, BitMapBackend, ChartBuilder, Kind, PathElement, RED, Rectangle, Report,
+    ReportError, STATIC_CROP, SeriesLabelPosition, WHITE, legend, pct, pe,
+};
+use plotters::drawing::IntoDrawingArea;
+use plotters::style::Color;
+use std::fmt::Write;
 
 pub(super) fn resolution(ctx: &Report) -> Result<String, ReportError> {
     let seeds: Vec<u64> = (0..if ctx.quick { 2 } else { 5 })

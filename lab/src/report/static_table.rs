@@ -1,6 +1,10 @@
 //! Table 1 and Figure 5: the static classifier on the paper's six terrains.
 
-use super::*;
+use super::{
+    FeatureExtractor, Kind, Report, ReportError, STATIC_CROP, confusion, dataset, feature_plot,
+    pct, train_on,
+};
+use std::fmt::Write;
 
 pub(super) fn static_table(ctx: &Report) -> Result<String, ReportError> {
     let n = if ctx.quick { 30 } else { 80 };

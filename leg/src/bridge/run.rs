@@ -1,6 +1,9 @@
 //! Running the bridge: on one bus (`presrs leg`), or with the motors on a bus of their own.
 
-use super::*;
+use super::{
+    Component, Driver, IdConfig, LegConfig, LegCounters, LegMode, LegService, LegStatus, Message,
+    MessageKind, Outbox, Stamped,
+};
 
 /// Runs the bridge on `source` until `stop` (`presrs leg`), on the robot's clock (`time_scale`
 /// times the wall clock: match a simulator slower than real time). The motors share the bus
@@ -176,6 +179,7 @@ mod two_bus_tests {
     use super::*;
     use crate::simulated::SimulatedLeg;
     use protocol::bus::{BusSource, CanBus, InProcBus};
+    use protocol::messages::{LegCommand, LegState, Phase, decode};
     use std::sync::atomic::{AtomicBool, Ordering};
     use std::time::{Duration, Instant};
 

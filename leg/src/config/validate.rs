@@ -1,7 +1,7 @@
 //! The checks of `leg.toml`: each names the key at fault; gains an MIT motor cannot carry are
 //! warned of.
 
-use super::*;
+use super::{BusId, DriverKind, Invalid, JointConfig, Kinematics, LegConfig, Ranges, TAU};
 
 impl LegConfig {
     /// Gains an MIT motor carries more than 5% off (its 12-bit kp and kd counts), each with
@@ -83,20 +83,6 @@ impl LegConfig {
 
     /// Every check; the first failure, naming its key.
     pub fn validate(&self) -> Result<(), Invalid> {
-        let pos = |key: &str, v: f64| {
-            if v.is_finite() && v > 0.0 {
-                Ok(())
-            } else {
-                Err(Invalid::range(key, v, "a finite value > 0"))
-            }
-        };
-        let nonneg = |key: &str, v: f64| {
-            if v.is_finite() && v >= 0.0 {
-                Ok(())
-            } else {
-                Err(Invalid::range(key, v, "a finite value >= 0"))
-            }
-        };
         if self.foot >= protocol::ids::MAX_FEET {
             return Err(Invalid::range("foot", self.foot, "0..=7"));
         }
@@ -119,6 +105,16 @@ impl LegConfig {
                 ));
             }
         }
+        self.validate_kinematics()?;
+        self.validate_impedance()?;
+        for which in 0..2 {
+            self.validate_joint(which)?;
+        }
+        self.validate_ids()
+    }
+
+    /// The leg's geometry: lengths positive and in order, a two-link knee that can spring.
+    fn validate_kinematics(&self) -> Result<(), Invalid> {
         match self.kinematics {
             Kinematics::Prismatic {
                 min_length_m,
@@ -166,6 +162,12 @@ impl LegConfig {
                 }
             }
         }
+        Ok(())
+    }
+
+    /// The impedance gains: none negative; stance stiffness and the damping that stops the
+    /// leg and the hip positive.
+    fn validate_impedance(&self) -> Result<(), Invalid> {
         let imp = &self.impedance;
         for (k, v) in [
             (
@@ -211,10 +213,7 @@ impl LegConfig {
             "impedance.hip_damping_nm_s_per_rad",
             imp.hip_damping_nm_s_per_rad,
         )?;
-        for which in 0..2 {
-            self.validate_joint(which)?;
-        }
-        self.validate_ids()
+        Ok(())
     }
 
     fn validate_joint(&self, which: usize) -> Result<(), Invalid> {
@@ -511,4 +510,22 @@ fn validate_moteus(
         ));
     }
     Ok(())
+}
+
+/// `v` is finite and above zero, else an error naming `key`.
+fn pos(key: &str, v: f64) -> Result<(), Invalid> {
+    if v.is_finite() && v > 0.0 {
+        Ok(())
+    } else {
+        Err(Invalid::range(key, v, "a finite value > 0"))
+    }
+}
+
+/// `v` is finite and not below zero, else an error naming `key`.
+fn nonneg(key: &str, v: f64) -> Result<(), Invalid> {
+    if v.is_finite() && v >= 0.0 {
+        Ok(())
+    } else {
+        Err(Invalid::range(key, v, "a finite value >= 0"))
+    }
 }

@@ -1,6 +1,6 @@
 //! Which terrain each step stood on: a labels file of time ranges, or one terrain for the whole run.
 
-use super::*;
+use super::{CaptureError, Path, Skip, Terrain, TerrainCatalog, io, parse_seconds};
 
 /// One range of a labels file: steps whose touchdown and sample both fall in `[start, end)`
 /// (the log's clock, µs) on `foot` (any foot when `None`) are `terrain`.

@@ -1,7 +1,11 @@
 //! A captured set on disk: `DIR/<terrain>/<name>.pgm` and `DIR/manifest.csv`, which names each
 //! image's source and step so that a second capture of the same log adds nothing.
 
-use super::*;
+use super::{
+    CaptureError, CapturedStep, HashSet, Path, PathBuf, PressureImage, format_seconds, io,
+    parse_seconds, write_pgm,
+};
+use std::io::Write;
 
 /// What the manifest says of one image besides its terrain folder.
 #[derive(Clone, Debug, PartialEq, Eq)]

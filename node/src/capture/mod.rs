@@ -8,7 +8,6 @@
 //! `DIR/manifest.csv` that also keeps a second capture of the same log from adding anything.
 
 use std::collections::HashSet;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use protocol::Stamped;

@@ -1,7 +1,7 @@
 //! Capture as a part on the bus (`presrs capture --iface`): a [`Component`] that writes each
 //! labelled step to a [`CaptureSet`] as it comes.
 
-use super::*;
+use super::{Capture, CaptureError, CaptureSet, CapturedStep, Component, Outbox, Path, Stamped};
 
 /// A capture filling a training set, as a part on the bus ([`Component`]): `presrs capture
 /// --iface` runs it with the one runner; a log is fed to it frame by frame

@@ -80,7 +80,33 @@ pub fn parse_pgm_sequence(b: &[u8], path: &Path) -> Result<Vec<PressureImage>, I
 
 /// One PGM image at the start of `b`, and the bytes it takes (all of them for P2).
 fn parse_pgm_at(b: &[u8], path: &Path) -> Result<(PressureImage, usize), ImageError> {
-    // Header tokens: magic, width, height, maxval; '#' comments to end of line.
+    let hd = pgm_header(b, path)?;
+    let (px, used) = if hd.binary {
+        p5_pixels(b, &hd, path)?
+    } else {
+        (p2_pixels(b, &hd, path)?, b.len())
+    };
+    Ok((
+        PressureImage::new(hd.h, hd.w, bits_for(hd.maxval), px),
+        used,
+    ))
+}
+
+/// A PGM header, checked: the format, the size, the largest value, and where the pixels start.
+struct PgmHeader {
+    /// P5 (binary) rather than P2 (text).
+    binary: bool,
+    w: usize,
+    h: usize,
+    maxval: u32,
+    /// The byte after the header's last token.
+    pos: usize,
+    /// The line `pos` is on (1-based).
+    line: usize,
+}
+
+/// The header tokens (magic, width, height, maxval; '#' comments to the end of a line).
+fn pgm_header(b: &[u8], path: &Path) -> Result<PgmHeader, ImageError> {
     let mut pos = 0;
     let mut line = 1;
     let mut tokens = Vec::new();
@@ -146,63 +172,81 @@ fn parse_pgm_at(b: &[u8], path: &Path) -> Result<(PressureImage, usize), ImageEr
             format!("maxval {maxval} out of range 1..=65535"),
         ));
     }
-    let n = w * h;
-    let mut px = Vec::with_capacity(n);
-    if magic == "P5" {
-        pos += 1; // the single whitespace after maxval
-        let bpp = if maxval > 255 { 2 } else { 1 };
-        let data = b.get(pos..).unwrap_or(&[]);
-        if data.len() < n * bpp {
-            return Err(err(
-                path,
-                Some(line),
-                format!(
-                    "P5 data holds {} bytes, {}x{} needs {}",
-                    data.len(),
-                    w,
-                    h,
-                    n * bpp
-                ),
-            ));
-        }
-        for i in 0..n {
-            px.push(if bpp == 2 {
+    Ok(PgmHeader {
+        binary: magic == "P5",
+        w,
+        h,
+        maxval,
+        pos,
+        line,
+    })
+}
+
+/// P5's pixels (one byte each, or two big-endian above maxval 255), and the bytes the image
+/// takes with its header.
+fn p5_pixels(b: &[u8], hd: &PgmHeader, path: &Path) -> Result<(Vec<u16>, usize), ImageError> {
+    let (n, pos) = (hd.w * hd.h, hd.pos + 1); // the single whitespace after maxval
+    let bpp = if hd.maxval > 255 { 2 } else { 1 };
+    let data = b.get(pos..).unwrap_or(&[]);
+    if data.len() < n * bpp {
+        return Err(err(
+            path,
+            Some(hd.line),
+            format!(
+                "P5 data holds {} bytes, {}x{} needs {}",
+                data.len(),
+                hd.w,
+                hd.h,
+                n * bpp
+            ),
+        ));
+    }
+    let px = (0..n)
+        .map(|i| {
+            if bpp == 2 {
                 u16::from_be_bytes([data[2 * i], data[2 * i + 1]])
             } else {
                 data[i] as u16
-            });
-        }
-        return Ok((
-            PressureImage::new(h, w, bits_for(maxval), px),
-            pos + n * bpp,
-        ));
-    } else {
-        let text = String::from_utf8_lossy(&b[pos..]);
-        for (ln, l) in text.lines().enumerate() {
-            let l = l.split('#').next().unwrap_or("");
-            for t in l.split_whitespace() {
-                let v: u32 = t
-                    .parse()
-                    .map_err(|_| err(path, Some(line + ln), format!("bad pixel value `{t}`")))?;
-                if v > maxval {
-                    return Err(err(
-                        path,
-                        Some(line + ln),
-                        format!("pixel {v} above maxval {maxval}"),
-                    ));
-                }
-                px.push(v as u16);
             }
-        }
-        if px.len() != n {
-            return Err(err(
-                path,
-                None,
-                format!("P2 data has {} values, {w}x{h} needs {n}", px.len()),
-            ));
+        })
+        .collect();
+    Ok((px, pos + n * bpp))
+}
+
+/// P2's pixels: decimal values after the header, '#' comments to the end of a line.
+fn p2_pixels(b: &[u8], hd: &PgmHeader, path: &Path) -> Result<Vec<u16>, ImageError> {
+    let (n, maxval, line) = (hd.w * hd.h, hd.maxval, hd.line);
+    let mut px = Vec::with_capacity(n);
+    let text = String::from_utf8_lossy(&b[hd.pos..]);
+    for (ln, l) in text.lines().enumerate() {
+        let l = l.split('#').next().unwrap_or("");
+        for t in l.split_whitespace() {
+            let v: u32 = t
+                .parse()
+                .map_err(|_| err(path, Some(line + ln), format!("bad pixel value `{t}`")))?;
+            if v > maxval {
+                return Err(err(
+                    path,
+                    Some(line + ln),
+                    format!("pixel {v} above maxval {maxval}"),
+                ));
+            }
+            px.push(v as u16);
         }
     }
-    Ok((PressureImage::new(h, w, bits_for(maxval), px), b.len()))
+    if px.len() != n {
+        return Err(err(
+            path,
+            None,
+            format!(
+                "P2 data has {} values, {}x{} needs {n}",
+                px.len(),
+                hd.w,
+                hd.h
+            ),
+        ));
+    }
+    Ok(px)
 }
 
 /// Reads a CSV image: one sensel row per line, comma separated.

@@ -1,6 +1,9 @@
 //! The node's counters: shared by its threads as atomics, read as one [`NodeStats`].
 
-use super::*;
+use super::{
+    Arc, AtomicU64, ControllerState, Counters, Link, LinkStats, NodeState, Ordering, Reason,
+    ReasonCounts, ReassemblyStats,
+};
 
 /// The counters a running node shares between its threads, written without locks: the
 /// runner's (frames in and out, bus errors, the link's state) and the pipeline's.

@@ -1,6 +1,8 @@
 //! A node running on its threads, and what can be done to it while it runs.
 
-use super::*;
+use super::{
+    Arc, Model, NodeService, NodeStats, Path, ServiceError, Shared, Tap, TerrainCatalog, Threaded,
+};
 
 /// A node running on its threads (from [`NodeService::start`]).
 pub struct RunningNode {

@@ -11,7 +11,7 @@ use controller::Gait;
 use protocol::messages::{FootContact, LegCommand, LegState, Message, Phase};
 use protocol::tactile::{ImageRef, Segmenter, Variant};
 use protocol::{CanFrame, IdConfig};
-use rand::{Rng, SeedableRng};
+use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use serde::Deserialize;
 

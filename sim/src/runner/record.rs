@@ -1,6 +1,6 @@
 //! A simulated run written as a candump log, with the terrain each step stood on (its truth).
 
-use super::*;
+use super::{SimConfig, SimRobot, StepTruth};
 use protocol::emit::Emit;
 
 /// The log's clock at simulated time 0 for [`record`]: 2023-11-14, a plausible candump time.

@@ -1,7 +1,12 @@
 //! The simulated robot: the hopper, its foot switch, leg state and skin, on the bus's frames.
 
-use super::*;
+use super::{
+    CanFrame, ChaCha8Rng, Contact, Event, FRAME_PERIOD_US, FaultParams, FixedGait, FootContact,
+    Gait, Hopper, HopperParams, IdConfig, ImageRef, LegCommand, LegCommands, LegState, Message,
+    Phase, Rng, Segmenter, Skin, SkinParams, Terrain, Track, Variant,
+};
 use protocol::emit::Emit;
+use rand::SeedableRng;
 
 /// The simulated robot: track, legs, sensors, identifiers.
 #[derive(Clone, Debug, PartialEq)]

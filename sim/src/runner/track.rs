@@ -1,6 +1,8 @@
 //! The track: a circle of terrain segments, read from TOML and checked against the catalog.
 
-use super::*;
+use super::{
+    CannotSimulate, ConfigFileError, Deserialize, Invalid, Physics, Terrain, TerrainCatalog,
+};
 
 /// One stretch of the track: a catalog terrain the simulator has a model for.
 #[derive(Clone, Copy, Debug, PartialEq)]

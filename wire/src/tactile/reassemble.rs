@@ -5,7 +5,7 @@ use alloc::boxed::Box;
 use alloc::vec;
 use alloc::vec::Vec;
 
-use super::*;
+use super::{BITMAP_WORDS, Header, MAX_BYTES, ReassemblyStats, TactileImage, Variant};
 use crate::ids::MAX_FEET;
 
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]

@@ -1,6 +1,6 @@
 //! The foot's side: cutting an image into segment frames, on the stack (no_std, no allocation).
 
-use super::*;
+use super::{CanFrame, Header, IdConfig, MAX_PIXELS, Variant, make_id, pixel_byte, pixel_crc};
 use crate::emit::Emit;
 
 /// Errors of [`Segmenter`].

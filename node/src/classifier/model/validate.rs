@@ -1,7 +1,7 @@
 //! The checks a model file passes before a node runs it: sizes, indexes, finite numbers; each
 //! names the field at fault.
 
-use super::*;
+use super::{Invalid, MAX_CLASSES, MAX_DOWNSAMPLE, Model};
 
 impl Model {
     /// Checks that the model's parts fit together (sizes, indexes, finite numbers).

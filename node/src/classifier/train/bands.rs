@@ -1,6 +1,6 @@
 //! The load and texture bands: per class, the range a known image's load or texture falls in.
 
-use super::*;
+use super::preprocess;
 use crate::classifier::image::PressureImage;
 use crate::classifier::model::Model;
 

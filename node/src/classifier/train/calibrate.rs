@@ -1,7 +1,7 @@
 //! Calibrating the rejection on images the fit never saw: the novelty score's threshold per
 //! class, from a second run or held-out images of the training run.
 
-use super::*;
+use super::{class_spreads, cross_fit, nuisance_directions, positive, preprocess, residual_vector};
 use crate::classifier::image::PressureImage;
 use crate::classifier::model::Model;
 use crate::order_stats::{median, upper_quantile};

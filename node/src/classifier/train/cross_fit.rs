@@ -3,7 +3,7 @@
 
 use nalgebra::DMatrix;
 
-use super::*;
+use super::{Model, Parts, class_spreads, fit};
 use crate::unknown::novelty::Novelty;
 
 /// Time blocks a session is cut into to calibrate on itself ([`CalibrationSource::TimeBlocks`]).

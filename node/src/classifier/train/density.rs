@@ -1,7 +1,7 @@
 //! The unknown thresholds' densities and the kNN ratio's unit: each stored sample's
 //! leave-one-out density and each class's spread.
 
-use super::*;
+use super::{Model, sq_dist, widen};
 use crate::order_stats::median;
 
 /// `v` when it is a positive number, else `fallback` (else 1).

@@ -8,7 +8,10 @@
 //! working images (`Model::images`), so adding a terrain needs nothing but the model and the
 //! kept stances; the recording may be gone or on another machine.
 
-use super::*;
+use super::{
+    CalibrationSource, ClassInfo, DMatrix, MAX_CLASSES, Model, PressureImage, StoredImages,
+    TrainError, add_load_check, fit, preprocess, set_novelty, unknown_thresholds,
+};
 
 /// Why a terrain cannot be added.
 #[derive(Debug, thiserror::Error, PartialEq)]

@@ -1,7 +1,14 @@
 //! Fitting a model to labelled images: the split, PCA, the kernel width chosen on V, the stored
 //! samples (sections 4.2 and 7.2).
 
-use super::*;
+use super::{
+    CalibrationSource, Checks, ClassInfo, Crop, CropSpec, DMatrix, FeatureExtractor,
+    MAX_CALIBRATION_PER_CLASS, MAX_CLASSES, MODEL_VERSION, Margin, MinContact, Model,
+    PressureImage, StoredImages, TrainError, TrainOptions, UnknownChecks, add_load_check,
+    add_texture_check, fft_len, set_novelty, unknown_thresholds,
+};
+use rand::SeedableRng;
+use rand::seq::SliceRandom;
 
 /// One labelled image.
 #[derive(Clone, Copy)]
@@ -104,44 +111,11 @@ pub(crate) fn train_variants(
         }
         crate::classifier::options::UnknownChecks::Auto => o,
     };
-    let (rows, cols, bits) = (data[0].image.rows, data[0].image.cols, data[0].image.bits);
-    for d in data {
-        if (d.image.rows, d.image.cols, d.image.bits) != (rows, cols, bits) {
-            return Err(TrainError::Sizes {
-                a: format!("{rows}x{cols} {bits}-bit"),
-                b: format!("{}x{} {}-bit", d.image.rows, d.image.cols, d.image.bits),
-            });
-        }
-    }
+    let (rows, cols, bits) = one_size(data)?;
     // `auto`: the footprint of these images (a caller that trains several models of one set,
     // as `TrainingSet::train_calibrated` does, measures it once on the whole set).
     let crop = resolve_crop(o.crop, data.iter().map(|l| l.image));
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(o.seed);
-    let mut split = Split::default();
-    for (k, c) in classes.iter().enumerate() {
-        let mut idx: Vec<usize> = (0..data.len()).filter(|&i| data[i].class == k).collect();
-        if idx.len() < o.per_class {
-            return Err(TrainError::TooFew {
-                class: c.name.clone(),
-                have: idx.len(),
-                need: o.per_class,
-            });
-        }
-        if idx
-            .iter()
-            .all(|&i| data[i].image.pixels.iter().all(|&p| p == 0))
-        {
-            return Err(TrainError::NoLoad {
-                class: c.name.clone(),
-            });
-        }
-        idx.shuffle(&mut rng);
-        split.train.extend_from_slice(&idx[..o.train]);
-        split
-            .validation
-            .extend_from_slice(&idx[o.train..o.per_class]);
-        split.test.extend_from_slice(&idx[o.per_class..]);
-    }
+    let split = split_classes(data, classes, o)?;
     let prep = |i: usize| {
         preprocess(data[i].image, &crop, o.downsample).ok_or(TrainError::Crop { crop, rows, cols })
     };
@@ -213,6 +187,56 @@ pub(crate) fn train_variants(
         None => None,
     };
     Ok((model, max_model, split))
+}
+
+/// The images' one size and depth; two that differ are an error naming both.
+fn one_size(data: &[Labelled<'_>]) -> Result<(usize, usize, u8), TrainError> {
+    let (rows, cols, bits) = (data[0].image.rows, data[0].image.cols, data[0].image.bits);
+    for d in data {
+        if (d.image.rows, d.image.cols, d.image.bits) != (rows, cols, bits) {
+            return Err(TrainError::Sizes {
+                a: format!("{rows}x{cols} {bits}-bit"),
+                b: format!("{}x{} {}-bit", d.image.rows, d.image.cols, d.image.bits),
+            });
+        }
+    }
+    Ok((rows, cols, bits))
+}
+
+/// Each class's images shuffled (seeded by `o.seed`) into T (`o.train`), V (up to
+/// `o.per_class`) and the rest; a class with too few images, or none with load, is an error.
+fn split_classes(
+    data: &[Labelled<'_>],
+    classes: &[ClassInfo],
+    o: &TrainOptions,
+) -> Result<Split, TrainError> {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(o.seed);
+    let mut split = Split::default();
+    for (k, c) in classes.iter().enumerate() {
+        let mut idx: Vec<usize> = (0..data.len()).filter(|&i| data[i].class == k).collect();
+        if idx.len() < o.per_class {
+            return Err(TrainError::TooFew {
+                class: c.name.clone(),
+                have: idx.len(),
+                need: o.per_class,
+            });
+        }
+        if idx
+            .iter()
+            .all(|&i| data[i].image.pixels.iter().all(|&p| p == 0))
+        {
+            return Err(TrainError::NoLoad {
+                class: c.name.clone(),
+            });
+        }
+        idx.shuffle(&mut rng);
+        split.train.extend_from_slice(&idx[..o.train]);
+        split
+            .validation
+            .extend_from_slice(&idx[o.train..o.per_class]);
+        split.test.extend_from_slice(&idx[o.per_class..]);
+    }
+    Ok(split)
 }
 
 /// What [`train`] adds to a fitted model: the checks `o` asks for and the novelty's
@@ -310,28 +334,8 @@ pub(crate) fn fit(
     dims: Option<usize>,
 ) -> Result<(Fitted, Fitted), TrainError> {
     let n_px = work[0].len();
-    let total = |p: &[u16]| p.iter().map(|&v| v as f64).sum::<f64>();
-    // The mean load of the loaded images (a blank one, no contact, is not scaled either).
-    let loaded: Vec<f64> = work.iter().map(|p| total(p)).filter(|&t| t > 0.0).collect();
-    let normalize_load =
-        (normalize && !loaded.is_empty()).then(|| loaded.iter().sum::<f64>() / loaded.len() as f64);
-    let mut fx = FeatureExtractor::new(n_px);
-    let n = fx.feature_len();
-    let mut x = DMatrix::<f64>::zeros(work.len(), n);
-    for (row, p) in work.iter().enumerate() {
-        let scale = match normalize_load {
-            Some(t) if total(p) > 0.0 => (t / total(p)) as f32,
-            _ => 1.0,
-        };
-        let f = fx.features(p, scale);
-        for (j, v) in f.iter().enumerate() {
-            x[(row, j)] = *v as f64;
-        }
-    }
-    let mean = x.row_mean();
-    for mut r in x.row_iter_mut() {
-        r -= &mean;
-    }
+    let (x, mean, normalize_load) = centred_features(work, normalize);
+    let n = x.ncols();
     // PCA axes up to the paper's 52 (or --dims), as far as the rank allows.
     let pca = super::pca::principal_axes(&x, dims.unwrap_or(52));
     if pca.axes.is_empty() {
@@ -369,17 +373,76 @@ pub(crate) fn fit(
             c
         }
     };
+    let (best, best_max) = select(&proj, h_max, &candidates, labels, n_t, n_classes);
+    let fitted = |(_, h, sigma): (f64, usize, f64)| Fitted {
+        normalize_load,
+        n_fft: fft_len(n_px),
+        h,
+        pca_mean: mean.iter().map(|v| *v as f32).collect(),
+        pca_matrix: u[..h * n].to_vec(),
+        // The stored samples are T and V (the paper's P has p + q columns).
+        samples: (0..work.len())
+            .flat_map(|r| proj[r * h_max..r * h_max + h].iter().copied())
+            .collect(),
+        kernel_width: sigma,
+    };
+    Ok((fitted(best), fitted(best_max)))
+}
+
+/// The feature vectors of `work` (rows), centred, their mean, and the mean load they were
+/// scaled to (with `normalize`; a blank image, no contact, is not scaled).
+fn centred_features(
+    work: &[Vec<u16>],
+    normalize: bool,
+) -> (DMatrix<f64>, nalgebra::RowDVector<f64>, Option<f64>) {
+    let n_px = work[0].len();
+    let total = |p: &[u16]| p.iter().map(|&v| v as f64).sum::<f64>();
+    // The mean load of the loaded images (a blank one, no contact, is not scaled either).
+    let loaded: Vec<f64> = work.iter().map(|p| total(p)).filter(|&t| t > 0.0).collect();
+    let normalize_load =
+        (normalize && !loaded.is_empty()).then(|| loaded.iter().sum::<f64>() / loaded.len() as f64);
+    let mut fx = FeatureExtractor::new(n_px);
+    let n = fx.feature_len();
+    let mut x = DMatrix::<f64>::zeros(work.len(), n);
+    for (row, p) in work.iter().enumerate() {
+        let scale = match normalize_load {
+            Some(t) if total(p) > 0.0 => (t / total(p)) as f32,
+            _ => 1.0,
+        };
+        let f = fx.features(p, scale);
+        for (j, v) in f.iter().enumerate() {
+            x[(row, j)] = *v as f64;
+        }
+    }
+    let mean = x.row_mean();
+    for mut r in x.row_iter_mut() {
+        r -= &mean;
+    }
+    (x, mean, normalize_load)
+}
+
+/// The best (score, h, kernel width) on V over `candidates` and a log-spaced grid of widths,
+/// and the best at `h_max` alone; `proj` holds every image's `h_max` coordinates, T first.
+fn select(
+    proj: &[f32],
+    h_max: usize,
+    candidates: &[usize],
+    labels: &[usize],
+    n_t: usize,
+    n_classes: usize,
+) -> ((f64, usize, f64), (f64, usize, f64)) {
+    let n_all = proj.len() / h_max;
     let mut best = (f64::NEG_INFINITY, h_max, 1.0f64);
     // The best kernel width at h_max alone: the `Dims::Max` model, from the same SVD.
     let mut best_max = (f64::NEG_INFINITY, h_max, 1.0f64);
-    for &h in &candidates {
+    for &h in candidates {
         let t_proj: Vec<f32> = (0..n_t)
             .flat_map(|r| proj[r * h_max..r * h_max + h].iter().copied())
             .collect();
         let nn = median_nn_distance(&t_proj, h);
         // Each validation image's squared distances to T, once per h: the kernel widths below
         // only rescale them.
-        let d2: Vec<f64> = (n_t..work.len())
+        let d2: Vec<f64> = (n_t..n_all)
             .flat_map(|v| {
                 let q = &proj[v * h_max..v * h_max + h];
                 (0..n_t).map(|i| sq_dist(&t_proj[i * h..(i + 1) * h], q))
@@ -389,7 +452,7 @@ pub(crate) fn fit(
             let sigma = nn * 2f64.powf(step as f64 / 2.0);
             let mut correct = 0;
             let mut margin = 0.0;
-            for (row, v) in (n_t..work.len()).enumerate() {
+            for (row, v) in (n_t..n_all).enumerate() {
                 let d2 = &d2[row * n_t..(row + 1) * n_t];
                 let (best_k, lp) = parzen(d2, &labels[..n_t], sigma, n_classes, labels[v]);
                 correct += (best_k == labels[v]) as usize;
@@ -404,19 +467,7 @@ pub(crate) fn fit(
             }
         }
     }
-    let fitted = |(_, h, sigma): (f64, usize, f64)| Fitted {
-        normalize_load,
-        n_fft: fft_len(n_px),
-        h,
-        pca_mean: mean.iter().map(|v| *v as f32).collect(),
-        pca_matrix: u[..h * n].to_vec(),
-        // The stored samples are T and V (the paper's P has p + q columns).
-        samples: (0..work.len())
-            .flat_map(|r| proj[r * h_max..r * h_max + h].iter().copied())
-            .collect(),
-        kernel_width: sigma,
-    };
-    Ok((fitted(best), fitted(best_max)))
+    (best, best_max)
 }
 
 /// The Parzen decision for one projected vector from its squared distances `d2` to the stored

@@ -9,8 +9,6 @@
 //! load and texture bands.
 
 use nalgebra::DMatrix;
-use rand::SeedableRng;
-use rand::seq::SliceRandom;
 
 use super::features::{FeatureExtractor, fft_len};
 use super::image::{Crop, CropSpec, PressureImage};

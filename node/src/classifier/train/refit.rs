@@ -1,7 +1,7 @@
 //! Refitting a model to a damaged sensor: the repair filter's dead lines taken out of the
 //! features, the stored samples' features recomputed.
 
-use super::*;
+use super::{Model, StoredImages, fit, load_ranges, set_novelty};
 
 /// The model refitted to a sensor with dead lines: its stored images get the same dead rows and
 /// columns (of the working image) and the same repair as the node gives a live image, and PCA,

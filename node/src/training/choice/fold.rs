@@ -1,7 +1,12 @@
 //! One fold of the choice: a known terrain left out, the sessions cut around it, the fold's
 //! models fitted and every candidate tallied on them.
 
-use super::*;
+use super::{
+    Bands, Candidate, ChoiceError, ClassInfo, Classifier, Dims, Folds, Judged, Labelled, Margin,
+    Measured, Model, NoveltyScore, PressureImage, Tally, TrainOptions, UnknownChecks,
+    add_load_check_on, add_texture_check, auroc, calibrate_on_runs, fold_options, preprocess,
+    rescore, roughness, train_with_max_dims, unknown,
+};
 
 /// What one fold measured: per candidate its tally, the plain nearest neighbour's AUROC, and
 /// the energy check's on its own (each stance's flights against its texture class's map).

@@ -1,6 +1,6 @@
 //! What the choice found: each candidate's outcome, the one kept, and the table `train` prints.
 
-use super::*;
+use super::{CHECK_COST, Candidate, ChoiceRecord, fmt};
 
 /// What one candidate measured, over every terrain left out.
 #[derive(Clone, Debug, PartialEq)]
