@@ -10,9 +10,7 @@ use sim::terrain::Physics;
 pub fn run(a: GaitsArgs) -> Result<ExitCode> {
     let catalog = protocol::TerrainCatalog::paper();
     let grounds: Vec<Physics> = if a.terrains.is_empty() {
-        let mut g = Physics::DYNAMIC.to_vec();
-        g.push(Physics::Sand);
-        g
+        lab::gait_table::default_grounds()
     } else {
         a.terrains
             .iter()

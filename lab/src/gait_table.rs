@@ -49,6 +49,14 @@ pub struct GaitTable {
     pub safe: Option<SafeGait>,
 }
 
+/// The grounds `presrs lab gaits` scores without `--terrains`: the paper's dynamic set and
+/// sand, the demo's new ground.
+pub fn default_grounds() -> Vec<Physics> {
+    let mut g = Physics::DYNAMIC.to_vec();
+    g.push(Physics::Sand);
+    g
+}
+
 /// Scores every gait on every ground.
 pub fn measure(
     gaits: &[Gait],
@@ -236,11 +244,9 @@ mod tests {
     /// energy check, docs/decisions/safe-gait.md), the narrowest.
     #[test]
     fn g3_has_the_widest_margin_everywhere_and_g1_the_narrowest() {
-        let mut grounds = Physics::DYNAMIC.to_vec();
-        grounds.push(Physics::Sand);
         let t = measure(
             &Gait::paper_gaits(),
-            &grounds,
+            &default_grounds(),
             &HopperParams::default(),
             &ScoreOptions::default(),
         );

@@ -80,6 +80,9 @@ struct Run {
     hopper: Hopper,
     cmd: FixedGait,
     ground: Ground,
+    /// The last touchdown's time and the last stance's length, s.
+    touchdown_t: f64,
+    stance_s: f64,
 }
 
 /// What a touchdown finds: the body's position, energy and time, and the stance before it.
@@ -89,6 +92,8 @@ struct AtTouchdown {
     x: f64,
     energy_j: f64,
     work_j: f64,
+    /// The stance of the hop this touchdown closes, s.
+    stance_s: f64,
 }
 
 /// A hopper slower than this at touchdown has stopped (m/s).
@@ -100,6 +105,8 @@ impl Run {
             hopper: Hopper::launch(params.clone(), gait),
             cmd: FixedGait::new(gait.clone()),
             ground,
+            touchdown_t: 0.0,
+            stance_s: 0.0,
         }
     }
 
@@ -109,14 +116,18 @@ impl Run {
         let deadline = self.hopper.t + 2.0;
         while self.hopper.t < deadline {
             match self.hopper.advance(0.001, self.ground, &mut self.cmd) {
-                Some(Event::Touchdown { beta, vx, .. }) => {
+                Some(Event::Touchdown { t, beta, vx, .. }) => {
                     self.cmd.on_touchdown(beta);
+                    self.touchdown_t = t;
                     if vx < STOPPED_M_S {
                         return None;
                     }
                     return Some(self.at());
                 }
-                Some(Event::Liftoff { beta, .. }) => self.cmd.on_liftoff(beta),
+                Some(Event::Liftoff { t, beta, .. }) => {
+                    self.cmd.on_liftoff(beta);
+                    self.stance_s = t - self.touchdown_t;
+                }
                 Some(Event::Fell { .. }) => return None,
                 None => {}
             }
@@ -130,6 +141,7 @@ impl Run {
             x: self.hopper.x,
             energy_j: self.hopper.energy_j(),
             work_j: self.hopper.actuator_work_j,
+            stance_s: self.stance_s,
         }
     }
 
@@ -175,38 +187,9 @@ pub fn score(
             f64::INFINITY
         },
         energy_ratio: ratio / n,
-        // On a fresh run of the same hops: the run above sees touchdowns only.
-        stance_s: mean_stance(gait, ground, params, opts),
+        stance_s: rest.iter().map(|td| td.stance_s).sum::<f64>() / n,
         margin: margin(gait, ground, params, opts),
     })
-}
-
-/// Mean stance time of the steady hops, s.
-fn mean_stance(gait: &Gait, ground: Ground, params: &HopperParams, opts: &ScoreOptions) -> f64 {
-    let mut h = Hopper::launch(params.clone(), gait);
-    let mut cmd = FixedGait::new(gait.clone());
-    let (mut hops, mut td_t, mut sum, mut n) = (0, None, 0.0, 0usize);
-    let end = opts.settle_hops + opts.measure_hops;
-    let deadline = 2.0 * end as f64;
-    while hops < end && h.t < deadline {
-        match h.advance(0.001, ground, &mut cmd) {
-            Some(Event::Touchdown { t, beta, .. }) => {
-                cmd.on_touchdown(beta);
-                hops += 1;
-                td_t = (hops > opts.settle_hops).then_some(t);
-            }
-            Some(Event::Liftoff { t, beta, .. }) => {
-                cmd.on_liftoff(beta);
-                if let Some(t0) = td_t.take() {
-                    sum += t - t0;
-                    n += 1;
-                }
-            }
-            Some(Event::Fell { .. }) => break,
-            None => {}
-        }
-    }
-    if n == 0 { 0.0 } else { sum / n as f64 }
 }
 
 /// The largest sudden loss of forward speed at one touchdown (a fraction in 0..[`MAX_LOSS`])
