@@ -36,7 +36,7 @@ pub struct StepRecord {
     pub damage_pct: f64,
     /// The gait the leg ran when the TerrainClass arrived.
     pub gait: u8,
-    /// Forward speed over the step, m/s.
+    /// Forward speed over the stride that ended at this step's touchdown, m/s.
     pub speed_m_s: f64,
 }
 
@@ -49,8 +49,11 @@ impl StepRecord {
         t_us: u64,
         catalog: &TerrainCatalog,
     ) -> Self {
-        let truth = robot.step_at(foot, t_us).map_or("?", |s| s.terrain.name());
-        let (speed, _) = robot.speed_and_position(foot).unwrap_or((0.0, 0.0));
+        let step = robot.step_at(foot, t_us);
+        let truth = step.map_or("?", |s| s.terrain.name());
+        // The stride's speed (touchdown to touchdown), not the body's at this moment: the
+        // TerrainClass comes at mid-stance, where the body is slowest (about 25% below).
+        let speed = step.map_or(0.0, |s| s.speed_m_s);
         Self {
             t_s: t_us as f64 * 1e-6,
             foot,
@@ -418,6 +421,29 @@ pub fn run(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The step's speed is its stride's (the truth's touchdown to touchdown), not the body's at
+    /// the moment its TerrainClass came (mid-stance, the slowest).
+    #[test]
+    fn a_step_record_carries_the_stride_speed() {
+        let mut robot = SimRobot::new(SimConfig::default(), 1);
+        let mut sink = Vec::new();
+        let mut t = 0u64;
+        while robot.steps.len() < 12 {
+            t += 1_000;
+            robot.advance_to(t, &mut sink);
+            sink.clear();
+        }
+        // 70 ms after the last touchdown: mid-stance, where a TerrainClass comes.
+        let last = robot.steps[robot.steps.len() - 1];
+        robot.advance_to(last.touchdown_us + 70_000, &mut sink);
+        let tc = messages::TerrainClass::default();
+        let catalog = TerrainCatalog::paper();
+        let r = StepRecord::of(&robot, 0, &tc, last.touchdown_us + 70_000, &catalog);
+        assert_eq!(r.speed_m_s, last.speed_m_s);
+        let (now, _) = robot.speed_and_position(0).unwrap();
+        assert!(now < 0.9 * r.speed_m_s, "{now} against {}", r.speed_m_s);
+    }
 
     #[test]
     fn the_report_line_scores_what_was_heard() {
