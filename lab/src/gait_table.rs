@@ -2,7 +2,10 @@
 //! chosen by measurement rather than assumed.
 //!
 //! The safe gait is where the controller goes on ground it does not know, so what it needs is
-//! the widest margin, not the lowest speed: the gait whose narrowest margin over the grounds
+//! the widest margin, not the lowest speed. A gait's margin on a ground is the largest sudden
+//! change of speed it survives either way ([`GaitScore::change_margin`]): a loss (a snag, a
+//! patch that grips) or a gain (a push, a step down, where the ground's friction shows). The
+//! safe gait is the one whose narrowest margin over the grounds
 //! (its worst ground) is the widest of the gaits'. Ties within [`MARGIN_TIE`] go to the faster
 //! gait. The table says too whether that gait's margin is at least every other gait's on every
 //! ground, which is the stronger claim a lab may want to check before trusting it.
@@ -82,7 +85,12 @@ pub fn measure(
 fn margins(rows: &[GaitRow], gait: u8) -> Vec<(&str, Option<f64>)> {
     rows.iter()
         .filter(|r| r.gait == gait)
-        .map(|r| (r.terrain.as_str(), r.score.as_ref().ok().map(|s| s.margin)))
+        .map(|r| {
+            (
+                r.terrain.as_str(),
+                r.score.as_ref().ok().map(|s| s.change_margin()),
+            )
+        })
         .collect()
 }
 
@@ -96,8 +104,8 @@ fn safest(rows: &[GaitRow]) -> Option<SafeGait> {
         for r in rows.iter().filter(|r| r.gait == id) {
             let s = r.score.as_ref().ok()?;
             speed += s.stride_speed_m_s;
-            if worst.as_ref().is_none_or(|(m, _)| s.margin < *m) {
-                worst = Some((s.margin, r.terrain.clone()));
+            if worst.as_ref().is_none_or(|(m, _)| s.change_margin() < *m) {
+                worst = Some((s.change_margin(), r.terrain.clone()));
             }
         }
         worst.map(|(m, t)| (m, t, speed))
@@ -136,21 +144,26 @@ impl GaitTable {
     /// The table as Markdown, then the safe gait and why.
     pub fn markdown(&self) -> String {
         let mut md = String::from(
-            "| ground | gait | stride speed (m/s) | cost of transport | energy ratio | stance (ms) | margin (speed loss survived) |\n|---|---|---|---|---|---|---|\n",
+            "| ground | gait | stride speed (m/s) | cost of transport | energy ratio | stance (ms) | margin: speed loss survived | speed gain survived | grip needed |\n|---|---|---|---|---|---|---|---|---|\n",
         );
         for r in &self.rows {
             match &r.score {
                 Ok(s) => md.push_str(&format!(
-                    "| {} | G{} | {:.3} | {:.3} | {:.3} | {:.0} | {:.1}% |\n",
+                    "| {} | G{} | {:.3} | {:.3} | {:.3} | {:.0} | {:.1}% | {:.1}% | {:.2} |\n",
                     r.terrain,
                     r.gait,
                     s.stride_speed_m_s,
                     s.cost_of_transport,
                     s.energy_ratio,
                     s.stance_s * 1e3,
-                    s.margin * 100.0
+                    s.margin * 100.0,
+                    s.gain_margin * 100.0,
+                    s.grip_needed
                 )),
-                Err(e) => md.push_str(&format!("| {} | G{} | {e} | | | | |\n", r.terrain, r.gait)),
+                Err(e) => md.push_str(&format!(
+                    "| {} | G{} | {e} | | | | | | |\n",
+                    r.terrain, r.gait
+                )),
             }
         }
         md.push('\n');
@@ -190,6 +203,8 @@ impl GaitTable {
                     "energy_ratio": s.energy_ratio,
                     "stance_s": s.stance_s,
                     "margin": s.margin,
+                    "gain_margin": s.gain_margin,
+                    "grip_needed": s.grip_needed,
                 }),
                 Err(e) => serde_json::json!({"terrain": r.terrain, "gait": r.gait, "error": e.to_string()}),
             })
@@ -218,6 +233,8 @@ mod tests {
                 energy_ratio: 1.0,
                 stance_s: 0.17,
                 margin,
+                gain_margin: 0.5,
+                grip_needed: 0.4,
             }),
         }
     }
@@ -257,7 +274,7 @@ mod tests {
         assert!(t.rows.iter().all(|r| r.score.is_ok()), "{}", t.markdown());
         let g1 = t.rows.iter().filter(|r| r.gait == 1);
         assert!(
-            g1.map(|r| r.score.as_ref().map_or(0.0, |s| s.margin))
+            g1.map(|r| r.score.as_ref().map_or(0.0, |s| s.change_margin()))
                 .all(|m| m < safe.narrowest_margin),
             "{}",
             t.markdown()

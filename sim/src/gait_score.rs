@@ -63,6 +63,19 @@ pub struct GaitScore {
     /// Largest sudden speed loss survived, a fraction of the speed (0 when even the unperturbed
     /// gait does not keep hopping).
     pub margin: f64,
+    /// Largest sudden speed gain survived, a fraction of the speed: where the ground's
+    /// friction shows (a faster stance ends at a flatter leg, and the foot slips).
+    pub gain_margin: f64,
+    /// The least friction the gait keeps hopping on, this ground otherwise ([`grip_needed`]).
+    pub grip_needed: f64,
+}
+
+impl GaitScore {
+    /// The narrower of the two margins: the largest sudden change of speed, either way, the
+    /// gait survives. What the safe gait is chosen by.
+    pub fn change_margin(&self) -> f64 {
+        self.margin.min(self.gain_margin)
+    }
 }
 
 /// The unperturbed gait did not keep hopping on this ground: it fell or stopped.
@@ -83,6 +96,8 @@ struct Run {
     /// The last touchdown's time and the last stance's length, s.
     touchdown_t: f64,
     stance_s: f64,
+    /// The largest leg angle from the vertical at a touchdown or a liftoff so far, rad.
+    peak_angle: f64,
 }
 
 /// What a touchdown finds: the body's position, energy and time, and the stance before it.
@@ -107,6 +122,7 @@ impl Run {
             ground,
             touchdown_t: 0.0,
             stance_s: 0.0,
+            peak_angle: 0.0,
         }
     }
 
@@ -118,6 +134,7 @@ impl Run {
             match self.hopper.advance(0.001, self.ground, &mut self.cmd) {
                 Some(Event::Touchdown { t, beta, vx, .. }) => {
                     self.cmd.on_touchdown(beta);
+                    self.peak_angle = self.peak_angle.max(beta.abs());
                     self.touchdown_t = t;
                     if vx < STOPPED_M_S {
                         return None;
@@ -126,6 +143,7 @@ impl Run {
                 }
                 Some(Event::Liftoff { t, beta, .. }) => {
                     self.cmd.on_liftoff(beta);
+                    self.peak_angle = self.peak_angle.max(beta.abs());
                     self.stance_s = t - self.touchdown_t;
                 }
                 Some(Event::Fell { .. }) => return None,
@@ -155,17 +173,35 @@ impl Run {
     }
 }
 
-/// Scores `gait` on `ground`: steady figures, then the margin.
-pub fn score(
+/// A gait's steady figures on a ground, without its margins (what a grid search over gaits
+/// compares).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Steady {
+    /// Mean stride speed over the measured hops, m/s.
+    pub stride_speed_m_s: f64,
+    /// Positive actuator work per metre over weight.
+    pub cost_of_transport: f64,
+    /// Mean energy ratio of the measured hops (touchdown to touchdown).
+    pub energy_ratio: f64,
+    /// Mean stance time, s.
+    pub stance_s: f64,
+    /// The largest leg angle from the vertical at a measured hop's touchdown or liftoff, rad:
+    /// where the foot asks most of the ground's friction (`tan` of it).
+    pub peak_angle_rad: f64,
+}
+
+/// `gait` held on `ground`: `opts.settle_hops` hops, then the figures of `opts.measure_hops`.
+pub fn steady(
     gait: &Gait,
     ground: Ground,
     params: &HopperParams,
     opts: &ScoreOptions,
-) -> Result<GaitScore, DoesNotHop> {
+) -> Result<Steady, DoesNotHop> {
     let fail = |hop| DoesNotHop { gait: gait.id, hop };
     let mut run = Run::new(gait, ground, params);
     run.hops(opts.settle_hops).map_err(fail)?;
     let first = run.next_touchdown().ok_or(fail(opts.settle_hops))?;
+    run.peak_angle = 0.0;
     let rest = run
         .hops(opts.measure_hops)
         .map_err(|h| fail(opts.settle_hops + 1 + h))?;
@@ -179,7 +215,8 @@ pub fn score(
     let (dx, dt) = (last.x - first.x, last.t - first.t);
     let weight = params.mass_kg * G;
     let n = rest.len().max(1) as f64;
-    Ok(GaitScore {
+    Ok(Steady {
+        peak_angle_rad: run.peak_angle,
         stride_speed_m_s: if dt > 0.0 { dx / dt } else { 0.0 },
         cost_of_transport: if dx > 0.0 {
             (last.work_j - first.work_j) / (weight * dx)
@@ -188,37 +225,96 @@ pub fn score(
         },
         energy_ratio: ratio / n,
         stance_s: rest.iter().map(|td| td.stance_s).sum::<f64>() / n,
+    })
+}
+
+/// Scores `gait` on `ground`: steady figures, then the margins and the grip it needs.
+pub fn score(
+    gait: &Gait,
+    ground: Ground,
+    params: &HopperParams,
+    opts: &ScoreOptions,
+) -> Result<GaitScore, DoesNotHop> {
+    let s = steady(gait, ground, params, opts)?;
+    Ok(GaitScore {
+        stride_speed_m_s: s.stride_speed_m_s,
+        cost_of_transport: s.cost_of_transport,
+        energy_ratio: s.energy_ratio,
+        stance_s: s.stance_s,
         margin: margin(gait, ground, params, opts),
+        gain_margin: gain_margin(gait, ground, params, opts),
+        grip_needed: grip_needed(gait, ground, params, opts),
     })
 }
 
 /// The largest sudden loss of forward speed at one touchdown (a fraction in 0..[`MAX_LOSS`])
 /// after which `gait` keeps hopping on `ground` for `opts.recover_hops` hops.
 pub fn margin(gait: &Gait, ground: Ground, params: &HopperParams, opts: &ScoreOptions) -> f64 {
-    let survives = |loss: f64| {
+    margin_toward(gait, ground, params, opts, -1.0)
+}
+
+/// The largest sudden gain of forward speed at one touchdown (a fraction in 0..[`MAX_LOSS`])
+/// after which `gait` keeps hopping on `ground`: a push, a step down. A faster stance sweeps
+/// the leg further behind the hip, and past the friction cone the foot slips.
+pub fn gain_margin(gait: &Gait, ground: Ground, params: &HopperParams, opts: &ScoreOptions) -> f64 {
+    margin_toward(gait, ground, params, opts, 1.0)
+}
+
+/// The least friction (foot on ground) on which `gait` keeps hopping on a ground otherwise
+/// like `ground`, within [`MAX_GRIP`]: how slippery a ground the gait can take (bisection,
+/// `opts.halvings` halvings; [`MAX_GRIP`] when it needs more).
+pub fn grip_needed(gait: &Gait, ground: Ground, params: &HopperParams, opts: &ScoreOptions) -> f64 {
+    let hops = |friction: f64| {
+        let mut run = Run::new(gait, Ground { friction, ..ground }, params);
+        run.hops(opts.settle_hops + opts.recover_hops).is_ok()
+    };
+    if !hops(MAX_GRIP) {
+        return MAX_GRIP;
+    }
+    // Hopping at `hi` and not at `lo`: the least friction that holds is the boundary.
+    boundary(MAX_GRIP, 0.0, opts.halvings, hops)
+}
+
+/// The edge between `ok` (where `holds` is true) and `bad` (where it is not), by `halvings`
+/// halvings of the interval; the last point found to hold.
+fn boundary(mut ok: f64, mut bad: f64, halvings: usize, holds: impl Fn(f64) -> bool) -> f64 {
+    for _ in 0..halvings {
+        let mid = 0.5 * (ok + bad);
+        if holds(mid) {
+            ok = mid;
+        } else {
+            bad = mid;
+        }
+    }
+    ok
+}
+
+/// The largest friction [`grip_needed`] tries: rubber on dry concrete reads about 1.
+pub const MAX_GRIP: f64 = 1.5;
+
+/// The bisection of [`margin`] and [`gain_margin`]: speed changed by `sign` times the fraction.
+fn margin_toward(
+    gait: &Gait,
+    ground: Ground,
+    params: &HopperParams,
+    opts: &ScoreOptions,
+    sign: f64,
+) -> f64 {
+    let survives = |change: f64| {
         let mut run = Run::new(gait, ground, params);
         if run.hops(opts.settle_hops).is_err() {
             return false;
         }
-        run.hopper.vx *= 1.0 - loss;
+        run.hopper.vx *= 1.0 + sign * change;
         run.hops(opts.recover_hops).is_ok()
     };
     if !survives(0.0) {
         return 0.0;
     }
-    let (mut lo, mut hi) = (0.0, MAX_LOSS);
-    if survives(hi) {
-        return hi;
+    if survives(MAX_LOSS) {
+        return MAX_LOSS;
     }
-    for _ in 0..opts.halvings {
-        let mid = 0.5 * (lo + hi);
-        if survives(mid) {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
-    lo
+    boundary(0.0, MAX_LOSS, opts.halvings, survives)
 }
 
 #[cfg(test)]
@@ -265,5 +361,35 @@ mod tests {
             );
             assert!(x.margin > 0.0 && x.margin < MAX_LOSS, "{x:?}");
         }
+    }
+
+    /// G3 lands and leaves with the flattest leg: it needs the most grip; on damp grass
+    /// (friction 0.6, near that need) a push at touchdown fells it at half the gain it
+    /// survives where the foot cannot slip.
+    #[test]
+    fn the_fastest_gait_needs_the_most_grip() {
+        for p in [Physics::Wood, Physics::Grass] {
+            let s: Vec<GaitScore> = Gait::paper_gaits().into_iter().map(|x| g(x, p)).collect();
+            assert!(s[2].grip_needed > s[0].grip_needed + 0.05, "{p:?}: {s:?}");
+            assert!(s[2].grip_needed < p.ground().friction, "{p:?}: {s:?}");
+        }
+        let on = |friction: f64| {
+            let ground = Ground {
+                friction,
+                ..Physics::Grass.ground()
+            };
+            score(
+                &Gait::g3(),
+                ground,
+                &HopperParams::default(),
+                &ScoreOptions::default(),
+            )
+            .unwrap()
+        };
+        let (damp, no_slip) = (on(0.6), on(Ground::NO_SLIP));
+        assert!(
+            damp.gain_margin < 0.7 * no_slip.gain_margin,
+            "{damp:?} {no_slip:?}"
+        );
     }
 }

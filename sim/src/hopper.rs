@@ -58,6 +58,20 @@ pub struct Ground {
     pub stiffness: f64,
     /// N s/m. Clay is lossy; grass is springy.
     pub damping: f64,
+    /// Coulomb friction of the foot's sole on this ground (static and sliding alike): the foot
+    /// slips where the leg pushes it along the ground harder than this times the load, that
+    /// is where the leg's angle from the vertical passes atan(friction).
+    #[serde(default = "Ground::no_slip")]
+    pub friction: f64,
+}
+
+impl Ground {
+    /// A ground the foot never slips on (a friction no leg angle reaches).
+    pub const NO_SLIP: f64 = 100.0;
+
+    fn no_slip() -> f64 {
+        Self::NO_SLIP
+    }
 }
 
 /// Stance or flight, with what the phase needs.
@@ -144,6 +158,10 @@ pub struct Hopper {
     pub actuator_work_j: f64,
     /// The rest length commanded at the last stance step, m (None in flight).
     last_rest: Option<f64>,
+    /// The foot's speed along the ground while it slips, m/s (0 while it holds).
+    foot_vx: f64,
+    /// How far the foot has slid along the ground since the hopper was made, m.
+    pub slip_m: f64,
     ground: Ground,
 }
 
@@ -162,9 +180,12 @@ impl Hopper {
             impact: (0.0, 0.0),
             actuator_work_j: 0.0,
             last_rest: None,
+            foot_vx: 0.0,
+            slip_m: 0.0,
             ground: Ground {
                 stiffness: 1e6,
                 damping: 0.0,
+                friction: Ground::NO_SLIP,
             },
         }
     }
@@ -280,6 +301,7 @@ impl Hopper {
                     self.foot_force = 0.0;
                     if matches!(t_hit, Some(th) if th <= h) {
                         let foot_x = self.x + lf * beta.sin();
+                        self.foot_vx = 0.0;
                         self.phase = Phase::Stance {
                             foot_x,
                             t_touchdown: self.t,
@@ -338,6 +360,11 @@ impl Hopper {
                     [self.x, self.y, self.vx, self.vy] = s1;
                     self.t += h;
                     let f = f1.max(0.0);
+                    let foot_x = self.slide(foot_x, f, h);
+                    self.phase = Phase::Stance {
+                        foot_x,
+                        t_touchdown,
+                    };
                     let l = (self.x - foot_x).hypot(self.y);
                     // Normal force on the foot: the vertical component of the leg force.
                     self.foot_force = f * self.y / l;
@@ -348,6 +375,34 @@ impl Hopper {
             }
         }
         None
+    }
+
+    /// The foot at `foot_x` under leg force `f` (N) over `h` s: it holds while the ground's
+    /// friction can take the leg's push along the ground; past that it slides, its mass driven
+    /// by the push less the sliding friction, until it stops where the ground holds it again.
+    /// Returns where the foot is. The slide takes the leg's compression with it: the energy a
+    /// slip costs the hop.
+    fn slide(&mut self, foot_x: f64, f: f64, h: f64) -> f64 {
+        let (dx, dy) = (foot_x - self.x, self.y);
+        let l = dx.hypot(dy).max(1e-9);
+        // The leg pushes the foot away from the hip: along the ground, and into it.
+        let (along, load) = (f * dx / l, f * dy / l);
+        let grip = self.ground.friction * load;
+        if self.foot_vx == 0.0 && along.abs() <= grip {
+            return foot_x;
+        }
+        let dir = if self.foot_vx != 0.0 {
+            self.foot_vx.signum()
+        } else {
+            along.signum()
+        };
+        let a = (along - dir * grip) / self.params.foot_mass_kg;
+        let v = self.foot_vx + a * h;
+        // Sliding friction stops the foot; it does not push it back.
+        self.foot_vx = if v * dir <= 0.0 { 0.0 } else { v };
+        let moved = self.foot_vx * h;
+        self.slip_m += moved.abs();
+        foot_x + moved
     }
 
     /// Seconds until the body, ballistic, descends to `target` m: y(t) = y + vy t - g t^2 / 2
@@ -404,9 +459,12 @@ mod tests {
 
     /// Events of `secs` of hopping on `physics` with the gait held.
     fn hop(gait: controller::Gait, physics: Physics, secs: f64) -> (Hopper, Vec<Event>) {
+        hop_on(gait, physics.ground(), secs)
+    }
+
+    fn hop_on(gait: controller::Gait, ground: Ground, secs: f64) -> (Hopper, Vec<Event>) {
         let mut h = Hopper::launch(HopperParams::default(), &gait);
         let mut cmd = FixedGait::new(gait);
-        let ground = physics.ground();
         let mut events = Vec::new();
         while h.t < secs {
             if let Some(e) = h.advance(0.001, ground, &mut cmd) {
@@ -443,6 +501,26 @@ mod tests {
         }
         // Moving forward.
         assert!(h.x > 2.0, "x = {}", h.x);
+    }
+
+    /// G3 lands with its leg about 29 degrees from the vertical (tan 0.55): on ground that
+    /// holds the foot it hops (the launch's first stance slides a tenth of a millimetre); on ground whose friction is under that (wet
+    /// grass, about 0.2 to 0.4) the foot slides out and the hopper falls, and G1, landing
+    /// steeper, keeps hopping where G3 cannot.
+    #[test]
+    fn the_foot_slips_past_the_grounds_friction() {
+        let grass = Physics::Grass.ground();
+        let fell = |events: &[Event]| events.iter().any(|e| matches!(e, Event::Fell { .. }));
+        let (h, events) = hop_on(controller::Gait::g3(), grass, 6.0);
+        assert!(!fell(&events) && h.slip_m < 1e-3, "{}", h.slip_m);
+        let wet = Ground {
+            friction: 0.48,
+            ..grass
+        };
+        let (h, events) = hop_on(controller::Gait::g3(), wet, 6.0);
+        assert!(fell(&events) && h.slip_m > 0.01, "{} {events:?}", h.slip_m);
+        let (_, events) = hop_on(controller::Gait::g1(), wet, 6.0);
+        assert!(!fell(&events), "{events:?}");
     }
 
     #[test]

@@ -163,6 +163,24 @@ impl Physics {
         }
     }
 
+    /// Friction of the foot's silicone sole on this ground (docs/decisions/ground-physics.md).
+    pub fn friction(self) -> f64 {
+        match self {
+            Physics::Aluminum => 0.6,
+            Physics::Wood => 0.8,
+            Physics::Gravel => 0.65,
+            Physics::Sandpaper220
+            | Physics::Sandpaper150
+            | Physics::Sandpaper100
+            | Physics::Sandpaper60 => 1.0,
+            Physics::Carpet => 0.9,
+            Physics::Clay => 0.8,
+            Physics::Grass => 0.8,
+            Physics::Sand => 0.65,
+            Physics::PineNeedles => 0.55,
+        }
+    }
+
     /// The ground under the hopper: bulk stiffness and damping in series with the leg.
     pub fn ground(self) -> Ground {
         let (stiffness, damping) = match self {
@@ -181,7 +199,11 @@ impl Physics {
             Physics::Sand => (1e4, 150.0),
             Physics::PineNeedles => (1.2e4, 60.0),
         };
-        Ground { stiffness, damping }
+        Ground {
+            stiffness,
+            damping,
+            friction: self.friction(),
+        }
     }
 
     /// A fresh random patch of this surface on a `rows x cols` grid of `cell_mm` cells.
