@@ -15,9 +15,7 @@
 //! the foot (a SLIP's spring is at rest at the edges, so it holds none), at this stance's
 //! liftoff over that at the last one's. Flight keeps the energy, so the last liftoff's is this
 //! touchdown's; measured at the same edge of each stance, the fit's error at that edge divides
-//! out, and a steady gait's hops multiply to 1 (their median read 0.988-1.017 on the
-//! simulator's four grounds and three gaits, `lab/tests/stride.rs`; touchdown to liftoff read
-//! 0.977-1.003).
+//! out, and a steady gait's hops multiply to 1 (docs/decisions/energy-ratio.md).
 //! The first hop after a lost phase, with no liftoff before it, is read touchdown to liftoff.
 //! The ends of the stance come from the first and last LegState reports of it, each end
 //! fitted with a quadratic in time (value and slope at the edge): a leg reports at 100 Hz to
@@ -184,13 +182,14 @@ impl StrideEstimator {
             let (latest, k) = self.ends.latest(&self.ends.last);
             let (latest_y, _) = self.ends.latest(&self.ends.last_y);
             let (x1, v1) = fit_at(&latest[..k], t1)?;
-            let e0 = Ends::energy_at(&self.ends.first[..n0], &self.ends.first_y[..n0], t0)?;
             let e1 = Ends::energy_at(&latest[..k], &latest_y[..k], t1)?;
             self.last_liftoff = Some((t_us, e1));
-            // The energy at touchdown: the last liftoff's, when its flight ended here.
-            let e0 = before
-                .filter(|&(lo, _)| lo <= td && td - lo <= MAX_FLIGHT_US)
-                .map_or(e0, |(_, e)| e);
+            // The energy at touchdown: the last liftoff's, when its flight ended here; else
+            // the touchdown's own fit.
+            let e0 = match before.filter(|&(lo, _)| lo <= td && td - lo <= MAX_FLIGHT_US) {
+                Some((_, e)) => e,
+                None => Ends::energy_at(&self.ends.first[..n0], &self.ends.first_y[..n0], t0)?,
+            };
             Some(Lifted {
                 touchdown_us: td,
                 liftoff_us: t_us,

@@ -96,8 +96,6 @@ struct Run {
     /// The last touchdown's time and the last stance's length, s.
     touchdown_t: f64,
     stance_s: f64,
-    /// The largest leg angle from the vertical at a touchdown or a liftoff so far, rad.
-    peak_angle: f64,
 }
 
 /// What a touchdown finds: the body's position, energy and time, and the stance before it.
@@ -122,7 +120,6 @@ impl Run {
             ground,
             touchdown_t: 0.0,
             stance_s: 0.0,
-            peak_angle: 0.0,
         }
     }
 
@@ -134,7 +131,6 @@ impl Run {
             match self.hopper.advance(0.001, self.ground, &mut self.cmd) {
                 Some(Event::Touchdown { t, beta, vx, .. }) => {
                     self.cmd.on_touchdown(beta);
-                    self.peak_angle = self.peak_angle.max(beta.abs());
                     self.touchdown_t = t;
                     if vx < STOPPED_M_S {
                         return None;
@@ -143,7 +139,6 @@ impl Run {
                 }
                 Some(Event::Liftoff { t, beta, .. }) => {
                     self.cmd.on_liftoff(beta);
-                    self.peak_angle = self.peak_angle.max(beta.abs());
                     self.stance_s = t - self.touchdown_t;
                 }
                 Some(Event::Fell { .. }) => return None,
@@ -173,35 +168,17 @@ impl Run {
     }
 }
 
-/// A gait's steady figures on a ground, without its margins (what a grid search over gaits
-/// compares).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Steady {
-    /// Mean stride speed over the measured hops, m/s.
-    pub stride_speed_m_s: f64,
-    /// Positive actuator work per metre over weight.
-    pub cost_of_transport: f64,
-    /// Mean energy ratio of the measured hops (touchdown to touchdown).
-    pub energy_ratio: f64,
-    /// Mean stance time, s.
-    pub stance_s: f64,
-    /// The largest leg angle from the vertical at a measured hop's touchdown or liftoff, rad:
-    /// where the foot asks most of the ground's friction (`tan` of it).
-    pub peak_angle_rad: f64,
-}
-
-/// `gait` held on `ground`: `opts.settle_hops` hops, then the figures of `opts.measure_hops`.
-pub fn steady(
+/// Scores `gait` on `ground`: steady figures, then the margins and the grip it needs.
+pub fn score(
     gait: &Gait,
     ground: Ground,
     params: &HopperParams,
     opts: &ScoreOptions,
-) -> Result<Steady, DoesNotHop> {
+) -> Result<GaitScore, DoesNotHop> {
     let fail = |hop| DoesNotHop { gait: gait.id, hop };
     let mut run = Run::new(gait, ground, params);
     run.hops(opts.settle_hops).map_err(fail)?;
     let first = run.next_touchdown().ok_or(fail(opts.settle_hops))?;
-    run.peak_angle = 0.0;
     let rest = run
         .hops(opts.measure_hops)
         .map_err(|h| fail(opts.settle_hops + 1 + h))?;
@@ -215,8 +192,7 @@ pub fn steady(
     let (dx, dt) = (last.x - first.x, last.t - first.t);
     let weight = params.mass_kg * G;
     let n = rest.len().max(1) as f64;
-    Ok(Steady {
-        peak_angle_rad: run.peak_angle,
+    Ok(GaitScore {
         stride_speed_m_s: if dt > 0.0 { dx / dt } else { 0.0 },
         cost_of_transport: if dx > 0.0 {
             (last.work_j - first.work_j) / (weight * dx)
@@ -225,22 +201,6 @@ pub fn steady(
         },
         energy_ratio: ratio / n,
         stance_s: rest.iter().map(|td| td.stance_s).sum::<f64>() / n,
-    })
-}
-
-/// Scores `gait` on `ground`: steady figures, then the margins and the grip it needs.
-pub fn score(
-    gait: &Gait,
-    ground: Ground,
-    params: &HopperParams,
-    opts: &ScoreOptions,
-) -> Result<GaitScore, DoesNotHop> {
-    let s = steady(gait, ground, params, opts)?;
-    Ok(GaitScore {
-        stride_speed_m_s: s.stride_speed_m_s,
-        cost_of_transport: s.cost_of_transport,
-        energy_ratio: s.energy_ratio,
-        stance_s: s.stance_s,
         margin: margin(gait, ground, params, opts),
         gain_margin: gain_margin(gait, ground, params, opts),
         grip_needed: grip_needed(gait, ground, params, opts),
