@@ -284,97 +284,109 @@ impl Hopper {
         let t_end = self.t + dt_total;
         while self.t < t_end - 1e-12 {
             let h = (t_end - self.t).min(self.params.dt);
-            match self.phase {
-                Phase::Flight => {
-                    let beta = cmd.touchdown_angle();
-                    let lf = cmd.flight_length();
-                    // Foot height: y - lf cos(beta); ballistic y(t) = y + vy t - g t^2 / 2.
-                    let t_hit = self.time_to_height(lf * beta.cos());
-                    let step = match t_hit {
-                        Some(th) if th <= h => th,
-                        _ => h,
-                    };
-                    self.x += self.vx * step;
-                    self.y += self.vy * step - 0.5 * G * step * step;
-                    self.vy -= G * step;
-                    self.t += step;
-                    self.foot_force = 0.0;
-                    if matches!(t_hit, Some(th) if th <= h) {
-                        let foot_x = self.x + lf * beta.sin();
-                        self.foot_vx = 0.0;
-                        self.phase = Phase::Stance {
-                            foot_x,
-                            t_touchdown: self.t,
-                        };
-                        // The foot mass stops against the ground spring: a half-sine spike.
-                        let mf = self.params.foot_mass_kg;
-                        let v = (-self.vy).max(0.0);
-                        let kg = ground.stiffness;
-                        self.impact = (
-                            v * (kg * mf).sqrt(),
-                            std::f64::consts::PI * (mf / kg).sqrt(),
-                        );
-                        return Some(Event::Touchdown {
-                            t: self.t,
-                            beta,
-                            vx: self.vx,
-                            vy: self.vy,
-                        });
-                    }
-                    if self.y <= 0.0 {
-                        return Some(Event::Fell { t: self.t });
-                    }
-                }
+            let event = match self.phase {
+                Phase::Flight => self.flight_step(h, ground, cmd),
                 Phase::Stance {
                     foot_x,
                     t_touchdown,
-                } => {
-                    let s0 = [self.x, self.y, self.vx, self.vy];
-                    let rest = cmd.stance_length(self.t - t_touchdown);
-                    let before = self.last_rest.unwrap_or(rest);
-                    if rest > before {
-                        // The force half-way through the step's change of rest length.
-                        let f = self.leg_force(&s0, foot_x, 0.5 * (rest + before));
-                        self.actuator_work_j += f.max(0.0) * (rest - before);
-                    }
-                    self.last_rest = Some(rest);
-                    let s1 = self.rk4(s0, h, foot_x, rest);
-                    let f1 = self.leg_force(&s1, foot_x, rest);
-                    let moving_up = (s1[0] - foot_x) * s1[2] + s1[1] * s1[3] > 0.0;
-                    if f1 <= 0.0 && moving_up && self.t - t_touchdown > 0.01 {
-                        let hi = self.liftoff_within(s0, h, foot_x, rest);
-                        let s = self.rk4(s0, hi, foot_x, rest);
-                        [self.x, self.y, self.vx, self.vy] = s;
-                        self.t += hi;
-                        let beta = (self.x - foot_x).atan2(self.y);
-                        let length = (self.x - foot_x).hypot(self.y);
-                        self.phase = Phase::Flight;
-                        self.foot_force = 0.0;
-                        self.last_rest = None;
-                        return Some(Event::Liftoff {
-                            t: self.t,
-                            beta,
-                            length,
-                        });
-                    }
-                    [self.x, self.y, self.vx, self.vy] = s1;
-                    self.t += h;
-                    let f = f1.max(0.0);
-                    let foot_x = self.slide(foot_x, f, h);
-                    self.phase = Phase::Stance {
-                        foot_x,
-                        t_touchdown,
-                    };
-                    let l = (self.x - foot_x).hypot(self.y);
-                    // Normal force on the foot: the vertical component of the leg force.
-                    self.foot_force = f * self.y / l;
-                    if self.y <= 0.02 {
-                        return Some(Event::Fell { t: self.t });
-                    }
-                }
+                } => self.stance_step(h, foot_x, t_touchdown, cmd),
+            };
+            if event.is_some() {
+                return event;
             }
         }
         None
+    }
+
+    /// Up to `h` s of flight, ballistic; a touchdown where the foot reaches the ground.
+    fn flight_step(&mut self, h: f64, ground: Ground, cmd: &mut dyn LegCommands) -> Option<Event> {
+        let beta = cmd.touchdown_angle();
+        let lf = cmd.flight_length();
+        // Foot height: y - lf cos(beta); ballistic y(t) = y + vy t - g t^2 / 2.
+        let t_hit = self.time_to_height(lf * beta.cos());
+        let step = match t_hit {
+            Some(th) if th <= h => th,
+            _ => h,
+        };
+        self.x += self.vx * step;
+        self.y += self.vy * step - 0.5 * G * step * step;
+        self.vy -= G * step;
+        self.t += step;
+        self.foot_force = 0.0;
+        if matches!(t_hit, Some(th) if th <= h) {
+            let foot_x = self.x + lf * beta.sin();
+            self.foot_vx = 0.0;
+            self.phase = Phase::Stance {
+                foot_x,
+                t_touchdown: self.t,
+            };
+            // The foot mass stops against the ground spring: a half-sine spike.
+            let mf = self.params.foot_mass_kg;
+            let v = (-self.vy).max(0.0);
+            let kg = ground.stiffness;
+            self.impact = (
+                v * (kg * mf).sqrt(),
+                std::f64::consts::PI * (mf / kg).sqrt(),
+            );
+            return Some(Event::Touchdown {
+                t: self.t,
+                beta,
+                vx: self.vx,
+                vy: self.vy,
+            });
+        }
+        (self.y <= 0.0).then_some(Event::Fell { t: self.t })
+    }
+
+    /// Up to `h` s of stance on the foot at `foot_x`: the leg's spring and actuator (RK4), the
+    /// actuator's work, a liftoff where the leg's force ends on the way up, the foot's slide.
+    fn stance_step(
+        &mut self,
+        h: f64,
+        foot_x: f64,
+        t_touchdown: f64,
+        cmd: &mut dyn LegCommands,
+    ) -> Option<Event> {
+        let s0 = [self.x, self.y, self.vx, self.vy];
+        let rest = cmd.stance_length(self.t - t_touchdown);
+        let before = self.last_rest.unwrap_or(rest);
+        if rest > before {
+            // The force half-way through the step's change of rest length.
+            let f = self.leg_force(&s0, foot_x, 0.5 * (rest + before));
+            self.actuator_work_j += f.max(0.0) * (rest - before);
+        }
+        self.last_rest = Some(rest);
+        let s1 = self.rk4(s0, h, foot_x, rest);
+        let f1 = self.leg_force(&s1, foot_x, rest);
+        let moving_up = (s1[0] - foot_x) * s1[2] + s1[1] * s1[3] > 0.0;
+        if f1 <= 0.0 && moving_up && self.t - t_touchdown > 0.01 {
+            let hi = self.liftoff_within(s0, h, foot_x, rest);
+            let s = self.rk4(s0, hi, foot_x, rest);
+            [self.x, self.y, self.vx, self.vy] = s;
+            self.t += hi;
+            let beta = (self.x - foot_x).atan2(self.y);
+            let length = (self.x - foot_x).hypot(self.y);
+            self.phase = Phase::Flight;
+            self.foot_force = 0.0;
+            self.last_rest = None;
+            return Some(Event::Liftoff {
+                t: self.t,
+                beta,
+                length,
+            });
+        }
+        [self.x, self.y, self.vx, self.vy] = s1;
+        self.t += h;
+        let f = f1.max(0.0);
+        let foot_x = self.slide(foot_x, f, h);
+        self.phase = Phase::Stance {
+            foot_x,
+            t_touchdown,
+        };
+        let l = (self.x - foot_x).hypot(self.y);
+        // Normal force on the foot: the vertical component of the leg force.
+        self.foot_force = f * self.y / l;
+        (self.y <= 0.02).then_some(Event::Fell { t: self.t })
     }
 
     /// The foot at `foot_x` under leg force `f` (N) over `h` s: it holds while the ground's
