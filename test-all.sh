@@ -18,7 +18,7 @@ deps_log=$(mktemp); deps_rc=$(mktemp)
 deps_pid=$!
 # A process and all it started: to stop the jobs beside the parts when a part fails.
 tree() { echo "$1"; for c in $(ps -o pid= --ppid "$1" 2>/dev/null); do tree "$c"; done; }
-trap 'for p in $(tree "$deps_pid") ${roots_pid:+$(tree "$roots_pid")} ${arm_build_pid:+$(tree "$arm_build_pid")} ${arm_pid:+$(tree "$arm_pid")}; do kill "$p" 2>/dev/null; done' EXIT
+trap 'for p in $(tree "$deps_pid") ${roots_pid:+$(tree "$roots_pid")} ${arm_build_pid:+$(tree "$arm_build_pid")} ${arm_pid:+$(tree "$arm_pid")} ${vcan_pid:+$(tree "$vcan_pid")}; do kill "$p" 2>/dev/null; done' EXIT
 part "install dependencies (beside the lints below; its output after them)"
 deps_ok() { while [ ! -s "$deps_rc" ]; do sleep 1; done; [ "$(cat "$deps_rc")" = 0 ]; }
 # Once installed: the package tests' throwaway Debian roots (downloads and unpacking, no build
@@ -52,16 +52,20 @@ cargo build -p presrs-wire --no-default-features --target thumbv7em-none-eabihf
 cargo clippy -p presrs-wire --no-default-features --target thumbv7em-none-eabihf -- -D warnings
 cargo clippy -p presrs-wire --features alloc --target thumbv7em-none-eabihf -- -D warnings
 # With vcan: the vcan suite's binary is built here, with the rest, and its tests listed as
-# ignored; tests/vcan/run.sh runs them below, on real SocketCAN.
-part "cargo test (unit, property, cantools/python-can interop)"
-cargo test --workspace --features interop,vcan
+# ignored; tests/vcan/run.sh runs them, on real SocketCAN, beside the test binaries below.
+part "cargo test: the build (unit, property, cantools/python-can interop, the vcan suite's)"
+cargo test --workspace --features interop,vcan --no-run
 part "vcan suite, the host's part: the test build's binaries, the system tests' model"
 tests/vcan/run.sh --prepare
 # Where this kernel has no CAN the vcan run is User-mode Linux, one CPU, which run.sh pins to
-# core 0 (or a VM). The arm64 part stays on every core at idle priority: User-mode Linux leaves
-# about half of its core idle (its processes wait on robot time), and a task at idle priority
-# gives way the moment one of them wakes (the run's tests judge robot time).
-part "vcan suite (beside it, at idle priority: the rest of scripts/test-arm64.sh, its output after)"
+# core 0 (or a VM): it runs beside the test binaries, which take the other core and what
+# User-mode Linux leaves of its own (about half: its processes wait on robot time), at nice 5
+# so that a User-mode Linux process that wakes gets its core first (the suite's tests judge
+# robot time). The arm64 part stays on every core at idle priority: it takes what both leave.
+part "vcan suite (its output after cargo test's) beside cargo test's binaries, and at idle priority the rest of scripts/test-arm64.sh (its output last)"
+vcan_log=$(mktemp); vcan_rc_file=$(mktemp)
+( rc=0; tests/vcan/run.sh --prepared >"$vcan_log" 2>&1 || rc=$?; echo "$rc" >"$vcan_rc_file" ) &
+vcan_pid=$!
 (
   # Once its builds are done (a subshell cannot `wait` for its parent's child: their exit
   # status is in a file), the rest: tests under qemu-aarch64, the packages.
@@ -74,7 +78,11 @@ part "vcan suite (beside it, at idle priority: the rest of scripts/test-arm64.sh
   chrt --idle 0 nice -n 19 scripts/test-arm64.sh >>"$arm_log" 2>&1
 ) &
 arm_pid=$!
-vcan_rc=0; tests/vcan/run.sh --prepared || vcan_rc=$?
+part "cargo test (unit, property, cantools/python-can interop), beside the vcan suite"
+nice -n 5 cargo test --workspace --features interop,vcan
+part "cargo test done; the vcan suite beside it:"
+while [ ! -s "$vcan_rc_file" ]; do sleep 2; done
+vcan_rc=$(cat "$vcan_rc_file"); cat "$vcan_log"; rm -f "$vcan_log" "$vcan_rc_file"
 part "vcan suite done (exit $vcan_rc); the arm64 part beside it:"
 arm_rc=0; wait "$arm_pid" || arm_rc=$?
 cat "$arm_log"; rm -f "$arm_log"

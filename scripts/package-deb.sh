@@ -2,7 +2,12 @@
 # Builds the Debian package: target/debian/presrs_<version>_<arch>.deb
 #
 #   scripts/package-deb.sh --arch amd64|arm64 [--no-build | --binary PATH]
+#   scripts/package-deb.sh --print-build-args   the cargo arguments of the binary it builds
 #
+# The package holds the robot's build of presrs (node, controller, leg, bridge): without the
+# `lab` feature, so without the simulator, the experiments and the plots
+# (docs/decisions/robot-binary.md); the lab's computer builds the workstation's with `cargo
+# build --release`.
 # --binary packages an already built presrs for that architecture instead of the release
 # build (the test command packages its test build's binary for amd64: the packaging is what it
 # tests; docs/decisions/test-command-time.md, sixth stop).
@@ -24,12 +29,15 @@ cd "$root"
 
 arch=$(dpkg --print-architecture 2>/dev/null || echo amd64)
 build=1; given_bin=""
+# The robot's build: its default features but the lab's (foxglove: `node --foxglove`).
+robot_build=(--bin presrs --no-default-features --features foxglove)
 while [ $# -gt 0 ]; do
   case "$1" in
+    --print-build-args) echo "${robot_build[*]}"; exit 0 ;;
     --arch) arch="${2:?--arch takes amd64 or arm64}"; shift 2 ;;
     --no-build) build=0; shift ;;
     --binary) given_bin="${2:?--binary takes the path of a built presrs}"; build=0; shift 2 ;;
-    -h|--help) sed -n '2,19p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,25p' "$0"; exit 0 ;;
     *) echo "package-deb: unknown argument \`$1\` (use --arch amd64|arm64 [--no-build | --binary PATH])" >&2; exit 2 ;;
   esac
 done
@@ -57,8 +65,8 @@ if [ "$build" = 1 ]; then
     scripts/install-deps.sh --cross "$arch"
     export CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_LINKER="${cross_prefix}gcc"
   fi
-  echo "package-deb: cargo build --release ${target_args[*]}"
-  cargo build --release --quiet "${target_args[@]}" --bin presrs
+  echo "package-deb: cargo build --release ${target_args[*]} ${robot_build[*]}"
+  cargo build --release --quiet "${target_args[@]}" "${robot_build[@]}"
 fi
 [ -z "$given_bin" ] || bin=$given_bin
 [ -x "$bin" ] || { echo "package-deb: no binary at $bin (build it, or drop --no-build / --binary)" >&2; exit 1; }
@@ -122,8 +130,9 @@ Description: PreSRS terrain node for legged robots on CAN
  A robot foot's pressure-sensing skin (PreSRS, 44x44 at 100 Hz) streams tactile images on
  CAN FD; the node classifies the terrain once per stance (FFT features, PCA, Parzen window)
  and sends it on the bus, and the controller switches the gait per terrain.
- Includes the presrs binary (node, controller, training, evaluation, simulator), systemd
- units for the node and the controller, example configs and the CAN database (DBC).
+ Includes the robot's presrs (node, controller, leg bridge, ROS 2 bridge), systemd units
+ for each, example configs and the CAN database (DBC). Training, discovery and the simulator
+ run on the lab's computer (the workstation build).
 EOF
 dpkg-deb --build --root-owner-group "$stage" "$deb" >/dev/null
 echo "package-deb: wrote $deb ($(du -h "$deb" | cut -f1); Depends: $depends)"

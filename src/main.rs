@@ -4,52 +4,82 @@ use std::process::ExitCode;
 
 use anyhow::Result;
 use clap::Parser;
-use presrs_cli::{Cli, Cmd, LabCmd};
+#[cfg(feature = "lab")]
+use presrs_cli::LabCmd;
+use presrs_cli::{Cli, Cmd};
 
-mod adaptation_cmd;
-mod bench_node_cmd;
-mod capture_cmd;
-mod classifier_cmd;
+// What the robot runs: in every build.
 mod controller_cmd;
-mod demo_cmd;
-mod discover_cmd;
-mod energy_cmd;
-mod experiment_cmd;
-mod feet_cmd;
-mod gaits_cmd;
 mod leg_cmd;
-mod mcap_cmd;
 mod node_cmd;
 mod ros2_cmd;
+// The lab's commands: only in the workstation build (the `lab` feature, on by default).
+#[cfg(feature = "lab")]
+mod adaptation_cmd;
+#[cfg(feature = "lab")]
+mod bench_node_cmd;
+#[cfg(feature = "lab")]
+mod capture_cmd;
+#[cfg(feature = "lab")]
+mod classifier_cmd;
+#[cfg(feature = "lab")]
+mod demo_cmd;
+#[cfg(feature = "lab")]
+mod discover_cmd;
+#[cfg(feature = "lab")]
+mod energy_cmd;
+#[cfg(feature = "lab")]
+mod experiment_cmd;
+#[cfg(feature = "lab")]
+mod feet_cmd;
+#[cfg(feature = "lab")]
+mod gaits_cmd;
+#[cfg(feature = "lab")]
+mod mcap_cmd;
+#[cfg(feature = "lab")]
 mod sim_cmd;
 
 fn run(cli: Cli) -> Result<ExitCode> {
     match cli.cmd {
-        Cmd::Demo(a) => demo_cmd::run(a),
-        Cmd::Capture(a) => capture_cmd::run(a),
-        Cmd::Train(a) => classifier_cmd::train(&a),
-        Cmd::Eval(a) => classifier_cmd::eval(&a),
         Cmd::Node(a) => node_cmd::run(a),
         Cmd::Controller(a) => controller_cmd::run(a),
         Cmd::Leg(a) => leg_cmd::run(a),
         Cmd::Bridge(a) => ros2_cmd::bridge(a),
+        #[cfg(feature = "lab")]
+        Cmd::Demo(a) => demo_cmd::run(a),
+        #[cfg(feature = "lab")]
+        Cmd::Capture(a) => capture_cmd::run(a),
+        #[cfg(feature = "lab")]
+        Cmd::Train(a) => classifier_cmd::train(&a),
+        #[cfg(feature = "lab")]
+        Cmd::Eval(a) => classifier_cmd::eval(&a),
+        #[cfg(feature = "lab")]
         Cmd::Discover(a) => discover_cmd::run(a),
+        #[cfg(feature = "lab")]
         Cmd::Mcap(a) => mcap_cmd::run(a),
+        #[cfg(feature = "lab")]
         Cmd::View(a) => mcap_cmd::view(a),
-        Cmd::Lab(cmd) => match cmd {
-            LabCmd::Sim(a) => sim_cmd::run(a),
-            LabCmd::Dataset(a) => classifier_cmd::dataset(&a),
-            LabCmd::Experiment(a) => experiment_cmd::run(a),
-            LabCmd::BenchNode(a) => bench_node_cmd::run(a),
-            LabCmd::Classify(a) => classifier_cmd::classify(&a),
-            LabCmd::Features(a) => classifier_cmd::features(&a),
-            LabCmd::Repair(a) => classifier_cmd::repair(&a),
-            LabCmd::Dbc(a) => classifier_cmd::dbc(&a),
-            LabCmd::Energy(a) => energy_cmd::run(a),
-            LabCmd::Adaptation(a) => adaptation_cmd::run(a),
-            LabCmd::Feet(a) => feet_cmd::run(a),
-            LabCmd::Gaits(a) => gaits_cmd::run(a),
-        },
+        #[cfg(feature = "lab")]
+        Cmd::Lab(cmd) => run_lab(cmd),
+    }
+}
+
+/// `presrs lab ...` (the workstation build).
+#[cfg(feature = "lab")]
+fn run_lab(cmd: LabCmd) -> Result<ExitCode> {
+    match cmd {
+        LabCmd::Sim(a) => sim_cmd::run(a),
+        LabCmd::Dataset(a) => classifier_cmd::dataset(&a),
+        LabCmd::Experiment(a) => experiment_cmd::run(a),
+        LabCmd::BenchNode(a) => bench_node_cmd::run(a),
+        LabCmd::Classify(a) => classifier_cmd::classify(&a),
+        LabCmd::Features(a) => classifier_cmd::features(&a),
+        LabCmd::Repair(a) => classifier_cmd::repair(&a),
+        LabCmd::Dbc(a) => classifier_cmd::dbc(&a),
+        LabCmd::Energy(a) => energy_cmd::run(a),
+        LabCmd::Adaptation(a) => adaptation_cmd::run(a),
+        LabCmd::Feet(a) => feet_cmd::run(a),
+        LabCmd::Gaits(a) => gaits_cmd::run(a),
     }
 }
 

@@ -125,3 +125,59 @@ fn the_wire_crate_is_no_std_and_turns_its_dependencies_std_off() {
         "wire/src/lib.rs"
     );
 }
+
+/// The robot's build of `presrs` (scripts/package-deb.sh's, the arm64 .deb's) links no
+/// simulator, experiment, lab tool or plotting crate: its whole dependency tree, as cargo
+/// resolves it for those features.
+#[test]
+fn the_robot_build_links_no_simulator_lab_or_plots() {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let args = Command::new("bash")
+        .args(["scripts/package-deb.sh", "--print-build-args"])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .expect("bash runs");
+    let args = String::from_utf8_lossy(&args.stdout);
+    let features: Vec<&str> = args
+        .split_whitespace()
+        .filter(|a| *a != "--bin" && *a != "presrs")
+        .collect();
+    assert!(
+        features.contains(&"--no-default-features"),
+        "the robot's build keeps the default (lab) features: {args}"
+    );
+    let out = Command::new(cargo)
+        .args([
+            "tree",
+            "-p",
+            "presrs",
+            "-e",
+            "normal,build",
+            "--prefix",
+            "none",
+        ])
+        .args(&features)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .expect("cargo tree runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let tree = String::from_utf8_lossy(&out.stdout);
+    let crates: BTreeSet<&str> = tree
+        .lines()
+        .filter_map(|l| l.split_whitespace().next())
+        .collect();
+    assert!(crates.contains("presrs-node") && crates.contains("presrs-ros2"));
+    for lab in [
+        "presrs-sim",
+        "presrs-lab",
+        "presrs-tools",
+        "plotters",
+        "image",
+    ] {
+        assert!(!crates.contains(lab), "the robot's build links {lab}");
+    }
+}

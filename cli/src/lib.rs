@@ -8,31 +8,57 @@
 //! their crates, behind each crate's `clap` feature, and are flattened here.
 #![forbid(unsafe_code)]
 
-pub mod adaptation;
-pub mod bench_node;
+// What the robot runs: in every build.
 pub mod bridge;
-pub mod capture;
-pub mod classifier;
 pub mod controller;
-pub mod demo;
-pub mod discover;
-pub mod energy;
-pub mod experiment;
-pub mod feet;
-pub mod gaits;
 pub mod leg;
-pub mod mcap;
 pub mod node;
+// The lab's commands: only in the workstation build (the `lab` feature, on by default).
+#[cfg(feature = "lab")]
+pub mod adaptation;
+#[cfg(feature = "lab")]
+pub mod bench_node;
+#[cfg(feature = "lab")]
+pub mod capture;
+#[cfg(feature = "lab")]
+pub mod classifier;
+#[cfg(feature = "lab")]
+pub mod demo;
+#[cfg(feature = "lab")]
+pub mod discover;
+#[cfg(feature = "lab")]
+pub mod energy;
+#[cfg(feature = "lab")]
+pub mod experiment;
+#[cfg(feature = "lab")]
+pub mod feet;
+#[cfg(feature = "lab")]
+pub mod gaits;
+#[cfg(feature = "lab")]
+pub mod mcap;
+#[cfg(feature = "lab")]
 pub mod sim;
 
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
-#[command(
-    name = "presrs",
-    version,
-    about = "PreSRS terrain node: classify terrain from a tactile foot over CAN",
-    after_help = "On the robot: node, controller, leg, bridge (systemd units in the .deb). On the lab's computer: demo, capture, train, eval, discover, mcap, view, and `presrs lab` for the rest."
+#[cfg_attr(
+    feature = "lab",
+    command(
+        name = "presrs",
+        version,
+        about = "PreSRS terrain node: classify terrain from a tactile foot over CAN",
+        after_help = "On the robot: node, controller, leg, bridge (systemd units in the .deb). On the lab's computer: demo, capture, train, eval, discover, mcap, view, and `presrs lab` for the rest."
+    )
+)]
+#[cfg_attr(
+    not(feature = "lab"),
+    command(
+        name = "presrs",
+        version,
+        about = "PreSRS terrain node, the robot's build: classify terrain from a tactile foot over CAN",
+        after_help = ROBOT_BUILD
+    )
 )]
 pub struct Cli {
     #[command(subcommand)]
@@ -43,16 +69,20 @@ pub struct Cli {
 /// under `presrs lab`.
 #[derive(Subcommand)]
 pub enum Cmd {
+    #[cfg(feature = "lab")]
     /// Simulator, node and controller in one process on the in-process bus: the closed loop.
     Demo(demo::DemoArgs),
+    #[cfg(feature = "lab")]
     /// A training set from the robot's own runs: one image per step (the node's stance logic),
     /// labelled, into DIR/<terrain>/ with a manifest.
     Capture(capture::CaptureArgs),
+    #[cfg(feature = "lab")]
     /// Train a terrain classifier on DIR/<terrain>/<images>, as `capture` writes them.
     ///
     /// A first try needs only `--data` and `--out`: the crop, the stance's frame and the
     /// unknown-ground checks are measured on your runs, and the summary says what was chosen.
     Train(classifier::TrainArgs),
+    #[cfg(feature = "lab")]
     /// Evaluate a model on a dataset: confusion matrix (detected vs actual, %) and accuracy.
     Eval(classifier::EvalArgs),
     /// The terrain node: foot switch and tactile frames in, one TerrainClass per step out
@@ -67,17 +97,21 @@ pub enum Cmd {
     /// images, joint states, gait and /diagnostics, on Zenoh in rmw_zenoh's format (no ROS
     /// install on the robot).
     Bridge(bridge::BridgeArgs),
+    #[cfg(feature = "lab")]
     /// A candump log to an MCAP file (Foxglove, PlotJuggler, any MCAP reader): each message on
     /// its own JSON channel per foot, each pressure image a foxglove.RawImage; with --ros2, a
     /// rosbag2 directory that `ros2 bag play` reads (CDR, the bridge's topics).
     Mcap(mcap::McapArgs),
+    #[cfg(feature = "lab")]
     /// New ground: the stances a node kept as unknown (`node --keep-unknown DIR`) grouped into
     /// proposed terrains, each with its size, how far it lies from the known terrains and a
     /// contact sheet.
     Discover(discover::DiscoverArgs),
+    #[cfg(feature = "lab")]
     /// A recording at a glance: a foot's pressure image beside what the recording holds
     /// (terrain, contact, gait, speed), as a PNG.
     View(mcap::ViewArgs),
+    #[cfg(feature = "lab")]
     /// The lab bench: the simulator and its datasets, the paper's experiments, the node's
     /// benchmark, the classifier's parts (classify, features, repair), the DBC, the energy fit.
     #[command(
@@ -88,6 +122,7 @@ pub enum Cmd {
 }
 
 /// `presrs lab`: what a lab needs now and then, beside its path.
+#[cfg(feature = "lab")]
 #[derive(Subcommand)]
 pub enum LabCmd {
     /// The simulated hopper and foot on a CAN interface, in real time.
@@ -124,6 +159,14 @@ pub enum LabCmd {
     Gaits(gaits::GaitsArgs),
 }
 
+/// What the robot's build says where a lab command was asked for, and in its `--help`.
+pub const ROBOT_BUILD: &str = "This is the robot's build of presrs: node, controller, leg, bridge (systemd units in the .deb). The lab's commands (demo, capture, train, eval, discover, mcap, view, lab) are in the workstation build: `cargo build --release` (its default features), on the lab's computer.";
+
+/// The lab's commands: not in the robot's build, which names where they are.
+pub const LAB_COMMANDS: [&str; 8] = [
+    "demo", "capture", "train", "eval", "discover", "mcap", "view", "lab",
+];
+
 /// The commands that moved under `presrs lab`; their old names still run, with a pointer, for
 /// one release.
 pub const MOVED_TO_LAB: [&str; 9] = [
@@ -139,13 +182,18 @@ pub const MOVED_TO_LAB: [&str; 9] = [
 ];
 
 /// The arguments, with a command that moved under `presrs lab` put there (and said so once).
+/// In the robot's build a lab command is an error that says where it is (exit status 2, as
+/// clap's usage errors).
 pub fn args() -> Vec<std::ffi::OsString> {
     let mut args: Vec<_> = std::env::args_os().collect();
-    if let Some(cmd) = args
-        .get(1)
-        .and_then(|a| a.to_str())
-        .filter(|c| MOVED_TO_LAB.contains(c))
-    {
+    let cmd = args.get(1).and_then(|a| a.to_str()).map(str::to_owned);
+    let Some(cmd) = cmd else { return args };
+    let lab_command = LAB_COMMANDS.contains(&cmd.as_str()) || MOVED_TO_LAB.contains(&cmd.as_str());
+    if !cfg!(feature = "lab") && lab_command {
+        eprintln!("error: `presrs {cmd}` is a lab command. {ROBOT_BUILD}");
+        std::process::exit(2);
+    }
+    if MOVED_TO_LAB.contains(&cmd.as_str()) {
         eprintln!(
             "note: `presrs {cmd}` is now `presrs lab {cmd}`; the old name goes in the next release"
         );
@@ -179,6 +227,7 @@ mod tests {
     }
 
     /// A name moved under `presrs lab` still runs there.
+    #[cfg(feature = "lab")]
     #[test]
     fn moved_commands_are_lab_commands() {
         let lab = Cli::command();
