@@ -22,6 +22,8 @@ pub fn run(a: DiscoverArgs) -> Result<ExitCode> {
         } else {
             a.split_at
         },
+        no_patches: a.no_patches,
+        patch_link: a.patch_link,
     };
     let d = discover_at(&model, &kept, how)
         .with_context(|| format!("--model {}", a.model.display()))?;

@@ -55,6 +55,11 @@ pub fn run(a: FeetArgs) -> Result<ExitCode> {
         steps: a.steps,
         third_steps: a.third_steps,
         keep: a.keep.is_some(),
+        grouping: node::unknown::discover::Grouping {
+            no_patches: a.no_patches,
+            patch_link: a.patch_link,
+            ..Default::default()
+        },
         scratch: a.keep.clone().unwrap_or(defaults.scratch),
     };
     let started = std::time::Instant::now();

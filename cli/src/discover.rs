@@ -53,4 +53,10 @@ pub struct DiscoverArgs {
     /// A fixed separation for splitting a linked group instead of the known terrains' own.
     #[arg(long, hide = true)]
     pub split_at: Option<f64>,
+    /// Neighbouring unknown steps link as any two others do (for measuring their link).
+    #[arg(long, hide = true)]
+    pub no_patches: bool,
+    /// The link factor of neighbouring unknown steps (for measuring it).
+    #[arg(long, hide = true)]
+    pub patch_link: Option<f64>,
 }

@@ -31,4 +31,10 @@ pub struct FeetArgs {
     /// Every trial as one JSON array on stdout (the table still goes to stderr).
     #[arg(long)]
     pub json: bool,
+    /// `discover` without its link of neighbouring steps (to measure it).
+    #[arg(long, hide = true)]
+    pub no_patches: bool,
+    /// `discover`'s link factor for neighbouring steps (to measure it).
+    #[arg(long, hide = true)]
+    pub patch_link: Option<f64>,
 }

@@ -37,6 +37,7 @@ fn the_readme_path_holds_on_feet_that_are_not_the_papers() {
         third_steps: 12,
         scratch: std::env::temp_dir().join(format!("presrs-feet-test-{}", std::process::id())),
         keep: false,
+        grouping: Default::default(),
     };
     let table = presrs_lab::feet::run(
         &feet,

@@ -7,7 +7,7 @@ use std::path::Path;
 use node::classifier::Model;
 use node::classifier::train::ToldApart;
 use node::unknown::add::Added;
-use node::unknown::discover::{Discovery, KeptStance, MIN_GROUP};
+use node::unknown::discover::{Discovery, KeptStance, MIN_GROUP, PATCH_LINK};
 
 use crate::contact_sheet::contact_sheet;
 use crate::plot::PlotError;
@@ -76,7 +76,8 @@ pub fn table(d: &Discovery, kept: &[KeptStance], model: &Model, dir: &str) -> St
     let mut s = format!(
         "{} unknown stances kept in {dir} ({} without contact; {} known ones of the run beside \
          them); stances linked when nearer each other \
-         than, on average, to known ground, groups of {MIN_GROUP} or more; new ground when a \
+         than, on average, to known ground (unknown steps that follow each other: \
+         within {PATCH_LINK} times that), groups of {MIN_GROUP} or more; new ground when a \
          group stands apart by {:.2} or more (as much as the edge of {}'s band does, the most \
          of any known terrain):\n",
         unknown(kept),

@@ -83,6 +83,8 @@ pub struct FeetOptions {
     pub scratch: PathBuf,
     /// Keep each trial's folder (its images, logs, set and `model.json`).
     pub keep: bool,
+    /// How `discover` groups the kept stances (its defaults; others to measure them).
+    pub grouping: node::unknown::discover::Grouping,
 }
 
 impl Default for FeetOptions {
@@ -93,6 +95,7 @@ impl Default for FeetOptions {
             third_steps: 20,
             scratch: std::env::temp_dir().join(format!("presrs-feet-{}", std::process::id())),
             keep: false,
+            grouping: Default::default(),
         }
     }
 }

@@ -8,7 +8,7 @@ use std::path::Path;
 use node::classifier::Model;
 use node::classifier::model::ClassInfo;
 use node::unknown::add::{add_group, add_stances};
-use node::unknown::discover::{discover, read_kept};
+use node::unknown::discover::{Grouping, discover_at, read_kept};
 use node::unknown::lab_word::{LabWord, touchdown_us};
 use protocol::terrain::Terrain;
 
@@ -40,6 +40,7 @@ pub(super) fn learn(
     third: &Session,
     model: &Model,
     new: Terrain,
+    grouping: Grouping,
 ) -> Result<(Learned, Option<Model>), FeetError> {
     let io = |e: node::unknown::discover::DiscoverError| FeetError::Emulator(e.to_string());
     let mut l = Learned::default();
@@ -66,7 +67,7 @@ pub(super) fn learn(
         .map(|s| s.known.is_none() && truth(&s.file) == Some(new))
         .collect();
     l.kept_new = is_new.iter().filter(|&&n| n).count();
-    let d = discover(model, &stances).map_err(io)?;
+    let d = discover_at(model, &stances, grouping).map_err(io)?;
     l.group = d
         .new_ground()
         .map(|(_, g)| {

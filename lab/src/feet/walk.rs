@@ -243,7 +243,8 @@ fn try_walk(
     let kept = dir.join("kept");
     replay(&sessions[2], &model, t, Some(&kept))?;
     // New ground: the kept stances grouped and added, then a fresh session.
-    let (mut learned, added) = super::new_ground::learn(&kept, &sessions[2], &model, new)?;
+    let (mut learned, added) =
+        super::new_ground::learn(&kept, &sessions[2], &model, new, opts.grouping)?;
     if let Some(added) = added {
         let fourth = make(3, &all, opts.third_steps)?;
         fresh(&fourth, &model, &added, new, &mut learned)?;

@@ -8,7 +8,8 @@
 //!
 //! **Linking.** Two kept stances are linked when they lie nearer each other than they lie, on
 //! average, to the nearest stored stance: no distance scale has to be chosen, and a chain
-//! does not run through known ground. A linked group of [`MIN_GROUP`] or more is a proposal;
+//! does not run through known ground; unknown steps that follow each other, ground the robot
+//! is on, link a little further ([`PATCH_LINK`]). A linked group of [`MIN_GROUP`] or more is a proposal;
 //! smaller ones are scattered stances. Two new grounds in one run may each lie nearer the
 //! other than known ground: a group is split in two (two Gaussians, each its own spread) where
 //! one part stands apart from the other twice as much as new ground must from known ground.
@@ -37,6 +38,17 @@ pub const SETTLING_STEPS: usize = 10;
 
 /// The fewest stances a proposed terrain holds: fewer are a stumble, not ground.
 pub const MIN_GROUP: usize = 5;
+
+/// Kept stances of one run and foot whose step numbers are at most this far apart are
+/// neighbouring steps (one known step between two unknown ones).
+pub const PATCH_GAP: u16 = 2;
+
+/// Neighbouring unknown steps link when nearer each other than this many times the mean of
+/// their distances to known ground (any two others: 1). Unknown steps that follow each other
+/// are ground the robot is on, not known ground's stragglers, which come one at a time: a few
+/// stances of new ground that scatter as far from each other as from known ground stay one
+/// group (docs/decisions/discover-grouping.md, "Neighbouring steps").
+pub const PATCH_LINK: f64 = 1.5;
 
 /// One stance of a keep folder (a line of its `kept.csv` and its image).
 #[derive(Clone, Debug)]
@@ -192,6 +204,10 @@ pub struct Grouping {
     /// A fixed separation for a split instead of the known terrains' own ([`split_floor`]);
     /// infinite: each linked group left whole.
     pub split_at: Option<f64>,
+    /// Neighbouring steps link as any two others do ([`PATCH_LINK`]: off).
+    pub no_patches: bool,
+    /// The neighbours' link factor instead of [`PATCH_LINK`].
+    pub patch_link: Option<f64>,
 }
 
 /// [`discover`] grouped as `how` says.
@@ -219,7 +235,11 @@ pub fn discover_at(
                 .unwrap_or((f64::INFINITY, 0))
         })
         .collect();
-    let (linked, nearest_member) = link(&kept.points, &near_known);
+    let neighbour_link = match how.no_patches {
+        true => 1.0,
+        false => how.patch_link.unwrap_or(PATCH_LINK),
+    };
+    let (linked, nearest_member) = link(&kept, &near_known, neighbour_link);
     let split_at = how
         .split_at
         .unwrap_or_else(|| split_floor(model, &known).max(min_separation));
@@ -281,6 +301,8 @@ struct KeptShapes {
     at: Vec<usize>,
     /// The stances without contact.
     no_contact: Vec<usize>,
+    /// Pairs of points that were neighbouring steps (one run and foot, [`PATCH_GAP`]).
+    neighbours: Vec<(usize, usize)>,
 }
 
 impl KeptShapes {
@@ -289,6 +311,7 @@ impl KeptShapes {
             points: Shapes::default(),
             at: Vec::new(),
             no_contact: Vec::new(),
+            neighbours: Vec::new(),
         };
         for (i, s) in stances
             .iter()
@@ -307,13 +330,36 @@ impl KeptShapes {
                 out.no_contact.push(i);
             }
         }
+        out.neighbours = neighbours(stances, &out.at);
         Ok(out)
     }
 }
 
-/// The linked groups of `points` (each point's index in one), and each point's distance to
-/// its nearest other point.
-fn link(points: &Shapes, near_known: &[(f64, usize)]) -> (Vec<Vec<usize>>, Vec<f64>) {
+/// The pairs of `at` (indices of `stances`) that are neighbouring steps: one run and foot,
+/// step numbers at most [`PATCH_GAP`] apart (the node's step counter wraps).
+fn neighbours(stances: &[KeptStance], at: &[usize]) -> Vec<(usize, usize)> {
+    let mut out = Vec::new();
+    for (a, &i) in at.iter().enumerate() {
+        for (b, &j) in at.iter().enumerate().skip(a + 1) {
+            let (x, y) = (&stances[i], &stances[j]);
+            let gap = x.step.wrapping_sub(y.step).min(y.step.wrapping_sub(x.step));
+            if x.source == y.source && x.foot == y.foot && (1..=PATCH_GAP).contains(&gap) {
+                out.push((a, b));
+            }
+        }
+    }
+    out
+}
+
+/// The linked groups of the kept points (each point's index in one), and each point's
+/// distance to its nearest other point. Neighbouring steps link within `neighbour_link` times
+/// the others' reach.
+fn link(
+    kept: &KeptShapes,
+    near_known: &[(f64, usize)],
+    neighbour_link: f64,
+) -> (Vec<Vec<usize>>, Vec<f64>) {
+    let points = &kept.points;
     let n = points.len();
     let mut parent: Vec<usize> = (0..n).collect();
     let mut nearest_member = vec![f64::INFINITY; n];
@@ -331,6 +377,16 @@ fn link(points: &Shapes, near_known: &[(f64, usize)]) -> (Vec<Vec<usize>>, Vec<f
             // (Nearer than either: a terrain splits in two; than both: known ground's edge
             // joins it. docs/decisions/discover-grouping.md.)
             if d < 0.5 * (near_known[a].0 + near_known[b].0) {
+                let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
+                parent[ra.max(rb)] = ra.min(rb);
+            }
+        }
+    }
+    // Unknown steps that follow each other: ground the robot is on links a little further.
+    if neighbour_link > 1.0 {
+        for &(a, b) in &kept.neighbours {
+            let d = points.dist(a, points.get(b));
+            if d < neighbour_link * 0.5 * (near_known[a].0 + near_known[b].0) {
                 let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
                 parent[ra.max(rb)] = ra.min(rb);
             }
@@ -658,6 +714,40 @@ mod tests {
         let mut sizes: Vec<usize> = out.iter().map(Vec::len).collect();
         sizes.sort_unstable();
         sizes
+    }
+
+    /// Six stances of one ground a step apart on a line, each 1.0 from the next and 0.8 from
+    /// known ground, and a seventh far off: by distance alone nothing links; as neighbouring
+    /// steps the six are one group and the far one stays alone.
+    #[test]
+    fn neighbouring_unknown_steps_link_further_and_a_far_one_does_not() {
+        let mut points = Shapes::default();
+        for i in 0..6 {
+            points
+                .0
+                .extend((0..BANDS).map(|b| if b == 0 { i as f32 } else { 0.0 }));
+        }
+        points
+            .0
+            .extend((0..BANDS).map(|b| if b == 1 { 9.0 } else { 0.0 }));
+        let kept = KeptShapes {
+            points,
+            at: (0..7).collect(),
+            no_contact: Vec::new(),
+            neighbours: (0..6).map(|a| (a, a + 1)).collect(),
+        };
+        let near_known = vec![(0.8, 0); 7];
+        let sizes = |link_factor: f64| {
+            let mut s: Vec<usize> = link(&kept, &near_known, link_factor)
+                .0
+                .iter()
+                .map(Vec::len)
+                .collect();
+            s.sort_unstable();
+            s
+        };
+        assert_eq!(sizes(1.0), vec![1; 7]);
+        assert_eq!(sizes(PATCH_LINK), vec![1, 6]);
     }
 
     #[test]
