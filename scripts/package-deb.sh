@@ -8,7 +8,7 @@
 # `lab` feature, so without the simulator, the experiments and the plots
 # (docs/decisions/robot-binary.md); the lab's computer builds the workstation's with `cargo
 # build --release`.
-# --binary packages an already built presrs for that architecture instead of the release
+# --binary packages an already built presrs for that architecture instead of the robot
 # build (the test command packages its test build's binary for amd64: the packaging is what it
 # tests; docs/decisions/test-command-time.md, sixth stop).
 # arm64 is cross-built on an x86-64 machine with Debian's gcc-aarch64-linux-gnu as the linker
@@ -54,19 +54,20 @@ version=$(cargo metadata --no-deps --format-version 1 |
 target_dir=$(cargo metadata --no-deps --format-version 1 |
   python3 -c 'import json,sys; print(json.load(sys.stdin)["target_directory"])')
 
-# The machine's own architecture builds where `cargo build --release` does (the same binary
-# the tests use, built once); another one is cross-built into target/<triple>/.
-target_args=(); bin="$target_dir/release/presrs"
+# The robot's build in its own profile (release settings, target/robot/: the workstation's
+# target/release/presrs stays as it is); another architecture is cross-built into
+# target/<triple>/robot/.
+target_args=(); bin="$target_dir/robot/presrs"
 if [ "$arch" != "$host_arch" ]; then
-  target_args=(--target "$triple"); bin="$target_dir/$triple/release/presrs"
+  target_args=(--target "$triple"); bin="$target_dir/$triple/robot/presrs"
 fi
 if [ "$build" = 1 ]; then
   if [ -n "$cross_prefix" ]; then
     scripts/install-deps.sh --cross "$arch"
     export CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_LINKER="${cross_prefix}gcc"
   fi
-  echo "package-deb: cargo build --release ${target_args[*]} ${robot_build[*]}"
-  cargo build --release --quiet "${target_args[@]}" "${robot_build[@]}"
+  echo "package-deb: cargo build --profile robot ${target_args[*]} ${robot_build[*]}"
+  cargo build --profile robot --quiet "${target_args[@]}" "${robot_build[@]}"
 fi
 [ -z "$given_bin" ] || bin=$given_bin
 [ -x "$bin" ] || { echo "package-deb: no binary at $bin (build it, or drop --no-build / --binary)" >&2; exit 1; }

@@ -72,6 +72,8 @@ cross cargo test "${node_tests[@]}" --lib -- classifier::
 cross cargo test "${node_tests[@]}" --test train_classify -- --skip a_model_holds_more_than_sixteen_classes
 
 step "arm64 Debian package (the robot's build, test profile)"
+# A no-op after --build; on its own, the script builds what it packages.
+cross cargo build --quiet --target "$triple" $robot_build
 cross scripts/package-deb.sh --arch arm64 --binary "$cross_dir/$triple/debug/presrs"
 # Beside the amd64 one, where scripts/test-package.sh looks (which runs the installed robot
 # build's node on a log beside the x86-64 one: the same decisions).

@@ -6,11 +6,11 @@ use std::process::Command;
 
 use rand::{Rng, SeedableRng};
 
-/// `presrs` as a command: this build's binary, or `PRESRS_TEST_BIN` when set, e.g. the arm64
-/// package's binary (scripts/test-arm64.sh). Another architecture's binary runs under
-/// qemu-user, named by `PRESRS_TEST_RUNNER` ("qemu-aarch64 -L /usr/aarch64-linux-gnu"): there
-/// is no binfmt_misc here to start it by itself. The test runs on the host, so the workspace
-/// is not cross-built a second time for it (times in scripts/test-arm64.sh).
+/// `presrs` as a command: this build's binary, or `PRESRS_TEST_BIN` when set, e.g. a
+/// workstation build for another architecture (the arm64 package holds the robot's build,
+/// without these commands: scripts/test-package.sh checks it). Another architecture's binary
+/// runs under qemu-user, named by `PRESRS_TEST_RUNNER` ("qemu-aarch64 -L
+/// /usr/aarch64-linux-gnu"): there is no binfmt_misc here to start it by itself.
 fn presrs_command() -> Command {
     let bin =
         std::env::var("PRESRS_TEST_BIN").unwrap_or_else(|_| env!("CARGO_BIN_EXE_presrs").into());

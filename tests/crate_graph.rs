@@ -137,6 +137,11 @@ fn the_robot_build_links_no_simulator_lab_or_plots() {
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .output()
         .expect("bash runs");
+    assert!(
+        args.status.success(),
+        "scripts/package-deb.sh --print-build-args: {}",
+        String::from_utf8_lossy(&args.stderr)
+    );
     let args = String::from_utf8_lossy(&args.stdout);
     let features: Vec<&str> = args
         .split_whitespace()

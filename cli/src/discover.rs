@@ -54,7 +54,7 @@ pub struct DiscoverArgs {
     #[arg(long, hide = true)]
     pub split_at: Option<f64>,
     /// Neighbouring unknown steps link as any two others do (for measuring their link).
-    #[arg(long, hide = true)]
+    #[arg(long, hide = true, conflicts_with = "patch_link")]
     pub no_patches: bool,
     /// The link factor of neighbouring unknown steps (for measuring it).
     #[arg(long, hide = true)]

@@ -32,7 +32,7 @@ pub struct FeetArgs {
     #[arg(long)]
     pub json: bool,
     /// `discover` without its link of neighbouring steps (to measure it).
-    #[arg(long, hide = true)]
+    #[arg(long, hide = true, conflicts_with = "patch_link")]
     pub no_patches: bool,
     /// `discover`'s link factor for neighbouring steps (to measure it).
     #[arg(long, hide = true)]

@@ -116,7 +116,7 @@ pub enum Cmd {
     /// benchmark, the classifier's parts (classify, features, repair), the DBC, the energy fit.
     #[command(
         subcommand,
-        after_help = "On a real robot's recordings or bus: adaptation (a run's speed per terrain and gait), energy (the energy check's fit), dbc (the bus for cantools, SavvyCAN, ...), bench-node --iface (the node on the robot's computer), classify, features, repair (image files). On the simulator: sim, dataset, experiment, feet, gaits."
+        after_help = "On a real robot's recordings or bus: adaptation (a run's speed per terrain and gait), energy (the energy check's fit), dbc (the bus for cantools, SavvyCAN, ...), bench-node --iface (a node on the robot's bus, from a workstation build on a machine there), classify, features, repair (image files). On the simulator: sim, dataset, experiment, feet, gaits."
     )]
     Lab(LabCmd),
 }
@@ -224,6 +224,27 @@ mod tests {
         let mut missing = Vec::new();
         walk(&Cli::command(), "presrs", &mut missing);
         assert!(missing.is_empty(), "without help: {missing:#?}");
+    }
+
+    /// Every command but the robot's is one the robot's build names as the lab's (and says
+    /// where it is), and every name it names is a command.
+    #[cfg(feature = "lab")]
+    #[test]
+    fn the_robot_build_names_every_lab_command() {
+        let robot = ["node", "controller", "leg", "bridge"];
+        let names: Vec<String> = Cli::command()
+            .get_subcommands()
+            .map(|c| c.get_name().to_string())
+            .collect();
+        for n in &names {
+            assert!(
+                robot.contains(&n.as_str()) || LAB_COMMANDS.contains(&n.as_str()),
+                "{n}: neither the robot's nor in LAB_COMMANDS"
+            );
+        }
+        for n in LAB_COMMANDS.iter().chain(&robot) {
+            assert!(names.iter().any(|m| m == n), "{n} is no command");
+        }
     }
 
     /// A name moved under `presrs lab` still runs there.

@@ -7,7 +7,7 @@ use std::path::Path;
 use node::classifier::Model;
 use node::classifier::train::ToldApart;
 use node::unknown::add::Added;
-use node::unknown::discover::{Discovery, KeptStance, MIN_GROUP, PATCH_LINK};
+use node::unknown::discover::{Discovery, KeptStance, MIN_GROUP};
 
 use crate::contact_sheet::contact_sheet;
 use crate::plot::PlotError;
@@ -77,12 +77,13 @@ pub fn table(d: &Discovery, kept: &[KeptStance], model: &Model, dir: &str) -> St
         "{} unknown stances kept in {dir} ({} without contact; {} known ones of the run beside \
          them); stances linked when nearer each other \
          than, on average, to known ground (unknown steps that follow each other: \
-         within {PATCH_LINK} times that), groups of {MIN_GROUP} or more; new ground when a \
+         within {} times that), groups of {MIN_GROUP} or more; new ground when a \
          group stands apart by {:.2} or more (as much as the edge of {}'s band does, the most \
          of any known terrain):\n",
         unknown(kept),
         d.no_contact.len(),
         kept.len() - unknown(kept),
+        d.neighbour_link,
         d.min_separation,
         model
             .classes
@@ -134,6 +135,7 @@ pub fn json(d: &Discovery, kept: &[KeptStance], model: &Model) -> serde_json::Va
         "session_stances": kept.len() - unknown(kept),
         "no_contact": d.no_contact.len(),
         "min_separation": d.min_separation,
+        "neighbour_link": d.neighbour_link,
         "groups": d.groups.iter().enumerate().map(|(g, grp)| serde_json::json!({
             "group": g + 1,
             "stances": grp.members.len(),

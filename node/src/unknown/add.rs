@@ -364,6 +364,7 @@ mod tests {
         Discovery {
             min_separation: 1.5,
             least_separated: 0,
+            neighbour_link: 1.0,
             groups: new.iter().map(|&n| group(n)).collect(),
             group_of: vec![],
             no_contact: vec![],

@@ -9,10 +9,11 @@
 //! **Linking.** Two kept stances are linked when they lie nearer each other than they lie, on
 //! average, to the nearest stored stance: no distance scale has to be chosen, and a chain
 //! does not run through known ground; unknown steps that follow each other, ground the robot
-//! is on, link a little further ([`PATCH_LINK`]). A linked group of [`MIN_GROUP`] or more is a proposal;
-//! smaller ones are scattered stances. Two new grounds in one run may each lie nearer the
-//! other than known ground: a group is split in two (two Gaussians, each its own spread) where
-//! one part stands apart from the other twice as much as new ground must from known ground.
+//! is on, link a little further ([`PATCH_LINK`]). A linked group of [`MIN_GROUP`] or more is
+//! a proposal; smaller ones are scattered stances. Two new grounds in one run may each lie
+//! nearer the other than known ground: a group is split in two (two Gaussians, each its own
+//! spread) where one part stands apart from the other twice as much as new ground must from
+//! known ground.
 //!
 //! **New or known.** A group's separation is the median, over its members, of the distance to
 //! known ground over the distance to the nearest other member. The known terrains measure
@@ -31,6 +32,7 @@ use std::path::Path;
 use crate::classifier::dataset::read_image;
 use crate::classifier::{Classifier, Model, PressureImage};
 use crate::order_stats::median;
+use crate::unknown::lab_word::touchdown_us;
 
 /// A run's first steps, in which the robot settles into its gait (a launch lands from another
 /// height at another speed): a group of them alone is no ground.
@@ -39,9 +41,14 @@ pub const SETTLING_STEPS: usize = 10;
 /// The fewest stances a proposed terrain holds: fewer are a stumble, not ground.
 pub const MIN_GROUP: usize = 5;
 
-/// Kept stances of one run and foot whose step numbers are at most this far apart are
-/// neighbouring steps (one known step between two unknown ones).
+/// Kept stances of one run and foot whose step numbers are at most this far apart, and whose
+/// touchdowns are at most [`PATCH_GAP_US`] apart, are neighbouring steps (one known step
+/// between two unknown ones).
 pub const PATCH_GAP: u16 = 2;
+
+/// The most two neighbouring steps' touchdowns lie apart, µs: two steps of a slow gait (a
+/// live keep names its run by the interface, and the node's step counter restarts with it).
+pub const PATCH_GAP_US: u64 = 4_000_000;
 
 /// Neighbouring unknown steps link when nearer each other than this many times the mean of
 /// their distances to known ground (any two others: 1). Unknown steps that follow each other
@@ -174,6 +181,9 @@ pub struct Discovery {
     pub min_separation: f64,
     /// The known terrain whose edge that is (a class index).
     pub least_separated: usize,
+    /// How much further than any two others neighbouring unknown steps link ([`PATCH_LINK`];
+    /// 1: as any two).
+    pub neighbour_link: f64,
     /// The groups of at least [`MIN_GROUP`] stances, largest first.
     pub groups: Vec<Group>,
     /// Each stance's group (an index into `groups`), `None` for scattered stances and those
@@ -237,7 +247,7 @@ pub fn discover_at(
         .collect();
     let neighbour_link = match how.no_patches {
         true => 1.0,
-        false => how.patch_link.unwrap_or(PATCH_LINK),
+        false => how.patch_link.unwrap_or(PATCH_LINK).max(1.0),
     };
     let (linked, nearest_member) = link(&kept, &near_known, neighbour_link);
     let split_at = how
@@ -288,6 +298,7 @@ pub fn discover_at(
     Ok(Discovery {
         min_separation,
         least_separated,
+        neighbour_link,
         groups,
         group_of,
         no_contact: kept.no_contact,
@@ -336,14 +347,23 @@ impl KeptShapes {
 }
 
 /// The pairs of `at` (indices of `stances`) that are neighbouring steps: one run and foot,
-/// step numbers at most [`PATCH_GAP`] apart (the node's step counter wraps).
+/// step numbers at most [`PATCH_GAP`] apart (the node's step counter wraps), touchdowns at
+/// most [`PATCH_GAP_US`] apart (the kept file's name; none: not a neighbour).
 fn neighbours(stances: &[KeptStance], at: &[usize]) -> Vec<(usize, usize)> {
     let mut out = Vec::new();
     for (a, &i) in at.iter().enumerate() {
         for (b, &j) in at.iter().enumerate().skip(a + 1) {
             let (x, y) = (&stances[i], &stances[j]);
             let gap = x.step.wrapping_sub(y.step).min(y.step.wrapping_sub(x.step));
-            if x.source == y.source && x.foot == y.foot && (1..=PATCH_GAP).contains(&gap) {
+            let near_in_time = match (touchdown_us(&x.file), touchdown_us(&y.file)) {
+                (Some(tx), Some(ty)) => tx.abs_diff(ty) <= PATCH_GAP_US,
+                _ => false,
+            };
+            if x.source == y.source
+                && x.foot == y.foot
+                && (1..=PATCH_GAP).contains(&gap)
+                && near_in_time
+            {
                 out.push((a, b));
             }
         }
