@@ -8,8 +8,8 @@ use std::path::Path;
 use node::classifier::Model;
 use node::classifier::model::ClassInfo;
 use node::unknown::add::{add_group, add_stances};
-use node::unknown::discover::{Grouping, discover_at, read_kept};
-use node::unknown::lab_word::{LabWord, touchdown_us};
+use node::unknown::discover::{Grouping, discover_at, read_kept, touchdown_us};
+use node::unknown::lab_word::LabWord;
 use protocol::terrain::Terrain;
 
 use super::FeetError;

@@ -32,7 +32,6 @@ use std::path::Path;
 use crate::classifier::dataset::read_image;
 use crate::classifier::{Classifier, Model, PressureImage};
 use crate::order_stats::median;
-use crate::unknown::lab_word::touchdown_us;
 
 /// A run's first steps, in which the robot settles into its gait (a launch lands from another
 /// height at another speed): a group of them alone is no ground.
@@ -99,6 +98,13 @@ pub enum DiscoverError {
         /// What does not fit.
         msg: String,
     },
+}
+
+/// A kept stance's touchdown, µs on the log's clock, from its file name
+/// (`<source>_f<foot>_s<step>_<touchdown_us>.pgm`, as `--keep-unknown` names it).
+pub fn touchdown_us(file: &str) -> Option<u64> {
+    let stem = file.rsplit('/').next()?.strip_suffix(".pgm")?;
+    stem.rsplit('_').next()?.parse().ok()
 }
 
 /// Reads a keep folder: its `kept.csv` and every image it names.

@@ -15,7 +15,7 @@ use std::path::Path;
 
 use protocol::candump::parse_seconds;
 
-use super::discover::{DiscoverError, KeptStance};
+use super::discover::{DiscoverError, KeptStance, touchdown_us};
 
 /// One of the three ways (see the module docs).
 #[derive(Clone, Debug, PartialEq)]
@@ -146,13 +146,6 @@ fn labels(text: &str, terrain: &str) -> Result<LabWord, String> {
         ));
     }
     Ok(LabWord::Times(out))
-}
-
-/// A kept stance's touchdown, µs on the log's clock, from its file name
-/// (`<source>_f<foot>_s<step>_<touchdown_us>.pgm`, as `--keep-unknown` names it).
-pub fn touchdown_us(file: &str) -> Option<u64> {
-    let stem = file.rsplit('/').next()?.strip_suffix(".pgm")?;
-    stem.rsplit('_').next()?.parse().ok()
 }
 
 #[cfg(test)]
