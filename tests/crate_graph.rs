@@ -9,18 +9,11 @@ use std::process::Command;
 /// Workspace crate (without `presrs-`) -> its direct normal workspace dependencies, and each
 /// dependency's `uses_default_features`.
 fn graph() -> (BTreeMap<String, BTreeSet<String>>, serde_json::Value) {
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let out = Command::new(cargo)
-        .args(["metadata", "--format-version", "1", "--no-deps"])
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("cargo metadata runs");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = stdout_of(
+        Command::new(cargo()).args(["metadata", "--format-version", "1", "--no-deps"]),
+        "cargo metadata",
     );
-    let meta: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let meta: serde_json::Value = serde_json::from_str(&out).unwrap();
     let short = |n: &str| n.strip_prefix("presrs-").unwrap_or(n).to_string();
     let mut g = BTreeMap::new();
     for p in meta["packages"].as_array().unwrap() {
@@ -34,6 +27,25 @@ fn graph() -> (BTreeMap<String, BTreeSet<String>>, serde_json::Value) {
         g.insert(short(p["name"].as_str().unwrap()), deps);
     }
     (g, meta)
+}
+
+/// The cargo running the tests.
+fn cargo() -> String {
+    std::env::var("CARGO").unwrap_or_else(|_| "cargo".into())
+}
+
+/// `cmd`'s standard output, run in the workspace's root; `what` names it if it fails.
+fn stdout_of(cmd: &mut Command, what: &str) -> String {
+    let out = cmd
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap_or_else(|e| panic!("{what}: {e}"));
+    assert!(
+        out.status.success(),
+        "{what}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
 fn reaches(g: &BTreeMap<String, BTreeSet<String>>, from: &str) -> BTreeSet<String> {
@@ -131,18 +143,10 @@ fn the_wire_crate_is_no_std_and_turns_its_dependencies_std_off() {
 /// resolves it for those features.
 #[test]
 fn the_robot_build_links_no_simulator_lab_or_plots() {
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let args = Command::new("bash")
-        .args(["scripts/package-deb.sh", "--print-build-args"])
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("bash runs");
-    assert!(
-        args.status.success(),
-        "scripts/package-deb.sh --print-build-args: {}",
-        String::from_utf8_lossy(&args.stderr)
+    let args = stdout_of(
+        Command::new("bash").args(["scripts/package-deb.sh", "--print-build-args"]),
+        "scripts/package-deb.sh --print-build-args",
     );
-    let args = String::from_utf8_lossy(&args.stdout);
     let features: Vec<&str> = args
         .split_whitespace()
         .filter(|a| *a != "--bin" && *a != "presrs")
@@ -151,26 +155,20 @@ fn the_robot_build_links_no_simulator_lab_or_plots() {
         features.contains(&"--no-default-features"),
         "the robot's build keeps the default (lab) features: {args}"
     );
-    let out = Command::new(cargo)
-        .args([
-            "tree",
-            "-p",
-            "presrs",
-            "-e",
-            "normal,build",
-            "--prefix",
-            "none",
-        ])
-        .args(&features)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("cargo tree runs");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let tree = stdout_of(
+        Command::new(cargo())
+            .args([
+                "tree",
+                "-p",
+                "presrs",
+                "-e",
+                "normal,build",
+                "--prefix",
+                "none",
+            ])
+            .args(&features),
+        "cargo tree",
     );
-    let tree = String::from_utf8_lossy(&out.stdout);
     let crates: BTreeSet<&str> = tree
         .lines()
         .filter_map(|l| l.split_whitespace().next())

@@ -356,12 +356,14 @@ impl KeptShapes {
 /// step numbers at most [`PATCH_GAP`] apart (the node's step counter wraps), touchdowns at
 /// most [`PATCH_GAP_US`] apart (the kept file's name; none: not a neighbour).
 fn neighbours(stances: &[KeptStance], at: &[usize]) -> Vec<(usize, usize)> {
+    // Each touchdown read from its file name once, not once per pair.
+    let touchdown: Vec<Option<u64>> = at.iter().map(|&i| touchdown_us(&stances[i].file)).collect();
     let mut out = Vec::new();
     for (a, &i) in at.iter().enumerate() {
         for (b, &j) in at.iter().enumerate().skip(a + 1) {
             let (x, y) = (&stances[i], &stances[j]);
             let gap = x.step.wrapping_sub(y.step).min(y.step.wrapping_sub(x.step));
-            let near_in_time = match (touchdown_us(&x.file), touchdown_us(&y.file)) {
+            let near_in_time = match (touchdown[a], touchdown[b]) {
                 (Some(tx), Some(ty)) => tx.abs_diff(ty) <= PATCH_GAP_US,
                 _ => false,
             };
